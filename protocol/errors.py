@@ -1,0 +1,29 @@
+"""The single exception root of sea-hil. Every error the project raises on purpose derives from SeaHilError."""
+
+
+class SeaHilError(Exception):
+    """Root of all sea-hil errors."""
+
+
+class ConfigError(SeaHilError):
+    """A configuration file or CLI option is invalid."""
+
+
+class TrajectoryError(SeaHilError):
+    """A desired trajectory (e.g. a CSV file) is unusable."""
+
+
+class MalformedFrame(SeaHilError):
+    """A CAN frame that cannot be accepted (unknown id, wrong length, out-of-range or NaN value)."""
+
+
+class MalformedPayload(SeaHilError):
+    """A Zenoh payload that cannot be accepted (bad magic/version/type/length, NaN)."""
+
+
+class BusError(SeaHilError):
+    """The CAN interface failed (down, buffer full beyond retries, cannot open)."""
+
+
+class RecordingError(SeaHilError):
+    """An MCAP recording cannot be written or read."""
