@@ -1,0 +1,89 @@
+"""Backstepping inner loop, paper Eq. 24-31: from the held deflection setpoint v_x(t_i) to the SEA voltage U_v.
+
+z1 = Delta (measured spring deflection), z2 = Delta_dot = a(theta) omega - rdot. With v_x(t_i) held between events,
+its time derivative is zero. The cross term -(g_x)^T s of Eq. 27 is weighted by `w` (see `cross_term_weight` and
+docs/deviations.md): the augmented Lyapunov function V1 = V_x + (1/(2w)) |v_x - z1|^2 cancels it for any w > 0, and
+w = 1 (the paper) makes it ~1e4-1e5 times too large for these units.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+from protocol.mechanics import LimbParams, fx_gx, sea_geometry
+
+Measurement = tuple[float, float, float, float, float, float, float, float]
+"""(theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2) as sent by the driver."""
+
+_FD_STEP_S = 1e-4  # finite-difference horizon for g_x_dot along the current joint velocity
+
+
+@dataclass(frozen=True, slots=True)
+class InnerGains:
+    kp1: float
+    kp2: float
+    w: float  # cross-term weight (1.0 = paper)
+
+
+def cross_term_weight(mode: str, p: LimbParams, bandwidth_rad_s: float, theta_rad: tuple[float, float]) -> float:
+    """'paper' -> 1; 'off' -> 0; 'normalized' -> omega_c^2 / ||g_x(theta)||_F^2.
+
+    The cross term couples s and the deflection error e1 = v_x - z1 into an oscillator s'' + w |g|^2 s = ...,
+    whose frequency is sqrt(w) |g_x|. With w = 1 (paper) that is ~3e4 rad/s, far beyond any sampled loop; the
+    normalized weight places it at omega_c (a design bandwidth, rad/s) while keeping the Lyapunov cancellation.
+    """
+    if mode == "paper":
+        return 1.0
+    if mode == "off":
+        return 0.0
+    q1, q2 = theta_rad
+    _, _, a1, a2, _, _ = sea_geometry(q1, q2, p)
+    _, _, g = fx_gx(q1, q2, 0.0, 0.0, a1, a2, p)
+    return bandwidth_rad_s * bandwidth_rad_s / sum(v * v for v in g)
+
+
+def _cross(g: tuple[float, float, float, float], s: tuple[float, float]) -> tuple[float, float]:
+    """g^T s for row-major g."""
+    return g[0] * s[0] + g[2] * s[1], g[1] * s[0] + g[3] * s[1]
+
+
+def backstepping_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, float], p: LimbParams,
+                         gains: InnerGains) -> tuple[float, float]:
+    """Eq. 27 and 31 (unsaturated U_v in volts)."""
+    q1, q2, w1, w2, z11, z12, rd1, rd2 = m
+    _, _, a1, a2, a1p, a2p = sea_geometry(q1, q2, p)
+    f1, f2, g = fx_gx(q1, q2, w1, w2, a1, a2, p)
+    z21, z22 = a1 * w1 - rd1, a2 * w2 - rd2
+    e11, e12 = vx[0] - z11, vx[1] - z12
+    # nominal joint acceleration (disturbance unknown) and SEA end acceleration F_R = d2 r_B / dt2
+    acc1 = f1 + g[0] * z11 + g[1] * z12
+    acc2 = f2 + g[2] * z11 + g[3] * z12
+    fr1, fr2 = a1 * acc1 + a1p * w1 * w1, a2 * acc2 + a2p * w2 * w2
+    if gains.w != 0.0:
+        c1, c2 = _cross(g, s)
+        gd = _g_dot(q1, q2, w1, w2, p)
+        cd1, cd2 = _cross(gd, s)
+        c1, c2, cd1, cd2 = gains.w * c1, gains.w * c2, gains.w * cd1, gains.w * cd2
+    else:
+        c1 = c2 = cd1 = cd2 = 0.0
+    v11 = gains.kp1 * e11 - c1          # Eq. 27 with vdot_x(t_i) = 0 (held setpoint)
+    v12 = gains.kp1 * e12 - c2
+    v1d1 = -gains.kp1 * z21 - cd1       # time derivative of v1 (s held between events)
+    v1d2 = -gains.kp1 * z22 - cd2
+    cn = p.nut_damping
+    u1 = fr1 + cn * rd1 - gains.kp2 * (v11 - z21) - v1d1 - e11   # Eq. 31 with g2 = -1
+    u2 = fr2 + cn * rd2 - gains.kp2 * (v12 - z22) - v1d2 - e12
+    return u1, u2
+
+
+def _g_dot(q1: float, q2: float, w1: float, w2: float, p: LimbParams) -> tuple[float, float, float, float]:
+    h = _FD_STEP_S
+    _, _, a1, a2, _, _ = sea_geometry(q1 + w1 * h, q2 + w2 * h, p)
+    _, _, gp = fx_gx(q1 + w1 * h, q2 + w2 * h, 0.0, 0.0, a1, a2, p)
+    _, _, a1, a2, _, _ = sea_geometry(q1 - w1 * h, q2 - w2 * h, p)
+    _, _, gm = fx_gx(q1 - w1 * h, q2 - w2 * h, 0.0, 0.0, a1, a2, p)
+    return tuple((x - y) / (2.0 * h) for x, y in zip(gp, gm))  # type: ignore[return-value]
+
+
+def is_finite_voltage(u: tuple[float, float]) -> bool:
+    return math.isfinite(u[0]) and math.isfinite(u[1])

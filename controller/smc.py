@@ -1,0 +1,56 @@
+"""Sliding surface and SMC law, paper Eq. 12-13, on the nominal model (protocol.mechanics).
+
+The law returns v_x, the desired spring deflection of each SEA (metres). Pure functions of plain floats.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from controller.trajectory import DesiredSample
+from protocol.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry
+
+
+@dataclass(frozen=True, slots=True)
+class JointState:
+    """What the outer loop needs of a measurement: joint angles and velocities."""
+    theta_rad: tuple[float, float]
+    omega_rad_s: tuple[float, float]
+
+
+def switching(s: float, boundary_layer: float) -> float:
+    """sign(s) as in the paper (boundary_layer = 0), else the saturation sat(s / boundary_layer)."""
+    if boundary_layer <= 0.0:
+        return 1.0 if s > 0.0 else (-1.0 if s < 0.0 else 0.0)
+    v = s / boundary_layer
+    return 1.0 if v > 1.0 else (-1.0 if v < -1.0 else v)
+
+
+def tracking_errors(js: JointState, ds: DesiredSample) -> tuple[float, float, float, float]:
+    """(x~1_hip, x~1_knee, x~2_hip, x~2_knee) of Eq. 11."""
+    return (js.theta_rad[0] - ds.theta_rad[0], js.theta_rad[1] - ds.theta_rad[1],
+            js.omega_rad_s[0] - ds.omega_rad_s[0], js.omega_rad_s[1] - ds.omega_rad_s[1])
+
+
+def sliding_surface(xt: tuple[float, float, float, float], c: float) -> tuple[float, float]:
+    """Eq. 12: s = c x~1 + x~2."""
+    return c * xt[0] + xt[2], c * xt[1] + xt[3]
+
+
+def smc_deflection(js: JointState, ds: DesiredSample, p: LimbParams, c: float, rho: float,
+                   boundary_layer: float = 0.0) -> tuple[tuple[float, float], tuple[float, float]]:
+    """Eq. 13: v_x = g_x^-1 [-f_x + xdd_d - c x~2 - rho sign(s)]. Returns (v_x, s).
+
+    With f_x = M^-1 N and g_x = M^-1 diag(-k a): v_x = diag(-k a)^-1 (M y - N), y = xdd_d - c x~2 - rho sign(s).
+    """
+    q1, q2 = js.theta_rad
+    w1, w2 = js.omega_rad_s
+    xt = tracking_errors(js, ds)
+    s = sliding_surface(xt, c)
+    y1 = ds.alpha_rad_s2[0] - c * xt[2] - rho * switching(s[0], boundary_layer)
+    y2 = ds.alpha_rad_s2[1] - c * xt[3] - rho * switching(s[1], boundary_layer)
+    m11, m12, m22 = mass_matrix(q2, p)
+    n1, n2 = n_terms(q1, q2, w1, w2, p)
+    _, _, a1, a2, _, _ = sea_geometry(q1, q2, p)
+    v1 = (m11 * y1 - m12 * y2 - n1) / (-p.k1 * a1)
+    v2 = (-m12 * y1 + m22 * y2 - n2) / (-p.k2 * a2)
+    return (v1, v2), s

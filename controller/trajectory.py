@@ -1,0 +1,106 @@
+"""Desired joint trajectories x_d(t) with first and second derivatives.
+
+`GaitTrajectory`: a smooth periodic hip/knee swing built from two Fourier harmonics (the paper's reference [13]
+profile is not available; see docs/deviations.md). `CsvTrajectory`: samples `t, theta1, theta2` (rad) from a CSV file
+interpolated by a cubic spline (periodic if the first and last rows coincide, else not-a-knot); derivatives are the
+spline's analytic derivatives.
+"""
+from __future__ import annotations
+
+import csv
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from protocol.config import TrajectoryConfig
+from protocol.errors import TrajectoryError
+
+# (offset, [(amplitude, harmonic, phase)]) per joint, angles in rad
+_HIP = (0.05, ((0.35, 1, 0.0), (0.05, 2, 0.0)))
+_KNEE = (0.55, ((0.40, 1, -0.5 * math.pi - 0.5), (0.10, 2, 1.0)))
+
+
+@dataclass(frozen=True)
+class DesiredSample:
+    theta_rad: tuple[float, float]
+    omega_rad_s: tuple[float, float]
+    alpha_rad_s2: tuple[float, float]
+
+
+class GaitTrajectory:
+    def __init__(self, period_s: float) -> None:
+        self.period_s = period_s
+        self._w = 2.0 * math.pi / period_s
+
+    def _joint(self, spec: tuple, t: float) -> tuple[float, float, float]:
+        offset, harmonics = spec
+        q, qd, qdd = offset, 0.0, 0.0
+        for amp, k, phase in harmonics:
+            wk = k * self._w
+            s, c = math.sin(wk * t + phase), math.cos(wk * t + phase)
+            q += amp * s
+            qd += amp * wk * c
+            qdd -= amp * wk * wk * s
+        return q, qd, qdd
+
+    def sample(self, t_s: float) -> DesiredSample:
+        h, k = self._joint(_HIP, t_s), self._joint(_KNEE, t_s)
+        return DesiredSample((h[0], k[0]), (h[1], k[1]), (h[2], k[2]))
+
+
+class CsvTrajectory:
+    def __init__(self, path: str | Path) -> None:
+        t, q = _read_csv(Path(path))
+        periodic = bool(np.allclose(q[0], q[-1]))
+        self._spline = CubicSpline(t, q, axis=0, bc_type="periodic" if periodic else "not-a-knot")
+        self._d1 = self._spline.derivative(1)
+        self._d2 = self._spline.derivative(2)
+        self._t0, self._t1 = float(t[0]), float(t[-1])
+        self.period_s = self._t1 - self._t0
+        self._periodic = periodic
+
+    def sample(self, t_s: float) -> DesiredSample:
+        if self._periodic:
+            t_s = self._t0 + (t_s - self._t0) % self.period_s
+        else:
+            t_s = min(max(t_s, self._t0), self._t1)
+        q, qd, qdd = self._spline(t_s), self._d1(t_s), self._d2(t_s)
+        return DesiredSample((float(q[0]), float(q[1])), (float(qd[0]), float(qd[1])), (float(qdd[0]), float(qdd[1])))
+
+
+def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        with path.open(newline="", encoding="utf-8") as fh:
+            reader = csv.DictReader(fh)
+            cols = [c.strip() for c in (reader.fieldnames or [])]
+            missing = {"t", "theta1", "theta2"} - set(cols)
+            if missing:
+                raise TrajectoryError(f"{path}: missing column(s) {sorted(missing)}; need t, theta1, theta2")
+            rows = [{k.strip(): v for k, v in row.items() if k is not None} for row in reader]
+    except OSError as err:
+        raise TrajectoryError(f"cannot read trajectory {path}: {err}") from None
+    if len(rows) < 4:
+        raise TrajectoryError(f"{path}: need at least 4 rows, got {len(rows)}")
+    try:
+        data = np.array([[float(r["t"]), float(r["theta1"]), float(r["theta2"])] for r in rows])
+    except (TypeError, ValueError) as err:
+        raise TrajectoryError(f"{path}: non-numeric value ({err})") from None
+    if not np.all(np.isfinite(data)):
+        bad = int(np.argwhere(~np.isfinite(data))[0][0]) + 2
+        raise TrajectoryError(f"{path}: NaN or infinite value on line {bad}")
+    t = data[:, 0]
+    if np.any(np.diff(t) <= 0):
+        bad = int(np.argwhere(np.diff(t) <= 0)[0][0]) + 3
+        raise TrajectoryError(f"{path}: time is not strictly increasing (line {bad})")
+    return t, data[:, 1:]
+
+
+def make_trajectory(cfg: TrajectoryConfig) -> GaitTrajectory | CsvTrajectory:
+    if cfg.kind == "csv":
+        if not cfg.csv_path:
+            raise TrajectoryError("trajectory.kind = 'csv' needs trajectory.csv_path")
+        return CsvTrajectory(cfg.csv_path)
+    return GaitTrajectory(cfg.period_s)

@@ -1,0 +1,66 @@
+"""Event trigger, paper Eq. 16-19 plus the ||X~|| > r rule of Sec. 4 and a maximum inter-event time.
+
+epsilon = [X~, X_d] (Eq. 11) is stacked as an 8-vector (x~1, x~2, x_d, xdot_d for both joints); the event error is
+e = epsilon(t_i) - epsilon(t) (Eq. 16) and an event fires when ||e|| >= eta / (L sqrt(1 + c^2)) (violation of Eq. 19),
+when ||X~|| > r, or when max_inter_event_s has passed since the last event (keeps the link and watchdog alive).
+"""
+from __future__ import annotations
+
+import enum
+import math
+from dataclasses import dataclass
+
+
+class TriggerReason(enum.IntEnum):
+    TIME = 0            # time-triggered baseline: every sample
+    ERROR_BOUND = 1     # ||e|| reached the Eq. 19 threshold
+    TRACKING_BOUND = 2  # ||X~|| > r
+    HEARTBEAT = 3       # max inter-event time elapsed
+    INITIAL = 4         # first sample of a session
+
+
+def error_threshold(eta: float, lipschitz_l: float, c: float) -> float:
+    """Right-hand side of Eq. 19."""
+    return eta / (lipschitz_l * math.sqrt(1.0 + c * c))
+
+
+def epsilon(xt: tuple[float, float, float, float], xd: tuple[float, float], xd_dot: tuple[float, float]
+            ) -> tuple[float, ...]:
+    return (xt[0], xt[1], xt[2], xt[3], xd[0], xd[1], xd_dot[0], xd_dot[1])
+
+
+@dataclass
+class EventTrigger:
+    """Stateful trigger; `update` is called once per outer sample and says whether to transmit."""
+    threshold: float
+    r: float
+    max_inter_event_ns: int
+    _eps_i: tuple[float, ...] | None = None
+    _t_i_ns: int = 0
+
+    def update(self, t_ns: int, eps: tuple[float, ...]) -> TriggerReason | None:
+        if self._eps_i is None:
+            reason: TriggerReason | None = TriggerReason.INITIAL
+        else:
+            e_norm = math.sqrt(sum((a - b) ** 2 for a, b in zip(self._eps_i, eps)))
+            x_norm = math.sqrt(eps[0] ** 2 + eps[1] ** 2 + eps[2] ** 2 + eps[3] ** 2)
+            if e_norm >= self.threshold:
+                reason = TriggerReason.ERROR_BOUND
+            elif x_norm > self.r:
+                reason = TriggerReason.TRACKING_BOUND
+            elif t_ns - self._t_i_ns >= self.max_inter_event_ns:
+                reason = TriggerReason.HEARTBEAT
+            else:
+                reason = None
+        if reason is not None:
+            self._eps_i = eps
+            self._t_i_ns = t_ns
+        return reason
+
+
+@dataclass
+class TimeTrigger:
+    """Time-triggered baseline: every sample is an event."""
+
+    def update(self, t_ns: int, eps: tuple[float, ...]) -> TriggerReason:
+        return TriggerReason.TIME
