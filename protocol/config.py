@@ -72,6 +72,7 @@ class ControllerConfig(_Frozen):
     sample_period_s: float = Field(0.01, gt=0)
     inner_rate_hz: float = Field(1000.0, gt=0)
     cross_term_scale: Literal["normalized", "paper", "off"] = "normalized"
+    cross_term_bandwidth_rad_s: float = Field(30.0, gt=0, description="omega_c of the normalized Eq. 27 cross term")
 
 
 class TriggerConfig(_Frozen):
@@ -94,14 +95,43 @@ class CanConfig(_Frozen):
     heartbeat_rate_hz: float = Field(10.0, gt=0)
     watchdog_timeout_s: float = Field(0.1, gt=0)
     send_retries: int = Field(5, ge=0)
+    send_backoff_s: float = Field(0.0002, ge=0, description="pause between send retries when the tx queue is full")
+
+    @field_validator("interface")
+    @classmethod
+    def _spec(cls, v: str) -> str:
+        from protocol.canbus import parse_can_spec  # local: keeps python-can out of config import time
+        try:
+            parse_can_spec(v)
+        except ConfigError as err:
+            raise ValueError(str(err)) from None
+        return v
+
+    @field_validator("node_ids")
+    @classmethod
+    def _nodes(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        if not v or len(set(v)) != len(v) or any(not 1 <= n <= 63 for n in v):
+            raise ValueError("node_ids must be distinct CAN node ids in 1..63 (can_id = node_id << 5 | cmd_id)")
+        return v
 
 
 class ZenohConfig(_Frozen):
+    """Zenoh session and key layout (see docs/zenoh-protocol.md)."""
     prefix: str = "sea"
     limb: str = "limb1"
+    mode: Literal["peer", "client"] = "peer"
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
     state_period_s: float = Field(0.01, gt=0)
+
+    @field_validator("prefix", "limb")
+    @classmethod
+    def _key_chunk(cls, v: str, info: Any) -> str:
+        from protocol.keys import validate_limb, validate_prefix
+        try:
+            return validate_prefix(v) if info.field_name == "prefix" else validate_limb(v)
+        except ConfigError as err:
+            raise ValueError(str(err)) from None
 
 
 class LinkDirectionConfig(_Frozen):
@@ -113,6 +143,8 @@ class LinkDirectionConfig(_Frozen):
     ge_p_bad_to_good: float = Field(1.0, ge=0, le=1)
     ge_loss_bad: float = Field(1.0, ge=0, le=1)
     rate_bps: float = Field(0.0, ge=0, description="0 = unlimited")
+    queue_limit_s: float = Field(0.0, ge=0, description="rate-limit queue: drop if waiting would exceed; 0 = no limit")
+    reorder: bool = Field(False, description="false = FIFO delivery like one TCP stream; true = jitter may reorder")
 
 
 class LinkConfig(_Frozen):
@@ -126,6 +158,7 @@ class RecordConfig(_Frozen):
     chunk_size_bytes: int = Field(1 << 20, gt=0)
     stats_period_s: float = Field(1.0, gt=0)
     queue_limit: int = Field(100_000, gt=0)
+    flush_period_s: float = Field(1.0, ge=0, description="close the open chunk at least this often; 0 = only when full")
 
 
 class SeaHilConfig(_Frozen):

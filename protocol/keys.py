@@ -1,0 +1,90 @@
+"""Zenoh key expressions of one limb: `<prefix>/<limb>/<channel>` (see docs/zenoh-protocol.md).
+
+| channel    | direction           | content                                                         |
+|------------|---------------------|-----------------------------------------------------------------|
+| `state`    | edge -> controller  | sampled joint state (`StatePayload`, binary)                    |
+| `setpoint` | controller -> edge  | spring-deflection setpoint v_x(t_i), only on events (binary)    |
+| `voltage`  | controller -> edge  | motor voltages for the "remote inner loop" placement (binary)   |
+| `stats`    | any node -> all     | periodic node statistics (JSON object)                          |
+| `event`    | controller -> all   | trigger events with their reason (JSON object)                  |
+| `control`  | any -> all          | session control, e.g. lockstep / stop (JSON object, generic)    |
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from protocol.errors import ConfigError
+
+CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
+_FORBIDDEN = frozenset("*$#?")
+
+
+def _check_chunk(what: str, chunk: str, full: str) -> None:
+    if not chunk:
+        raise ConfigError(f"zenoh {what} {full!r} has an empty chunk (leading, trailing or double '/')")
+    bad = sorted(set(chunk) & _FORBIDDEN)
+    if bad:
+        raise ConfigError(f"zenoh {what} {full!r} contains forbidden character(s) {''.join(bad)!r}")
+    if any(c.isspace() for c in chunk):
+        raise ConfigError(f"zenoh {what} {full!r} contains whitespace")
+
+
+def validate_prefix(prefix: str) -> str:
+    """A prefix is one or more '/'-separated chunks without wildcards (`*`, `$`), `#`, `?` or whitespace."""
+    if not isinstance(prefix, str) or not prefix:
+        raise ConfigError("zenoh prefix must be a non-empty string")
+    for chunk in prefix.split("/"):
+        _check_chunk("prefix", chunk, prefix)
+    return prefix
+
+
+def validate_limb(limb: str) -> str:
+    """A limb name is exactly one chunk: like a prefix chunk and additionally without '/'."""
+    if not isinstance(limb, str) or not limb:
+        raise ConfigError("zenoh limb must be a non-empty string")
+    if "/" in limb:
+        raise ConfigError(f"zenoh limb {limb!r} must not contain '/'")
+    _check_chunk("limb", limb, limb)
+    return limb
+
+
+@dataclass(frozen=True)
+class Keys:
+    """All key expressions of one limb. Build with `Keys.make(prefix, limb)` or `Keys.from_config(zenoh_cfg)`."""
+    prefix: str
+    limb: str
+    state: str
+    setpoint: str
+    voltage: str
+    stats: str
+    event: str
+    control: str
+
+    @classmethod
+    def make(cls, prefix: str, limb: str) -> Keys:
+        validate_prefix(prefix)
+        validate_limb(limb)
+        base = f"{prefix}/{limb}"
+        return cls(prefix, limb, **{ch: f"{base}/{ch}" for ch in CHANNELS})
+
+    @classmethod
+    def from_config(cls, zenoh_cfg: object) -> Keys:
+        """From a `protocol.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
+        return cls.make(getattr(zenoh_cfg, "prefix"), getattr(zenoh_cfg, "limb"))
+
+    def all(self) -> dict[str, str]:
+        """Channel name -> key expression."""
+        return {ch: getattr(self, ch) for ch in CHANNELS}
+
+
+def any_limb(prefix: str, channel: str) -> str:
+    """Wildcard selector `<prefix>/*/<channel>` over all limbs (for recorders and monitors)."""
+    validate_prefix(prefix)
+    if channel not in CHANNELS:
+        raise ConfigError(f"unknown channel {channel!r}; expected one of {', '.join(CHANNELS)}")
+    return f"{prefix}/*/{channel}"
+
+
+def everything(prefix: str) -> str:
+    """Selector `<prefix>/**` matching every key of every limb."""
+    return f"{validate_prefix(prefix)}/**"

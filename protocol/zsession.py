@@ -1,0 +1,155 @@
+"""Helpers on the zenoh 1.x Python API: explicit-endpoint sessions, newest-only subscribers, link-emulated publishers.
+
+Sessions never rely on multicast scouting: one side listens on e.g. `tcp/127.0.0.1:<port>`, the other connects.
+"""
+from __future__ import annotations
+
+import json
+import re
+import socket
+import time
+from typing import Any, Protocol
+
+import zenoh
+
+from protocol.config import ZenohConfig
+from protocol.errors import ConfigError
+from protocol.link import DelayQueue, LinkEmulator
+from protocol.payloads import estimate_wire_bytes
+
+_ENDPOINT = re.compile(r"^[a-z0-9\-]+/\S+$")
+_MODES = ("peer", "client", "router")
+
+
+def free_tcp_port(host: str = "127.0.0.1") -> int:
+    """A TCP port that was free a moment ago (the OS may hand it out again; bind promptly)."""
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as s:
+        s.bind((host, 0))
+        return int(s.getsockname()[1])
+
+
+def _insert(cfg: zenoh.Config, key: str, value: Any) -> None:
+    try:
+        cfg.insert_json5(key, json.dumps(value))
+    except zenoh.ZError as err:
+        raise ConfigError(f"zenoh config {key}={value!r} rejected: {err}") from None
+
+
+def make_config(*, listen: list[str] | tuple[str, ...] = (), connect: list[str] | tuple[str, ...] = (),
+                mode: str = "peer") -> zenoh.Config:
+    """A zenoh config with multicast scouting off and only the given endpoints (`<proto>/<address>`)."""
+    if mode not in _MODES:
+        raise ConfigError(f"zenoh mode {mode!r} must be one of {', '.join(_MODES)}")
+    for ep in (*listen, *connect):
+        if not isinstance(ep, str) or not _ENDPOINT.match(ep):
+            raise ConfigError(f"zenoh endpoint {ep!r} must look like 'tcp/127.0.0.1:7447'")
+    cfg = zenoh.Config()
+    _insert(cfg, "mode", mode)
+    _insert(cfg, "scouting/multicast/enabled", False)
+    _insert(cfg, "listen/endpoints", list(listen))
+    _insert(cfg, "connect/endpoints", list(connect))
+    return cfg
+
+
+def open_session(cfg: zenoh.Config | ZenohConfig) -> zenoh.Session:
+    """Open a session; an unusable endpoint or config raises `ConfigError`. Close it with `session.close()`."""
+    if isinstance(cfg, ZenohConfig):
+        cfg = make_config(listen=cfg.listen, connect=cfg.connect, mode=cfg.mode)
+    try:
+        return zenoh.open(cfg)
+    except zenoh.ZError as err:
+        raise ConfigError(f"cannot open zenoh session: {err}") from None
+
+
+def publisher(session: zenoh.Session, key: str, *, express: bool = True,
+              priority: zenoh.Priority = zenoh.Priority.REAL_TIME,
+              congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> zenoh.Publisher:
+    """A publisher for control traffic: by default unbatched (express), highest priority, drop when congested."""
+    return session.declare_publisher(key, express=express, priority=priority, congestion_control=congestion_control)
+
+
+class LatestSubscriber:
+    """Newest-sample-only subscriber: a zenoh `RingChannel(1)` (bounded in Rust, no Python thread, no backlog).
+
+    `try_latest()` takes the newest unread sample (or None). `recv(timeout_s)` waits for one by polling
+    `try_latest` every `poll_interval_s` (the 1.x Python handler has no timed receive), so it adds at most
+    that much latency; loops that already tick should call `try_latest` instead.
+    """
+
+    def __init__(self, session: zenoh.Session, key: str, *, poll_interval_s: float = 200e-6) -> None:
+        self.key = key
+        self.poll_interval_s = poll_interval_s
+        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
+
+    def try_latest(self) -> zenoh.Sample | None:
+        return self._sub.try_recv()
+
+    def recv(self, timeout_s: float) -> zenoh.Sample | None:
+        deadline = time.monotonic_ns() + round(timeout_s * 1e9)
+        while True:
+            sample = self._sub.try_recv()
+            if sample is not None or time.monotonic_ns() >= deadline:
+                return sample
+            time.sleep(self.poll_interval_s)
+
+    def close(self) -> None:
+        self._sub.undeclare()
+
+    def __enter__(self) -> LatestSubscriber:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+def latest_subscriber(session: zenoh.Session, key: str) -> LatestSubscriber:
+    return LatestSubscriber(session, key)
+
+
+class _Putter(Protocol):
+    def put(self, payload: bytes) -> Any: ...
+
+
+class LinkedPublisher:
+    """A publisher behind a `LinkEmulator`, driven explicitly by its owner's loop (no thread, no clock reads).
+
+    `put(data, now_ns)` runs the emulator; a kept message is published at once if it is due and nothing is
+    queued before it, otherwise held in a `DelayQueue`. The owner calls `poll(now_ns)` every tick (or sleeps until
+    `next_due_ns()`), which publishes everything due. In lockstep, `now_ns` is simulated time, so runs are
+    deterministic. The rate limit counts `estimate_wire_bytes(len(data))` unless `wire_bytes` is passed.
+    """
+
+    def __init__(self, pub: _Putter, link: LinkEmulator) -> None:
+        self._pub = pub
+        self.link = link
+        self._queue: DelayQueue[bytes] = DelayQueue()
+        self.published = 0
+
+    def put(self, data: bytes, now_ns: int, *, wire_bytes: int | None = None) -> int | None:
+        """Submit `data` at `now_ns`; returns its delivery time, or None if the link dropped it."""
+        at = self.link.submit(now_ns, estimate_wire_bytes(len(data)) if wire_bytes is None else wire_bytes)
+        if at is None:
+            return None
+        if at <= now_ns and not self._queue:
+            self._publish(data)
+        else:
+            self._queue.push(at, data)
+        return at
+
+    def poll(self, now_ns: int) -> int:
+        """Publish every held message due at `now_ns`; returns how many were published."""
+        due = self._queue.pop_due(now_ns)
+        for data in due:
+            self._publish(data)
+        return len(due)
+
+    def next_due_ns(self) -> int | None:
+        return self._queue.next_due_ns()
+
+    @property
+    def pending(self) -> int:
+        return len(self._queue)
+
+    def _publish(self, data: bytes) -> None:
+        self._pub.put(data)
+        self.published += 1

@@ -1,0 +1,49 @@
+"""The `sea-hil` console script: one entry point, one subcommand per node or job.
+
+Each subcommand lives in its own module `sea_hil/cmd_<name>.py` exposing `register(subparsers)`; the module is
+imported only when listed here. Errors derived from SeaHilError print one line and exit 2 (no traceback).
+"""
+from __future__ import annotations
+
+import argparse
+import importlib
+import logging
+import sys
+
+from protocol.errors import SeaHilError
+
+COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="sea-hil", description=(
+        "Networked HIL emulator: event-triggered SMC of a 2-DOF SEA lower limb over CAN and Zenoh."))
+    parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v info, -vv debug)")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    for name in COMMANDS:
+        try:
+            module = importlib.import_module(f"sea_hil.cmd_{name}")
+        except ModuleNotFoundError as err:
+            if err.name != f"sea_hil.cmd_{name}":
+                raise
+            continue
+        module.register(sub)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    level = logging.WARNING - 10 * min(args.verbose, 2)
+    logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
+    try:
+        return int(args.func(args) or 0)
+    except SeaHilError as err:
+        print(f"sea-hil {args.command}: error: {err}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())
