@@ -6,17 +6,10 @@ when ||X~|| > r, or when max_inter_event_s has passed since the last event (keep
 """
 from __future__ import annotations
 
-import enum
 import math
 from dataclasses import dataclass
 
-
-class TriggerReason(enum.IntEnum):
-    TIME = 0            # time-triggered baseline: every sample
-    ERROR_BOUND = 1     # ||e|| reached the Eq. 19 threshold
-    TRACKING_BOUND = 2  # ||X~|| > r
-    HEARTBEAT = 3       # max inter-event time elapsed
-    INITIAL = 4         # first sample of a session
+from protocol.payloads import TriggerReason
 
 
 def error_threshold(eta: float, lipschitz_l: float, c: float) -> float:

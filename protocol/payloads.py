@@ -4,8 +4,9 @@ Common 16-byte header: magic `b"SH"` (2 bytes), version (u8), msg type (u8), seq
 the sender at send time). Bodies (floats are float64 so lockstep runs are bit-reproducible):
 
 - STATE    (1): sample_t_ns u64, theta[2], omega[2], delta[2], nut_vel[2] f64            -> 88 bytes total
-- SETPOINT (2): state_seq u32, deflection_m[2] f64, reason u8                            -> 37 bytes total
+- SETPOINT (2): state_seq u32, deflection_m[2] f64, sliding[2] f64, reason u8           -> 53 bytes total
 - VOLTAGE  (3): state_seq u32, voltage_v[2] f64                                          -> 36 bytes total
+- ACK      (4): state_seq u32, setpoint_seq u32, sent u8 (lockstep: controller handled state_seq) -> 25 bytes
 
 Versioning: `VERSION` is bumped on any change of an existing layout; a decoder rejects every version it does not
 know. New message types may be added without a bump (old decoders reject them as unknown type). Lengths are exact.
@@ -34,6 +35,7 @@ class MsgType(IntEnum):
     STATE = 1
     SETPOINT = 2
     VOLTAGE = 3
+    ACK = 4
 
 
 class TriggerReason(IntEnum):
@@ -112,8 +114,9 @@ class SetpointPayload(_Payload):
     t_ns: int
     state_seq: int
     deflection_m: tuple[float, float]
+    sliding: tuple[float, float]
     reason: TriggerReason
-    _pairs: ClassVar[tuple[str, ...]] = ("deflection_m",)
+    _pairs: ClassVar[tuple[str, ...]] = ("deflection_m", "sliding")
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -137,14 +140,33 @@ class VoltagePayload(_Payload):
         _uint("state_seq", self.state_seq, U32_MAX)
 
 
-Payload = Union[StatePayload, SetpointPayload, VoltagePayload]
+@dataclass(frozen=True)
+class AckPayload(_Payload):
+    """Lockstep control plane: the controller has handled state `state_seq`; `sent` says whether that produced
+    setpoint `setpoint_seq` (which the edge then waits for). Not counted as a downlink transmission."""
+    seq: int
+    t_ns: int
+    state_seq: int
+    setpoint_seq: int
+    sent: bool
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        _uint("state_seq", self.state_seq, U32_MAX)
+        _uint("setpoint_seq", self.setpoint_seq, U32_MAX)
+        object.__setattr__(self, "sent", bool(self.sent))
+
+
+Payload = Union[StatePayload, SetpointPayload, VoltagePayload, AckPayload]
 
 _BODY = {
     MsgType.STATE: struct.Struct("<Q8d"),
-    MsgType.SETPOINT: struct.Struct("<I2dB"),
+    MsgType.SETPOINT: struct.Struct("<I4dB"),
     MsgType.VOLTAGE: struct.Struct("<I2d"),
+    MsgType.ACK: struct.Struct("<IIB"),
 }
-_TYPE_OF = {StatePayload: MsgType.STATE, SetpointPayload: MsgType.SETPOINT, VoltagePayload: MsgType.VOLTAGE}
+_TYPE_OF = {StatePayload: MsgType.STATE, SetpointPayload: MsgType.SETPOINT, VoltagePayload: MsgType.VOLTAGE,
+            AckPayload: MsgType.ACK}
 PAYLOAD_SIZE = {t: HEADER_SIZE + s.size for t, s in _BODY.items()}
 
 
@@ -157,7 +179,9 @@ def encode(p: Payload) -> bytes:
     if isinstance(p, StatePayload):
         body = _BODY[mtype].pack(p.sample_t_ns, *p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
     elif isinstance(p, SetpointPayload):
-        body = _BODY[mtype].pack(p.state_seq, *p.deflection_m, int(p.reason))
+        body = _BODY[mtype].pack(p.state_seq, *p.deflection_m, *p.sliding, int(p.reason))
+    elif isinstance(p, AckPayload):
+        body = _BODY[mtype].pack(p.state_seq, p.setpoint_seq, int(p.sent))
     else:
         body = _BODY[mtype].pack(p.state_seq, *p.voltage_v)
     return head + body
@@ -183,7 +207,11 @@ def decode(b: bytes) -> Payload:
     if mt is MsgType.STATE:
         return StatePayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5:7], f[7:9])
     if mt is MsgType.SETPOINT:
-        return SetpointPayload(seq, t_ns, f[0], f[1:3], f[3])
+        return SetpointPayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5])
+    if mt is MsgType.ACK:
+        if f[2] > 1:
+            raise PayloadRejected(RejectReason.ENUM, f"ack flag {f[2]} is not 0 or 1")
+        return AckPayload(seq, t_ns, f[0], f[1], f[2])
     return VoltagePayload(seq, t_ns, f[0], f[1:3])
 
 

@@ -9,7 +9,7 @@ from hypothesis import given, strategies as st
 
 from protocol.errors import ConfigError, MalformedPayload
 from protocol.keys import Keys, any_limb
-from protocol.payloads import (HEADER_SIZE, MAGIC, PAYLOAD_SIZE, MsgType, PayloadCounters, PayloadRejected,
+from protocol.payloads import (AckPayload, HEADER_SIZE, MAGIC, PAYLOAD_SIZE, MsgType, PayloadCounters, PayloadRejected,
                                RejectReason, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
                                TriggerReason, VoltagePayload, decode, encode, estimate_wire_bytes)
 
@@ -34,11 +34,23 @@ def test_state_roundtrip_is_bit_exact(seq, t, ts, th, om, de, nv):
     assert decode(b) == p
 
 
-@given(u32, u64, u32, pair, st.sampled_from(list(TriggerReason)))
-def test_setpoint_roundtrip(seq, t, sseq, d, reason):
-    p = SetpointPayload(seq, t, sseq, d, reason)
+@given(u32, u64, u32, pair, pair, st.sampled_from(list(TriggerReason)))
+def test_setpoint_roundtrip(seq, t, sseq, d, s, reason):
+    p = SetpointPayload(seq, t, sseq, d, s, reason)
     q = decode(encode(p))
-    assert q == p and isinstance(q.reason, TriggerReason)
+    assert q == p and isinstance(q.reason, TriggerReason) and len(encode(p)) == 53
+
+
+@given(u32, u64, u32, u32, st.booleans())
+def test_ack_roundtrip(seq, t, sseq, spseq, sent):
+    p = AckPayload(seq, t, sseq, spseq, sent)
+    assert decode(encode(p)) == p and len(encode(p)) == 25
+
+
+def test_ack_flag_must_be_boolean():
+    b = bytearray(encode(AckPayload(1, 2, 3, 4, True)))
+    b[-1] = 2
+    assert _reason(bytes(b)) is RejectReason.ENUM
 
 
 @given(u32, u64, u32, pair)
@@ -64,7 +76,7 @@ def test_rejections_name_their_reason():
     assert _reason(good[:3] + bytes([200]) + good[4:]) is RejectReason.TYPE
     nan = good[:HEADER_SIZE + 8] + struct.pack("<d", math.nan) + good[HEADER_SIZE + 16:]
     assert _reason(nan) is RejectReason.NONFINITE
-    sp = bytearray(encode(SetpointPayload(1, 2, 3, (0.0, 0.0), TriggerReason.HEARTBEAT)))
+    sp = bytearray(encode(SetpointPayload(1, 2, 3, (0.0, 0.0), (0.0, 0.0), TriggerReason.HEARTBEAT)))
     sp[-1] = 77
     assert _reason(bytes(sp)) is RejectReason.ENUM
     assert "enum" in str(pytest.raises(MalformedPayload, decode, bytes(sp)).value)
