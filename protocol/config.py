@@ -44,6 +44,7 @@ class PlantConfig(_Frozen):
     alpha1_rad: float
     alpha2_rad: float
     theta_ref_rad: Pair = (0.0, 0.0)
+    initial_theta_rad: Pair = Field((0.05, 0.2831), description="joint angles the driver boots at (rest, holding)")
     nut_damping_per_s: float = Field(48.0, ge=0)
     voltage_limit_v: float = Field(24.0, gt=0)
     include_i2_in_coupling: bool = True

@@ -1,0 +1,106 @@
+"""Open python-can buses from a one-string spec and send with a bounded retry when the transmit queue is full.
+
+Specs: ``socketcan:IFNAME`` (e.g. ``socketcan:vcan0``), ``virtual:NAME`` (in-process python-can bus, for tests and
+single-process runs) and ``udp_multicast:GROUP`` (python-can's UDP multicast bus between processes/hosts; GROUP is
+an IPv4 or IPv6 multicast address such as ``239.74.163.2``, python-can's default port 43113; needs ``msgpack``).
+"""
+from __future__ import annotations
+
+import errno
+import ipaddress
+import re
+import time
+from typing import Any, Callable
+
+import can
+
+from protocol.errors import BusError, ConfigError
+
+INTERFACES = ("socketcan", "virtual", "udp_multicast")
+_IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")  # Linux IFNAMSIZ (16) minus the NUL
+_USAGE = "expected 'socketcan:IFNAME', 'virtual:NAME' or 'udp_multicast:GROUP'"
+
+
+def parse_can_spec(spec: str) -> tuple[str, str]:
+    """``"socketcan:vcan0"`` -> ``("socketcan", "vcan0")``; `ConfigError` for anything malformed."""
+    if not isinstance(spec, str) or ":" not in spec:
+        raise ConfigError(f"bad CAN spec {spec!r}: {_USAGE}")
+    interface, _, channel = spec.partition(":")
+    if interface not in INTERFACES:
+        raise ConfigError(f"bad CAN spec {spec!r}: unknown interface {interface!r}; {_USAGE}")
+    if interface == "socketcan" and not _IFNAME.fullmatch(channel):
+        raise ConfigError(f"bad CAN spec {spec!r}: {channel!r} is not a network interface name "
+                          "(1-15 characters of A-Z a-z 0-9 _ . -)")
+    if interface == "virtual" and (not channel or channel != channel.strip()):
+        raise ConfigError(f"bad CAN spec {spec!r}: virtual channel name must be non-empty without "
+                          "surrounding spaces")
+    if interface == "udp_multicast":
+        try:
+            group = ipaddress.ip_address(channel)
+        except ValueError:
+            group = None
+        if group is None or not group.is_multicast:
+            raise ConfigError(f"bad CAN spec {spec!r}: udp_multicast needs an IPv4/IPv6 multicast group "
+                              "address, e.g. udp_multicast:239.74.163.2")
+    return interface, channel
+
+
+def open_bus(spec: str, *, receive_own_messages: bool = False, fd: bool = False) -> can.BusABC:
+    """Open the bus named by `spec` (classic CAN unless `fd`); `BusError` when it cannot be opened."""
+    interface, channel = parse_can_spec(spec)
+    kwargs: dict[str, Any] = {"receive_own_messages": receive_own_messages}
+    if interface == "virtual":
+        kwargs["protocol"] = can.CanProtocol.CAN_FD if fd else can.CanProtocol.CAN_20
+    else:
+        kwargs["fd"] = fd
+    if interface == "udp_multicast" and receive_own_messages:
+        raise BusError(f"cannot open {spec!r}: python-can's udp_multicast bus cannot receive its own messages")
+    try:
+        return can.Bus(interface=interface, channel=channel, **kwargs)
+    except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as err:
+        hint = " (is the interface up? e.g. scripts/with-vcan)" if interface == "socketcan" else ""
+        raise BusError(f"cannot open CAN bus {spec!r}: {err}{hint}") from None
+
+
+def frame_bits(dlc: int, *, worst_case: bool = True) -> int:
+    """Bit times of a classic base-format (11-bit id) data frame with `dlc` bytes, 3-bit interframe space included.
+
+    Worst case adds one stuff bit per 4 bits after the first of the 34 + 8*dlc stuffed bits (SOF .. CRC).
+    """
+    if not 0 <= dlc <= 8:
+        raise ConfigError(f"classic CAN DLC must be 0..8, got {dlc}")
+    stuff = (34 + 8 * dlc - 1) // 4 if worst_case else 0
+    return 47 + 8 * dlc + stuff
+
+
+def is_buffer_full(err: BaseException) -> bool:
+    """True for the transient 'transmit queue full' failures (ENOBUFS, python-can's 'Transmit buffer full')."""
+    if getattr(err, "error_code", None) == errno.ENOBUFS or getattr(err, "errno", None) == errno.ENOBUFS:
+        return True
+    cause = err.__cause__
+    if isinstance(cause, OSError) and cause.errno == errno.ENOBUFS:
+        return True
+    return isinstance(err, can.CanOperationError) and "buffer full" in str(err).lower()
+
+
+def send_with_retry(bus: can.BusABC, msg: can.Message, retries: int, backoff_s: float, *,
+                    timeout_s: float | None = None, sleep: Callable[[float], None] = time.sleep) -> int:
+    """Send `msg`, retrying up to `retries` times (sleeping `backoff_s` in between) while the transmit queue is full.
+
+    Returns the number of retries used; raises `BusError` on any other send failure at once and on a full queue
+    after the last retry. Worst-case blocking is ``retries * backoff_s`` plus the send timeouts.
+    """
+    if retries < 0 or not backoff_s >= 0:
+        raise ConfigError(f"send_with_retry: retries {retries!r} and backoff_s {backoff_s!r} must be >= 0")
+    last: BaseException | None = None
+    for attempt in range(retries + 1):
+        if attempt:
+            sleep(backoff_s)
+        try:
+            bus.send(msg, timeout=timeout_s)
+            return attempt
+        except (can.CanError, OSError) as err:
+            if not is_buffer_full(err):
+                raise BusError(f"CAN send of id 0x{msg.arbitration_id:X} failed: {err}") from None
+            last = err
+    raise BusError(f"CAN transmit queue still full after {retries} retries (id 0x{msg.arbitration_id:X}): {last}")

@@ -1,0 +1,301 @@
+"""Tests of protocol/sea.dbc + protocol/can_codec.py (bit layout in docs/can-protocol.md)."""
+from __future__ import annotations
+
+import itertools
+import math
+import random
+import subprocess
+import sys
+from pathlib import Path
+
+import can
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from protocol.can_codec import (FEEDBACK_PARTS, FRAME_TYPES, SEQ_MODULUS, T_US_MODULUS, ClearErrors,
+                                DeflectionSetpoint, DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle,
+                                FeedbackAssembler, FeedbackDeflection, FeedbackVelocity, Heartbeat, SeaCodec,
+                                VoltageCmd, can_id_of, load_database, seq_gap, unwrap_us)
+from protocol.errors import MalformedFrame
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@pytest.fixture(scope="module")
+def codec() -> SeaCodec:
+    return SeaCodec()
+
+
+def _msg(can_id: int, data: bytes | str, **kw) -> can.Message:
+    payload = bytes.fromhex(data) if isinstance(data, str) else data
+    return can.Message(arbitration_id=can_id, data=payload, is_extended_id=False, **kw)
+
+
+# Expected bytes computed by hand from the layout (little-endian, LSB first, two's complement):
+EXACT = [
+    (EStop(1), 0x020, ""),                                                   # node 1 << 5 | cmd 0, DLC 0
+    (ClearErrors(5), 0x0A6, ""),                                             # 5 << 5 | 6 = 0xA6
+    # seq 200 = C8; 12.345 V / 1 mV = 12345 = 0x3039; -3.2 V -> -3200 = 0xF380
+    (VoltageCmd(1, (12.345, -3.2), 200), 0x021, "c8 3930 80f3"),
+    # 0.0125 m / 1 um = 12500 = 0x30D4; -1 um -> -1 = 0xFFFF
+    (DeflectionSetpoint(2, (0.0125, -0.000001), 0), 0x042, "00 d430 ffff"),
+    # 63 << 5 | 7; state FAULT=2; flags WATCHDOG(bit0)|BUS_ERROR(bit4) = 0x11; 258 = 0x0102; 65535; seq 17 = 0x11
+    (Heartbeat(63, DriverState.FAULT, ErrorFlags.WATCHDOG | ErrorFlags.BUS_ERROR, 258, 65535, 17),
+     0x7E7, "02 11 0201 ffff 11"),
+    # seq 5; t_us 0xBEEF; 1.5708 rad / 1e-4 = 15708 = 0x3D5C; -1e-4 -> 0xFFFF
+    (FeedbackAngle(1, 5, 0xBEEF, (1.5708, -0.0001)), 0x023, "05 efbe 5c3d ffff"),
+    # 0.03 m -> 30000 = 0x7530; -0.03 m -> -30000 = 0x8AD0
+    (FeedbackDeflection(1, 5, (0.03, -0.03)), 0x024, "05 3075 d08a"),
+    # bits: seq 0..7 = 5 | omega1 8..22 = 500 | omega2 23..37 = -15000 -> 2^15-15000 = 17768
+    #       | nut_vel1 38..50 = 3000 | nut_vel2 51..63 = -1 -> 8191; as one little-endian 64-bit integer:
+    (FeedbackVelocity(1, 5, (1.0, -30.0), (0.6, -0.0002)), 0x025,
+     (5 | 500 << 8 | 17768 << 23 | 3000 << 38 | 8191 << 51).to_bytes(8, "little").hex()),
+]
+
+
+@pytest.mark.parametrize("obj,can_id,hexdata", EXACT, ids=[type(e[0]).__name__ for e in EXACT])
+def test_exact_bytes_and_round_trip(codec: SeaCodec, obj, can_id: int, hexdata: str) -> None:
+    msg = codec.encode(obj)
+    assert (msg.arbitration_id, msg.is_extended_id, msg.dlc) == (can_id, False, len(bytes.fromhex(hexdata)))
+    assert bytes(msg.data) == bytes.fromhex(hexdata)
+    back = codec.decode(_msg(can_id, hexdata))
+    assert type(back) is type(obj)
+    for name, val in vars(obj).items():
+        got = getattr(back, name)
+        if isinstance(val, tuple):
+            assert got == pytest.approx(val, abs=1e-12)
+        else:
+            assert got == val
+
+
+def test_every_frame_type_covered_and_ids_unique(codec: SeaCodec) -> None:
+    assert {type(e[0]) for e in EXACT} == set(FRAME_TYPES)
+    ids = [e[1] & 0x1F for e in EXACT]
+    assert len(set(ids)) == len(ids)
+    assert can_id_of(3, 0x05) == 0x65
+
+
+def test_dbc_meets_required_ranges_and_resolutions() -> None:
+    db = load_database()
+    need = {  # signal: (required |range|, required resolution)
+        "voltage1": (30, 1e-3), "vx1": (0.03, 1e-6), "theta1": (3.2, 1e-4), "omega1": (30, 2e-3),
+        "delta1": (0.03, 1e-6), "nut_vel1": (0.6, 2e-4),
+    }
+    sigs = {s.name: s for m in db.messages for s in m.signals}
+    for name, (rng, res) in need.items():
+        for s in (sigs[name], sigs[name[:-1] + "2"]):
+            assert s.scale <= res * (1 + 1e-9), s.name
+            assert s.minimum <= -rng and s.maximum >= rng, s.name
+            raw_max = (1 << (s.length - 1)) - 1
+            assert raw_max * s.scale >= s.maximum and -(raw_max + 1) * s.scale <= s.minimum, s.name
+    assert all(m.length <= 8 for m in db.messages)
+
+
+def test_python_enums_match_dbc() -> None:
+    db = load_database()
+    hb = db.get_message_by_name("HEARTBEAT")
+    assert {int(k): str(v) for k, v in hb.get_signal_by_name("state").choices.items()} == \
+        {s.value: s.name for s in DriverState}
+    flag_bits = {s.name: s.start - 8 for s in hb.signals if s.name.startswith("err_")}
+    assert flag_bits == {"err_" + f.name.lower(): int(f).bit_length() - 1 for f in ErrorFlags}
+    lengths = {s.name: s.length for m in db.messages for s in m.signals}
+    assert (1 << lengths["t_us"], 1 << lengths["seq"]) == (T_US_MODULUS, SEQ_MODULUS)
+
+
+BAD_ENCODE = [
+    VoltageCmd(1, (30.001, 0.0), 0), VoltageCmd(1, (0.0, -30.001), 0), VoltageCmd(1, (math.nan, 0.0), 0),
+    VoltageCmd(1, (math.inf, 0.0), 0), VoltageCmd(1, (0.0, 0.0), 256), VoltageCmd(1, (0.0, 0.0), -1),
+    VoltageCmd(1, (0.0, 0.0), 1.5), VoltageCmd(1, (0.0,), 1), VoltageCmd(1, "ab", 1),  # type: ignore[arg-type]
+    VoltageCmd(0, (0.0, 0.0), 1), VoltageCmd(64, (0.0, 0.0), 1), DeflectionSetpoint(1, (0.0301, 0.0), 0),
+    FeedbackAngle(1, 0, 65536, (0.0, 0.0)), FeedbackAngle(1, 0, 0, (3.2001, 0.0)),
+    FeedbackVelocity(1, 0, (30.01, 0.0), (0.0, 0.0)), FeedbackVelocity(1, 0, (0.0, 0.0), (0.0, -0.6002)),
+    FeedbackDeflection(1, 0, (0.0, math.nan)),
+    Heartbeat(1, 7, ErrorFlags(0), 0, 0, 0),  # type: ignore[arg-type]
+    Heartbeat(1, DriverState.RUNNING, 64, 0, 0, 0),  # type: ignore[arg-type]
+    Heartbeat(1, DriverState.RUNNING, ErrorFlags(0), 65536, 0, 0),
+]
+
+
+@pytest.mark.parametrize("obj", BAD_ENCODE, ids=range(len(BAD_ENCODE)))
+def test_strict_encoding_rejects(codec: SeaCodec, obj) -> None:
+    with pytest.raises(MalformedFrame):
+        codec.encode(obj)
+
+
+def test_encode_rejects_foreign_type(codec: SeaCodec) -> None:
+    with pytest.raises(MalformedFrame, match="not a sea-hil CAN frame"):
+        codec.encode(Feedback(1, 0, 0, (0, 0), (0, 0), (0, 0), (0, 0)))  # type: ignore[arg-type]
+
+
+BAD_DECODE = [
+    ("unknown CAN id", _msg(0x028, "")),                           # node 1, cmd 8 unused
+    ("unknown CAN id", _msg(0x001, "00 0000 0000")),               # node 0 does not exist
+    ("DLC", _msg(0x021, "00 0000 00")),
+    ("DLC", _msg(0x021, "00 0000 0000 00")),
+    ("DLC", _msg(0x020, "00")),
+    ("DLC", can.Message(arbitration_id=0x021, data=bytes(5), dlc=6, is_extended_id=False)),
+    ("remote", can.Message(arbitration_id=0x021, is_remote_frame=True, dlc=5, is_extended_id=False)),
+    ("error", can.Message(arbitration_id=0x021, is_error_frame=True, data=bytes(5), is_extended_id=False)),
+    ("extended", can.Message(arbitration_id=0x021, data=bytes(5), is_extended_id=True)),
+    ("FD", can.Message(arbitration_id=0x021, data=bytes(5), is_extended_id=False, is_fd=True)),
+    ("outside", _msg(0x021, "00 3175 0000")),                      # 30001 mV > 30 V
+    ("outside", _msg(0x023, "00 0000 017d 0000")),                 # theta1 raw 32001 > 3.2 rad
+    ("enum", _msg(0x027, "04 00 0000 0000 00")),                   # state 4
+    ("reserved", _msg(0x027, "01 40 0000 0000 00")),               # flag bit 6 reserved
+]
+
+
+@pytest.mark.parametrize("reason,msg", BAD_DECODE, ids=[f"{i}-{r}" for i, (r, _) in enumerate(BAD_DECODE)])
+def test_decode_rejects(codec: SeaCodec, reason: str, msg: can.Message) -> None:
+    with pytest.raises(MalformedFrame, match=reason):
+        codec.decode(msg)
+
+
+def test_node_filter() -> None:
+    only2 = SeaCodec(node_ids=[2])
+    assert only2.decode(_msg(0x040, "")) == EStop(2)
+    with pytest.raises(MalformedFrame, match="node 1, which is not served"):
+        only2.decode(_msg(0x020, ""))
+    with pytest.raises(MalformedFrame):
+        SeaCodec(node_ids=[0])
+
+
+_KNOWN = [(e[1] & 0x1F, len(bytes.fromhex(e[2]))) for e in EXACT]
+
+
+@st.composite
+def _frames(draw) -> can.Message:
+    kind = draw(st.sampled_from(["valid_id"] * 6 + ["any_id"] * 3 + ["remote", "error", "extended", "fd"]))
+    if kind == "valid_id":  # a served id with its correct DLC, random payload: exercises the value checks
+        cmd, dlc = draw(st.sampled_from(_KNOWN))
+        return _msg(draw(st.integers(1, 63)) << 5 | cmd, draw(st.binary(min_size=dlc, max_size=dlc)))
+    data = draw(st.binary(max_size=64 if kind == "fd" else 8))
+    can_id = draw(st.integers(0, 0x1FFFFFFF if kind == "extended" else 0x7FF))
+    return can.Message(arbitration_id=can_id, data=data, is_extended_id=kind == "extended",
+                       is_remote_frame=kind == "remote", is_error_frame=kind == "error", is_fd=kind == "fd")
+
+
+def _check_decodes_or_rejects(codec: SeaCodec, msg: can.Message) -> bool:
+    try:
+        obj = codec.decode(msg)
+    except MalformedFrame:
+        return False
+    assert type(obj) in FRAME_TYPES
+    again = codec.encode(obj)  # every accepted frame is valid and re-encodes to the same bits
+    assert (again.arbitration_id, bytes(again.data)) == (msg.arbitration_id, bytes(msg.data))
+    return True
+
+
+@settings(max_examples=1200, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+@given(msg=_frames())
+def test_random_frames_decode_or_raise_malformed(codec: SeaCodec, msg: can.Message) -> None:
+    _check_decodes_or_rejects(codec, msg)
+
+
+def test_random_frames_seeded_cover_both_outcomes(codec: SeaCodec) -> None:
+    rng = random.Random(1234)
+    outcomes = []
+    for _ in range(1500):
+        cmd, dlc = rng.choice(_KNOWN)
+        if rng.random() < 0.3:
+            dlc = rng.randint(0, 8)
+        data = bytes(rng.getrandbits(8) for _ in range(dlc))
+        outcomes.append(_check_decodes_or_rejects(codec, _msg(rng.randint(0, 63) << 5 | cmd, data)))
+    assert 300 < sum(outcomes) < 1200
+
+
+def test_quantisation_error_bounds(codec: SeaCodec) -> None:
+    rng = random.Random(7)
+    half_lsb = {"voltage_v": 0.5e-3, "deflection_m": 0.5e-6, "theta_rad": 0.5e-4, "omega_rad_s": 1e-3,
+                "delta_m": 0.5e-6, "nut_vel_m_s": 1e-4}
+    for _ in range(300):
+        u = lambda lim: (rng.uniform(-lim, lim), rng.uniform(-lim, lim))  # noqa: E731
+        objs = [VoltageCmd(1, u(30.0), 1), DeflectionSetpoint(1, u(0.03), 1),
+                *Feedback(1, 9, 77, u(3.2), u(30.0), u(0.03), u(0.6)).parts()]
+        for obj in objs:
+            back = codec.decode(codec.encode(obj))
+            for name, bound in half_lsb.items():
+                if hasattr(obj, name):
+                    err = max(abs(a - b) for a, b in zip(getattr(obj, name), getattr(back, name)))
+                    assert err <= bound * (1 + 1e-6), (name, err)
+
+
+def test_saturate(codec: SeaCodec) -> None:
+    cmd, changed = codec.saturate(VoltageCmd(1, (40.0, -math.inf), 3))
+    assert changed and cmd == VoltageCmd(1, (30.0, -30.0), 3)
+    same = VoltageCmd(1, (1.0, 2.0), 3)
+    assert codec.saturate(same) == (same, False)
+    hb, changed = codec.saturate(Heartbeat(1, DriverState.RUNNING, ErrorFlags(0), 70000, 3, 1))
+    assert changed and hb.rejected_frames == 65535
+    fb, changed = codec.saturate(Feedback(1, 2, 3, (4.0, 0.0), (0.0, -31.0), (0.0, 0.1), (0.7, 0.0)))
+    assert changed and fb == Feedback(1, 2, 3, (3.2, 0.0), (0.0, -30.0), (0.0, 0.03), (0.6, 0.0))
+    assert len(codec.encode_feedback(fb)) == 3
+    nan_cmd, _ = codec.saturate(VoltageCmd(1, (math.nan, 0.0), 3))
+    with pytest.raises(MalformedFrame, match="not finite"):
+        codec.encode(nan_cmd)
+
+
+def _fb(seq: int, node: int = 1) -> Feedback:
+    return Feedback(node, seq, 1000 + seq, (0.5, -0.25), (1.0, -2.0), (0.001, -0.002), (0.1, -0.2))
+
+
+def test_assembler_pairs_any_order(codec: SeaCodec) -> None:
+    for order in itertools.permutations(range(3)):
+        asm = FeedbackAssembler()
+        parts = [codec.decode(m) for m in codec.encode_feedback(_fb(7))]
+        results = [asm.push(parts[i]) for i in order]
+        assert results[:2] == [None, None] and results[2] == _fb(7)
+        assert (asm.incomplete, asm.stale) == (0, 0)
+
+
+def test_assembler_drops_incomplete_stale_and_duplicates() -> None:
+    asm = FeedbackAssembler(max_pending=2)
+    a, d, v = _fb(10).parts()
+    assert asm.push(a) is None and asm.push(d) is None         # sample 10 lacks its velocity frame
+    assert [asm.push(p) for p in _fb(11).parts()][-1] == _fb(11)
+    assert asm.incomplete == 1                                  # 10 dropped once 11 completed
+    assert asm.push(v) is None and asm.stale == 1               # late part of the closed sample 10
+    assert asm.push(_fb(11).parts()[0]) is None and asm.stale == 2  # repeat of a completed sample
+    a12 = _fb(12).parts()[0]
+    assert asm.push(a12) is None and asm.push(a12) is None and asm.stale == 3  # duplicate part
+    for seq in (13, 14):                                        # > max_pending open samples: oldest evicted
+        asm.push(_fb(seq).parts()[0])
+    assert asm.incomplete == 2
+    assert [asm.push(p) for p in _fb(12, node=2).parts()][-1] == _fb(12, node=2)  # nodes are independent
+    with pytest.raises(TypeError):
+        asm.push(EStop(1))  # type: ignore[arg-type]
+
+
+def test_assembler_across_seq_wrap() -> None:
+    asm = FeedbackAssembler()
+    got = [fb for seq in range(250, 270) for p in _fb(seq % 256).parts() if (fb := asm.push(p))]
+    assert [fb.seq for fb in got] == [s % 256 for s in range(250, 270)]
+    assert (asm.incomplete, asm.stale) == (0, 0)
+
+
+@given(full=st.integers(0, 10**12), gap=st.integers(-32768, 32767))
+def test_unwrap_us_property(full: int, gap: int) -> None:
+    assert unwrap_us(full, (full + gap) % T_US_MODULUS) == full + gap
+
+
+def test_unwrap_us_examples_and_errors() -> None:
+    assert unwrap_us(65_500, 20) == 65_556          # forward across the wrap
+    assert unwrap_us(70_000, 69_995 - 65_536) == 69_995  # a slightly older sample
+    assert unwrap_us(0, 1000) == 1000
+    for bad in (-1, 65_536, 1.5):
+        with pytest.raises(MalformedFrame):
+            unwrap_us(0, bad)  # type: ignore[arg-type]
+    assert (seq_gap(255, 0), seq_gap(3, 3), seq_gap(10, 5)) == (1, 0, 251)
+
+
+def test_cantools_cli_decodes_candump_for_any_node() -> None:
+    lines = "  vcan0  041   [5]  C8 39 30 80 F3\n  vcan0  047   [7]  02 11 02 01 FF FF 11\n"  # node 2
+    out = subprocess.run([sys.executable, "-m", "cantools", "decode", "-m", "0x1F", str(ROOT / "protocol/sea.dbc")],
+                         input=lines, capture_output=True, text=True, timeout=60, check=True).stdout
+    assert "VOLTAGE_CMD" in out and "voltage1: 12.345 V" in out and "voltage2: -3.2 V" in out
+    assert "HEARTBEAT" in out and "state: FAULT" in out and "rejected_frames: 258" in out
+
+
+def test_feedback_parts_types() -> None:
+    assert tuple(type(p) for p in _fb(1).parts()) == FEEDBACK_PARTS
