@@ -80,7 +80,7 @@ def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
             if missing:
                 raise TrajectoryError(f"{path}: missing column(s) {sorted(missing)}; need t, theta1, theta2")
             rows = [{k.strip(): v for k, v in row.items() if k is not None} for row in reader]
-    except OSError as err:
+    except (OSError, UnicodeDecodeError) as err:
         raise TrajectoryError(f"cannot read trajectory {path}: {err}") from None
     if len(rows) < 4:
         raise TrajectoryError(f"{path}: need at least 4 rows, got {len(rows)}")

@@ -1,0 +1,258 @@
+"""The edge node: CAN <-> Zenoh bridge next to the driver, running the backstepping inner loop at the driver's
+feedback rate with the latest setpoint v_x(t_i) held.
+
+Per feedback sample (three CAN frames assembled): publish the state to Zenoh every outer sample (uplink link
+emulator), take setpoints that have arrived (downlink link emulator), compute the voltage and send VOLTAGE_CMD.
+With `inner="remote"` the voltages come from the controller over Zenoh and are tunnelled to CAN as received (held).
+Link emulation runs here for both directions, clocked by the driver's sample time (1 ms resolution), so lockstep
+runs are deterministic. If no setpoint arrives for `setpoint_timeout_s` the edge stops commanding, so the driver's
+watchdog puts it into its safe state; when setpoints come back the edge clears the fault.
+"""
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from dataclasses import dataclass, field
+
+import can
+import zenoh
+
+from controller.inner import InnerLoop
+from protocol.can_codec import (ClearErrors, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
+                                VoltageCmd, unwrap_us, FEEDBACK_PARTS)
+from protocol.canbus import send_with_retry
+from protocol.config import SeaHilConfig
+from protocol.errors import BusError, MalformedFrame
+from protocol.histogram import LogHistogram
+from protocol.keys import Keys
+from protocol.link import DelayQueue, LinkEmulator
+from protocol.mechanics import limb_params
+from protocol.payloads import (AckPayload, PayloadCounters, SequenceTracker, SetpointPayload, StatePayload,
+                               VoltagePayload, encode)
+from protocol.zsession import LinkedPublisher, publisher
+
+log = logging.getLogger("sea_hil.edge")
+
+
+@dataclass
+class EdgeCounters:
+    feedback: int = 0
+    rejected_frames: int = 0
+    states_sent: int = 0
+    state_bytes: int = 0
+    setpoints: int = 0
+    setpoint_bytes: int = 0
+    voltages: int = 0
+    stale_setpoints: int = 0
+    clear_errors_sent: int = 0
+    lockstep_resends: int = 0
+    commands_sent: int = 0
+    latency: LogHistogram = field(default_factory=LogHistogram)
+
+
+class EdgeNode:
+    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, session: zenoh.Session, node_id: int, *,
+                 inner: str = "edge", lockstep: bool = False, resend_s: float = 0.1) -> None:
+        if inner not in ("edge", "remote"):
+            raise ValueError("inner must be 'edge' or 'remote'")
+        self.cfg, self.bus, self.node_id, self.inner_mode, self.lockstep = cfg, bus, node_id, inner, lockstep
+        self.codec = SeaCodec([node_id])
+        self.assembler = FeedbackAssembler()
+        self.keys = Keys.from_config(cfg.zenoh)
+        p = limb_params(cfg.plant)
+        self.inner = InnerLoop(cfg, p, tuple(cfg.plant.initial_theta_rad))
+        self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
+        self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
+        self.timeout_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
+        self.resend_ns = int(resend_s * 1e9)
+        seed = cfg.link.seed
+        self.uplink = LinkedPublisher(publisher(session, self.keys.state), LinkEmulator(cfg.link.uplink, f"{seed}/up"))
+        self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
+        self.pending_down: DelayQueue[object] = DelayQueue()
+        self.stats_pub = publisher(session, self.keys.stats, express=False)
+        self.sp_sub = session.declare_subscriber(self.keys.setpoint, zenoh.handlers.FifoChannel(1024))
+        self.v_sub = session.declare_subscriber(self.keys.voltage, zenoh.handlers.FifoChannel(1024))
+        self.ack_sub = session.declare_subscriber(self.keys.control, zenoh.handlers.FifoChannel(1024))
+        self.payloads = PayloadCounters()
+        self.sp_seq = SequenceTracker()
+        self.counters = EdgeCounters()
+        self.stop_event = threading.Event()
+        self._t_us_full = 0
+        self._sample_t_ns = 0
+        self._state_seq = 0
+        self._sent_at: dict[int, int] = {}
+        self._last_setpoint_ns: int | None = None
+        self._voltage: tuple[float, float] | None = None
+        self._driver_state = DriverState.INIT
+        self._last_fb_seq: int | None = None
+        self._last_cmd: can.Message | None = None
+        self._acks: dict[int, AckPayload] = {}
+        self._awaiting: dict[int, bytes] = {}
+        self._seen_setpoints: set[int] = set()
+
+    # ---- CAN side -----------------------------------------------------------------------------------------------
+    def run(self) -> None:
+        while not self.stop_event.is_set():
+            msg = self.bus.recv(timeout=0.05)
+            if msg is None:
+                continue
+            try:
+                frame = self.codec.decode(msg)
+            except MalformedFrame as err:
+                self.counters.rejected_frames += 1
+                log.debug("ignored frame: %s", err)
+                continue
+            if isinstance(frame, Heartbeat):
+                self._driver_state = frame.state
+            elif isinstance(frame, FEEDBACK_PARTS):
+                fb = self.assembler.push(frame)
+                if fb is not None:
+                    self._on_feedback(fb)
+
+    def _send(self, msg: can.Message) -> None:
+        try:
+            send_with_retry(self.bus, msg, self.cfg.can.send_retries, 0.0002)
+        except BusError as err:
+            log.warning("%s", err)
+
+    def _on_feedback(self, fb: Feedback) -> None:
+        if self.lockstep and fb.seq == self._last_fb_seq and self._last_cmd is not None:
+            self._send(self._last_cmd)      # the driver re-sent a sample we already answered
+            return
+        self._last_fb_seq = fb.seq
+        self.counters.feedback += 1
+        self._t_us_full = fb.t_us if self.counters.feedback == 1 else unwrap_us(self._t_us_full, fb.t_us)
+        now = self._sample_t_ns = self._t_us_full * 1000
+        k = round(now / self.period_ns)
+        if k % self.outer_every == 0:
+            self._publish_state(fb, now)
+        self.uplink.poll(now)
+        if self.lockstep:
+            self._wait_for_controller()
+        self._take_downlink(now)
+        u = self._command(fb, now)
+        if u is None:
+            return
+        cmd, _ = self.codec.saturate(VoltageCmd(self.node_id, u, fb.seq))
+        self._last_cmd = self.codec.encode(cmd)
+        self._send(self._last_cmd)
+        self.counters.commands_sent += 1
+
+    def _command(self, fb: Feedback, now: int) -> tuple[float, float] | None:
+        fresh = self._last_setpoint_ns is not None and now - self._last_setpoint_ns <= self.timeout_ns
+        if not fresh and not self.lockstep:
+            return None     # stop commanding: the driver watchdog takes it to its safe state
+        if fresh and self._driver_state in (DriverState.FAULT,) and not self.lockstep:
+            self._send(self.codec.encode(ClearErrors(self.node_id)))
+            self.counters.clear_errors_sent += 1
+            self._driver_state = DriverState.INIT
+        if self.inner_mode == "remote":
+            return self._voltage if self._voltage is not None else (0.0, 0.0)
+        m = (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s)
+        return self.inner.voltage(m)  # type: ignore[arg-type]
+
+    # ---- Zenoh side ---------------------------------------------------------------------------------------------
+    def _publish_state(self, fb: Feedback, sample_t_ns: int) -> None:
+        self._state_seq += 1
+        t = time.monotonic_ns()
+        data = encode(StatePayload(self._state_seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s, fb.delta_m,
+                                   fb.nut_vel_m_s))
+        self._sent_at[self._state_seq] = t
+        self._sent_at.pop(self._state_seq - 1000, None)
+        if self.uplink.put(data, sample_t_ns) is not None:
+            self.counters.states_sent += 1
+            self.counters.state_bytes += len(data)
+            if self.lockstep:
+                self._awaiting[self._state_seq] = data
+
+    def _wait_for_controller(self) -> None:
+        """Lockstep: block until every state published this step is acknowledged (and its setpoint received)."""
+        last_progress = time.monotonic_ns()
+        while self._awaiting and not self.stop_event.is_set():
+            progressed = self._drain_zenoh()
+            for seq in list(self._awaiting):
+                ack = self._acks.get(seq)
+                if ack is not None and (not ack.sent or ack.setpoint_seq in self._seen_setpoints):
+                    del self._awaiting[seq]
+                    progressed = True
+            now = time.monotonic_ns()
+            if progressed:
+                last_progress = now
+            elif now - last_progress > self.resend_ns:
+                for data in self._awaiting.values():
+                    self.uplink._pub.put(data)  # same seq: the controller answers duplicates idempotently
+                self.counters.lockstep_resends += 1
+                last_progress = now
+            else:
+                time.sleep(50e-6)
+
+    def _drain_zenoh(self) -> bool:
+        got = False
+        while (s := self.ack_sub.try_recv()) is not None:
+            p = self.payloads.try_decode(s.payload.to_bytes())
+            if isinstance(p, AckPayload):
+                self._acks[p.state_seq] = p
+                self._acks.pop(p.state_seq - 1000, None)
+                got = True
+        for sub in (self.sp_sub, self.v_sub):
+            while (s := sub.try_recv()) is not None:
+                data = s.payload.to_bytes()
+                p = self.payloads.try_decode(data)
+                if not isinstance(p, (SetpointPayload, VoltagePayload)):
+                    continue
+                if self.sp_seq.feed(p.seq) != 0:      # SeqVerdict.NEW == 0
+                    self.counters.stale_setpoints += 1
+                    continue
+                got = True
+                self._seen_setpoints.add(p.seq)
+                at = self.downlink.submit(self._sample_t_ns, len(data))
+                if at is not None:
+                    self.pending_down.push(at, p)
+        return got
+
+    def _take_downlink(self, now: int) -> None:
+        self._drain_zenoh()
+        for p in self.pending_down.pop_due(now):
+            t = time.monotonic_ns()
+            sent = self._sent_at.get(p.state_seq)   # type: ignore[attr-defined]
+            if sent is not None:
+                self.counters.latency.record(max(t - sent, 1000) * 1e-9)
+            self._last_setpoint_ns = now
+            if isinstance(p, SetpointPayload):
+                self.inner.hold(p.deflection_m, p.sliding)
+                self.counters.setpoints += 1
+                self.counters.setpoint_bytes += 53
+            else:
+                self._voltage = p.voltage_v
+                self.counters.voltages += 1
+
+    # ---- stats --------------------------------------------------------------------------------------------------
+    def stats_dict(self) -> dict[str, float]:
+        c = self.counters
+        lat = c.latency.to_dict()
+        up, down = self.uplink.link.counters(), self.downlink.counters()
+        out: dict[str, float] = {
+            "node_id": self.node_id, "feedback_samples": c.feedback, "rejected_frames": c.rejected_frames,
+            "uplink_msgs": c.states_sent, "uplink_bytes": c.state_bytes, "downlink_applied": c.setpoints,
+            "voltage_msgs_applied": c.voltages, "stale_setpoints": c.stale_setpoints,
+            "clear_errors_sent": c.clear_errors_sent, "lockstep_resends": c.lockstep_resends,
+            "commands_sent": c.commands_sent, "payload_rejected": self.payloads.as_dict()["rejected_total"],
+            "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": self.inner.saturated_steps,
+            "seq_lost": self.sp_seq.lost, "seq_reordered": self.sp_seq.reordered, "seq_duplicates": self.sp_seq.duplicates,
+            "latency_count": lat["count"],
+        }
+        for k in ("p50", "p90", "p99", "max", "min", "mean"):
+            v = lat.get(k)
+            out[f"latency_{k}_us"] = (v * 1e6) if v is not None else -1.0
+        return out
+
+    def publish_stats(self, final: bool = False) -> None:
+        d = self.stats_dict()
+        d["final"] = final
+        self.stats_pub.put(json.dumps(d).encode())
+
+    def close(self) -> None:
+        for sub in (self.sp_sub, self.v_sub, self.ack_sub):
+            sub.undeclare()

@@ -1,0 +1,119 @@
+"""Emulated SEA driver firmware for one limb (one CAN node): state machine, watchdog, e-stop, plant integration.
+
+Pure logic, no I/O: the node loop (`plant_emulator.node`) feeds it decoded frames and ticks. States:
+INIT (powered, zero voltage) -> RUNNING on the first voltage command; RUNNING -> FAULT (WATCHDOG) when no command
+arrived for `watchdog_timeout_s`; any state -> ESTOP on an e-stop frame (latched). Only CLEAR_ERRORS leaves FAULT or
+ESTOP (back to INIT). In FAULT, ESTOP and INIT the motor voltage is zero.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from plant_emulator.dynamics import State, deflections, initial_state, saturate
+from plant_emulator.integrator import Disturbance, advance
+from protocol.can_codec import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
+                                VoltageCmd)
+from protocol.mechanics import LimbParams
+
+U16 = 0xFFFF
+
+
+@dataclass
+class DriverCounters:
+    rejected_frames: int = 0
+    ignored_commands: int = 0
+    overruns: int = 0
+    commands: int = 0
+    watchdog_trips: int = 0
+    heartbeat_seq: int = 0
+
+
+@dataclass
+class DriverCore:
+    node_id: int
+    params: LimbParams
+    period_ns: int
+    watchdog_ns: int
+    substeps: int
+    x: State
+    disturbance: Disturbance
+    state: DriverState = DriverState.INIT
+    flags: ErrorFlags = ErrorFlags(0)
+    voltage_v: tuple[float, float] = (0.0, 0.0)
+    last_cmd_ns: int = 0
+    seq: int = 0          # samples integrated so far
+    counters: DriverCounters = field(default_factory=DriverCounters)
+
+    @classmethod
+    def create(cls, node_id: int, params: LimbParams, period_s: float, watchdog_s: float, substeps: int,
+               theta0_rad: tuple[float, float], disturbance: Disturbance) -> "DriverCore":
+        x0 = initial_state(theta0_rad[0], theta0_rad[1], 0.0, 0.0, params)
+        return cls(node_id, params, int(round(period_s * 1e9)), int(round(watchdog_s * 1e9)), substeps, x0,
+                   disturbance)
+
+    @property
+    def sample_t_ns(self) -> int:
+        return self.seq * self.period_ns
+
+    def reject(self) -> None:
+        self.counters.rejected_frames += 1
+        self.flags |= ErrorFlags.BAD_FRAME
+
+    def handle(self, frame: object, now_ns: int) -> bool:
+        """Apply one decoded frame addressed to this node; False if it is not a command the driver accepts."""
+        if isinstance(frame, VoltageCmd):
+            if self.state in (DriverState.FAULT, DriverState.ESTOP):
+                self.counters.ignored_commands += 1
+                return True
+            limit = self.params.voltage_limit
+            u = (saturate(frame.voltage_v[0], limit), saturate(frame.voltage_v[1], limit))
+            if u != tuple(frame.voltage_v):
+                self.flags |= ErrorFlags.SATURATED
+            self.voltage_v = u
+            self.state = DriverState.RUNNING
+            self.last_cmd_ns = now_ns
+            self.counters.commands += 1
+            return True
+        if isinstance(frame, EStop):
+            self.state = DriverState.ESTOP
+            self.flags |= ErrorFlags.ESTOP
+            self.voltage_v = (0.0, 0.0)
+            return True
+        if isinstance(frame, ClearErrors):
+            if self.state in (DriverState.FAULT, DriverState.ESTOP):
+                self.state = DriverState.INIT
+            self.flags = ErrorFlags(0)
+            self.voltage_v = (0.0, 0.0)
+            return True
+        if isinstance(frame, DeflectionSetpoint):
+            # The inner loop runs on the edge in this firmware; the frame is defined for drives that host it.
+            self.counters.ignored_commands += 1
+            return False
+        return False
+
+    def check_watchdog(self, now_ns: int) -> None:
+        if self.state is DriverState.RUNNING and now_ns - self.last_cmd_ns > self.watchdog_ns:
+            self.state = DriverState.FAULT
+            self.flags |= ErrorFlags.WATCHDOG
+            self.voltage_v = (0.0, 0.0)
+            self.counters.watchdog_trips += 1
+
+    def step(self) -> Feedback:
+        """Integrate one period with the held voltage and return the feedback of the new sample."""
+        u = self.voltage_v if self.state is DriverState.RUNNING else (0.0, 0.0)
+        t_s = self.seq * self.period_ns * 1e-9
+        self.x = advance(t_s, self.x, u, self.period_ns * 1e-9, self.substeps, self.params, self.disturbance)
+        self.seq += 1
+        return self.feedback()
+
+    def feedback(self) -> Feedback:
+        x = self.x
+        d1, d2, _, _ = deflections(x, self.params)
+        t_us = (self.sample_t_ns // 1000) & U16
+        return Feedback(self.node_id, self.seq & 0xFF, t_us, (x[0], x[1]), (x[2], x[3]), (d1, d2), (x[6], x[7]))
+
+    def heartbeat(self) -> Heartbeat:
+        c = self.counters
+        c.heartbeat_seq = (c.heartbeat_seq + 1) & 0xFF
+        return Heartbeat(self.node_id, self.state, self.flags, min(c.rejected_frames, U16), min(c.overruns, U16),
+                         c.heartbeat_seq)

@@ -1,0 +1,164 @@
+"""The SEA driver node: owns a CAN bus, serves one or more limbs (node ids) with `DriverCore`, sends feedback on a
+drift-free schedule (absolute deadlines) and heartbeats. Malformed frames are rejected, counted and logged.
+
+Real-time mode: one tick per feedback period; waiting for the next deadline is done in `bus.recv(timeout)` so
+commands are handled as they arrive. Lateness of each tick is recorded; a tick later than one period is an overrun
+(the schedule skips ahead, never bunches up).
+Lockstep mode: the driver integrates sample k -> k+1 only once the voltage command answering feedback k (same 8-bit
+seq) has arrived for every node; the last feedback is re-sent every `resend_s` of wall time while waiting, so a peer
+that joins late or a lost frame does not stall the session.
+"""
+from __future__ import annotations
+
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Callable
+
+import can
+
+from plant_emulator.disturbance import make_disturbance
+from plant_emulator.driver import DriverCore
+from protocol.can_codec import SeaCodec, VoltageCmd
+from protocol.canbus import send_with_retry
+from protocol.config import SeaHilConfig
+from protocol.errors import BusError, MalformedFrame
+from protocol.histogram import LogHistogram
+from protocol.mechanics import limb_params
+
+log = logging.getLogger("sea_hil.plant")
+
+
+@dataclass
+class TickStats:
+    ticks: int = 0
+    overruns: int = 0
+    send_retries: int = 0
+    send_failures: int = 0
+
+
+class PlantNode:
+    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, node_ids: tuple[int, ...], *, lockstep: bool = False,
+                 resend_s: float = 0.05) -> None:
+        if not node_ids:
+            raise BusError("plant needs at least one node id")
+        self.cfg = cfg
+        self.bus = bus
+        self.codec = SeaCodec(node_ids)
+        self.lockstep = lockstep
+        self.resend_ns = int(resend_s * 1e9)
+        p = limb_params(cfg.plant)
+        cc = cfg.can
+        self.period_ns = int(round(1e9 / cc.feedback_rate_hz))
+        self.drivers = {n: DriverCore.create(n, p, 1.0 / cc.feedback_rate_hz, cc.watchdog_timeout_s, cfg.sim.substeps,
+                                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance))
+                        for n in node_ids}
+        self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
+        self.lateness = LogHistogram()
+        self.stats = TickStats()
+        self.stop_event = threading.Event()
+        self._answered: set[int] = set()
+
+    # ---- frames -------------------------------------------------------------------------------------------------
+    def _on_message(self, msg: can.Message, now_ns: int) -> None:
+        try:
+            frame = self.codec.decode(msg)
+        except MalformedFrame as err:
+            node = msg.arbitration_id >> 5
+            target = self.drivers.get(node) or next(iter(self.drivers.values()))
+            target.reject()
+            log.info("rejected frame: %s", err)
+            return
+        drv = self.drivers.get(frame.node_id)
+        if drv is None or not hasattr(frame, "node_id"):
+            return
+        if not drv.handle(frame, now_ns):
+            return  # feedback/heartbeat of another driver, or unsupported: nothing to do
+        if self.lockstep and isinstance(frame, VoltageCmd) and frame.seq == drv.seq & 0xFF:
+            self._answered.add(frame.node_id)
+
+    def _send(self, msg: can.Message) -> None:
+        try:
+            self.stats.send_retries += send_with_retry(self.bus, msg, self.cfg.can.send_retries, 0.0002)
+        except BusError as err:
+            self.stats.send_failures += 1
+            log.warning("%s", err)
+
+    def _publish(self, drv: DriverCore, feedback: object) -> None:
+        for m in self.codec.encode_feedback(self.codec.saturate(feedback)[0]):
+            self._send(m)
+
+    def _heartbeats(self) -> None:
+        for drv in self.drivers.values():
+            self._send(self.codec.encode(drv.heartbeat()))
+
+    # ---- loops --------------------------------------------------------------------------------------------------
+    def run(self, duration_s: float | None = None) -> None:
+        (self._run_lockstep if self.lockstep else self._run_realtime)(duration_s)
+
+    def _drain_until(self, deadline_ns: int, done: Callable[[], bool] | None = None) -> None:
+        while done is None or not done():
+            now = time.monotonic_ns()
+            remaining = deadline_ns - now
+            if remaining <= 0:
+                return
+            msg = self.bus.recv(timeout=remaining * 1e-9)
+            if msg is not None:
+                self._on_message(msg, time.monotonic_ns())
+
+    def _run_realtime(self, duration_s: float | None) -> None:
+        start = time.monotonic_ns()
+        end = None if duration_s is None else start + int(duration_s * 1e9)
+        for drv in self.drivers.values():
+            drv.last_cmd_ns = start
+            self._publish(drv, drv.feedback())
+        k = 0
+        while not self.stop_event.is_set():
+            k += 1
+            deadline = start + k * self.period_ns
+            self._drain_until(deadline)
+            now = time.monotonic_ns()
+            late = now - deadline
+            self.lateness.record(max(late, 0) * 1e-9 + 1e-7)
+            if late > self.period_ns:
+                missed = late // self.period_ns
+                self.stats.overruns += missed
+                k += missed
+            self.stats.ticks += 1
+            for drv in self.drivers.values():
+                drv.counters.overruns = self.stats.overruns
+                drv.check_watchdog(now)
+                self._publish(drv, drv.step())
+            if k % self.heartbeat_every == 0:
+                self._heartbeats()
+            if end is not None and now >= end:
+                break
+
+    def _run_lockstep(self, duration_s: float | None) -> None:
+        end_seq = None if duration_s is None else int(round(duration_s * 1e9 / self.period_ns))
+        while not self.stop_event.is_set():
+            self._answered.clear()
+            for drv in self.drivers.values():
+                self._publish(drv, drv.feedback())
+            while len(self._answered) < len(self.drivers) and not self.stop_event.is_set():
+                before = len(self._answered)
+                self._drain_until(time.monotonic_ns() + self.resend_ns,
+                                  lambda: len(self._answered) >= len(self.drivers))
+                if len(self._answered) == before:   # nothing new within resend_s: re-send what is missing
+                    for n, drv in self.drivers.items():
+                        if n not in self._answered:
+                            self._publish(drv, drv.feedback())
+            if self.stop_event.is_set():
+                break
+            for drv in self.drivers.values():
+                drv.last_cmd_ns = drv.sample_t_ns
+                drv.step()
+            self.stats.ticks += 1
+            if self.stats.ticks % self.heartbeat_every == 0:
+                self._heartbeats()
+            if end_seq is not None and self.stats.ticks >= end_seq:
+                break
+
+    def stop(self) -> None:
+        self.stop_event.set()

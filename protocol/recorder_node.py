@@ -1,0 +1,141 @@
+"""The recorder node: every Zenoh message under `<prefix>/**` and every CAN frame on the bus into one MCAP file.
+
+Binary payloads are decoded (rejects counted, raw size kept); JSON stats/tracking messages are flattened into
+their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/feedback` / `/can/command`.
+Writing is done by the recorder's writer thread (bounded queue: a recorder that falls behind drops and counts).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import threading
+import time
+from typing import Any
+
+import can
+import zenoh
+
+from protocol.can_codec import FeedbackAngle, FeedbackDeflection, FeedbackVelocity, SeaCodec, VoltageCmd
+from protocol.errors import MalformedFrame
+from protocol.keys import everything
+from protocol.payloads import (AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload)
+from protocol.recording import SessionRecorder
+
+log = logging.getLogger("sea_hil.record")
+
+
+
+def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str, dict[str, Any]] | None:
+    """(topic, flat payload) for one Zenoh message, or None if it is not recordable."""
+    channel = key.rsplit("/", 1)[-1]
+    if channel in ("event", "stats"):
+        try:
+            obj = json.loads(data)
+        except (ValueError, UnicodeDecodeError):
+            payloads.rejected["json"] += 1
+            return None
+        if not isinstance(obj, dict):
+            return None
+        if channel == "stats":
+            return "/stats", {k: v for k, v in obj.items() if isinstance(v, (int, float, bool))}
+        flat = {k: v for k, v in obj.items() if isinstance(v, (int, float, str, bool)) or v is None}
+        flat["key"] = key
+        return "/tracking", flat
+    p = payloads.try_decode(data)
+    if p is None:
+        return None
+    base: dict[str, Any] = {"key": key, "seq": p.seq, "sent_t_ns": p.t_ns, "payload_bytes": len(data)}
+    if isinstance(p, StatePayload):
+        return "/zenoh/state", {**base, "sample_t_ns": p.sample_t_ns, "theta1_rad": p.theta_rad[0],
+                                "theta2_rad": p.theta_rad[1], "omega1_rad_s": p.omega_rad_s[0],
+                                "omega2_rad_s": p.omega_rad_s[1], "delta1_m": p.delta_m[0], "delta2_m": p.delta_m[1]}
+    if isinstance(p, SetpointPayload):
+        return "/zenoh/setpoint", {**base, "state_seq": p.state_seq, "delta1_ref_m": p.deflection_m[0],
+                                   "delta2_ref_m": p.deflection_m[1], "s1": p.sliding[0], "s2": p.sliding[1],
+                                   "reason": p.reason.name}
+    if isinstance(p, VoltagePayload):
+        return "/zenoh/voltage", {**base, "state_seq": p.state_seq, "u1_v": p.voltage_v[0], "u2_v": p.voltage_v[1]}
+    if isinstance(p, AckPayload):
+        return None   # lockstep control plane
+    return None
+
+
+class RecorderNode:
+    def __init__(self, recorder: SessionRecorder, session: zenoh.Session | None, prefix: str,
+                 bus: can.BusABC | None = None) -> None:
+        self.rec = recorder
+        self.payloads = PayloadCounters()
+        self.codec = SeaCodec()
+        self.stop_event = threading.Event()
+        self.can_frames = 0
+        self.can_rejected = 0
+        self.zenoh_msgs = 0
+        self._sub = session.declare_subscriber(everything(prefix), zenoh.handlers.FifoChannel(65536)) \
+            if session is not None else None
+        self._bus = bus
+        self._threads = [threading.Thread(target=self._zenoh_loop, name="rec-zenoh", daemon=True)]
+        if bus is not None:
+            self._threads.append(threading.Thread(target=self._can_loop, name="rec-can", daemon=True))
+
+    def start(self) -> None:
+        for t in self._threads:
+            t.start()
+
+    def _zenoh_loop(self) -> None:
+        while self._sub is not None:
+            s = self._sub.try_recv()
+            if s is None:
+                if self.stop_event.is_set():
+                    return
+                time.sleep(0.001)
+                continue
+            now = time.time_ns()
+            out = zenoh_record(str(s.key_expr), s.payload.to_bytes(), self.payloads)
+            if out is not None:
+                self.zenoh_msgs += 1
+                sent = out[1].get("sent_t_ns", now)
+                self.rec.submit(out[0], now, sent if isinstance(sent, int) else now, out[1])
+
+    def _can_loop(self) -> None:
+        assert self._bus is not None
+        while not self.stop_event.is_set():
+            msg = self._bus.recv(timeout=0.05)
+            if msg is not None:
+                self.on_can(msg)
+
+    def on_can(self, msg: can.Message) -> None:
+        now = time.time_ns()
+        self.can_frames += 1
+        data = bytes(msg.data or b"")
+        self.rec.submit("/can/raw", now, now, {"can_id": msg.arbitration_id, "dlc": msg.dlc, "data_hex": data.hex(),
+                                               "direction": "rx", "is_extended": bool(msg.is_extended_id),
+                                               "node_id": msg.arbitration_id >> 5})
+        try:
+            f = self.codec.decode(msg)
+        except MalformedFrame:
+            self.can_rejected += 1
+            return
+        if isinstance(f, VoltageCmd):
+            self.rec.submit("/can/command", now, now, {"node_id": f.node_id, "seq": f.seq, "kind": "voltage",
+                                                       "u1_v": f.voltage_v[0], "u2_v": f.voltage_v[1]})
+        elif isinstance(f, FeedbackAngle):
+            self.rec.submit("/can/feedback", now, now, {"node_id": f.node_id, "seq": f.seq, "t_us": f.t_us,
+                                                        "theta1_rad": f.theta_rad[0], "theta2_rad": f.theta_rad[1]})
+        elif isinstance(f, FeedbackDeflection):
+            self.rec.submit("/can/feedback", now, now, {"node_id": f.node_id, "seq": f.seq,
+                                                        "delta1_m": f.delta_m[0], "delta2_m": f.delta_m[1]})
+        elif isinstance(f, FeedbackVelocity):
+            self.rec.submit("/can/feedback", now, now, {"node_id": f.node_id, "seq": f.seq,
+                                                        "omega1_rad_s": f.omega_rad_s[0],
+                                                        "omega2_rad_s": f.omega_rad_s[1]})
+
+    def stop(self) -> None:
+        self.stop_event.set()
+        for t in self._threads:
+            t.join(timeout=5)
+        if self._sub is not None:
+            self._sub.undeclare()
+
+    def counters(self) -> dict[str, Any]:
+        return {"can_frames": self.can_frames, "can_rejected": self.can_rejected, "zenoh_msgs": self.zenoh_msgs,
+                **{f"payload_{k}": v for k, v in self.payloads.as_dict().items() if not isinstance(v, dict)}}
