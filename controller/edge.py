@@ -242,6 +242,8 @@ class EdgeNode:
             "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": self.inner.saturated_steps,
             "seq_lost": self.sp_seq.lost, "seq_reordered": self.sp_seq.reordered, "seq_duplicates": self.sp_seq.duplicates,
             "latency_count": lat["count"],
+            "uplink_submitted": up.submitted, "uplink_mean_added_delay_s": up.mean_added_delay_s,
+            "downlink_submitted": down.submitted, "downlink_mean_added_delay_s": down.mean_added_delay_s,
         }
         for k in ("p50", "p90", "p99", "max", "min", "mean"):
             v = lat.get(k)
