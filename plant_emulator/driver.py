@@ -83,6 +83,7 @@ class DriverCore:
             if self.state in (DriverState.FAULT, DriverState.ESTOP):
                 self.state = DriverState.INIT
             self.flags = ErrorFlags(0)
+            self.counters.rejected_frames = self.counters.overruns = 0  # DBC: counted since the last CLEAR_ERRORS
             self.voltage_v = (0.0, 0.0)
             return True
         if isinstance(frame, DeflectionSetpoint):
@@ -90,6 +91,11 @@ class DriverCore:
             self.counters.ignored_commands += 1
             return False
         return False
+
+    def note_overruns(self, missed: int) -> None:
+        """The node's schedule missed `missed` feedback deadlines."""
+        self.counters.overruns += missed
+        self.flags |= ErrorFlags.OVERRUN
 
     def check_watchdog(self, now_ns: int) -> None:
         if self.state is DriverState.RUNNING and now_ns - self.last_cmd_ns > self.watchdog_ns:

@@ -20,7 +20,7 @@ import can
 
 from plant_emulator.disturbance import make_disturbance
 from plant_emulator.driver import DriverCore
-from protocol.can_codec import SeaCodec, VoltageCmd
+from protocol.can_codec import ErrorFlags, SeaCodec, VoltageCmd
 from protocol.canbus import send_with_retry
 from protocol.config import SeaHilConfig
 from protocol.errors import BusError, MalformedFrame
@@ -83,6 +83,9 @@ class PlantNode:
             self.stats.send_retries += send_with_retry(self.bus, msg, self.cfg.can.send_retries, 0.0002)
         except BusError as err:
             self.stats.send_failures += 1
+            drv = self.drivers.get(msg.arbitration_id >> 5)
+            if drv is not None:
+                drv.flags |= ErrorFlags.BUS_ERROR
             log.warning("%s", err)
 
     def _publish(self, drv: DriverCore, feedback: object) -> None:
@@ -113,7 +116,7 @@ class PlantNode:
         for drv in self.drivers.values():
             drv.last_cmd_ns = start
             self._publish(drv, drv.feedback())
-        k = 0
+        k, next_heartbeat_k = 0, self.heartbeat_every
         while not self.stop_event.is_set():
             k += 1
             deadline = start + k * self.period_ns
@@ -121,17 +124,18 @@ class PlantNode:
             now = time.monotonic_ns()
             late = now - deadline
             self.lateness.record(max(late, 0) * 1e-9 + 1e-7)
-            if late > self.period_ns:
-                missed = late // self.period_ns
-                self.stats.overruns += missed
-                k += missed
+            missed = late // self.period_ns if late > self.period_ns else 0
+            self.stats.overruns += missed
+            k += missed
             self.stats.ticks += 1
             for drv in self.drivers.values():
-                drv.counters.overruns = self.stats.overruns
+                if missed:
+                    drv.note_overruns(missed)
                 drv.check_watchdog(now)
                 self._publish(drv, drv.step())
-            if k % self.heartbeat_every == 0:
+            if k >= next_heartbeat_k:  # skipped ticks must not skip the heartbeat
                 self._heartbeats()
+                next_heartbeat_k = (k // self.heartbeat_every + 1) * self.heartbeat_every
             if end is not None and now >= end:
                 break
 
