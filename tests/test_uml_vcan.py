@@ -1,0 +1,103 @@
+"""Host-level tests of scripts/with-vcan: the tests/socketcan suite passes on a real vcan0 (User Mode Linux guest
+when this kernel has no CAN), the command's exit status, stdout/stderr, cwd and environment come back, and the
+timeout kills the guest.
+
+Without ``linux.uml`` (and no native vcan0) these tests skip, except under CI=true where they fail: CI must run them.
+"""
+from __future__ import annotations
+
+import importlib.machinery
+import importlib.util
+import os
+import re
+import signal
+import subprocess
+import sys
+from collections.abc import Callable
+from pathlib import Path
+from types import ModuleType
+
+import pytest
+
+REPO = Path(__file__).resolve().parents[1]
+WITH_VCAN = REPO / "scripts" / "with-vcan"
+GUEST_TIMEOUT_S = 240
+HOST_TIMEOUT_S = GUEST_TIMEOUT_S + 60
+
+pytestmark = pytest.mark.uml
+
+
+def load_with_vcan() -> ModuleType:
+    """Import scripts/with-vcan (no .py suffix) as a module, to reuse its probes."""
+    loader = importlib.machinery.SourceFileLoader("with_vcan", str(WITH_VCAN))
+    spec = importlib.util.spec_from_loader("with_vcan", loader)
+    assert spec is not None
+    module = importlib.util.module_from_spec(spec)
+    loader.exec_module(module)
+    return module
+
+
+def require_uml_kernel() -> None:
+    """Skip (or fail under CI=true) when no User Mode Linux kernel is installed; skip inside the guest."""
+    if os.environ.get("SEA_HIL_IN_UML"):
+        pytest.skip("already inside the with-vcan guest (no recursion)")
+    try:
+        load_with_vcan().find_uml_kernel()
+    except Exception as exc:  # noqa: BLE001 - WithVcanError of the loaded script module
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must run the UML tests: {exc}")
+        pytest.skip(str(exc))
+
+
+@pytest.fixture
+def with_vcan_runner() -> Callable[..., subprocess.CompletedProcess[str]]:
+    """Function running ``scripts/with-vcan ARGS`` -> CompletedProcess; skips when it cannot boot a guest."""
+    if not load_with_vcan().interface_is_up("vcan0"):
+        require_uml_kernel()
+    elif os.environ.get("SEA_HIL_IN_UML"):
+        pytest.skip("already inside the with-vcan guest (no recursion)")
+    return run_with_vcan
+
+
+def run_with_vcan(*args: str, cwd: Path = REPO, env: dict[str, str] | None = None) -> subprocess.CompletedProcess[str]:
+    """Run with-vcan; on a host-side timeout send SIGTERM so that with-vcan itself kills the guest."""
+    proc = subprocess.Popen([sys.executable, str(WITH_VCAN), *args], cwd=cwd, env=env, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        stdout, stderr = proc.communicate(timeout=HOST_TIMEOUT_S)
+    except subprocess.TimeoutExpired:
+        proc.send_signal(signal.SIGTERM)
+        stdout, stderr = proc.communicate(timeout=60)
+        pytest.fail(f"with-vcan did not finish within {HOST_TIMEOUT_S} s:\n{stdout}\n{stderr}")
+    return subprocess.CompletedProcess(proc.args, proc.returncode, stdout, stderr)
+
+
+Runner = Callable[..., subprocess.CompletedProcess[str]]
+
+
+def test_socketcan_suite_passes_on_real_vcan(with_vcan_runner: Runner) -> None:
+    result = with_vcan_runner("--timeout", str(GUEST_TIMEOUT_S), "--", sys.executable, "-m", "pytest", "-q",
+                              "-rA", "-p", "no:cacheprovider", "tests/socketcan")
+    output = result.stdout + result.stderr
+    assert result.returncode == 0, output
+    summary = re.search(r"(\d+) passed", output)
+    assert summary is not None and int(summary.group(1)) >= 6, output
+    for test in ("test_two_buses_exchange_frames", "test_cansend_reaches_python_can",
+                 "test_python_can_frame_seen_by_candump"):
+        assert f"PASSED tests/socketcan/test_vcan_basics.py::{test}" in output, output
+
+
+def test_exit_status_streams_cwd_and_env_come_back(with_vcan_runner: Runner, tmp_path: Path) -> None:
+    probe = "two words, 'quotes' and $dollar\nnewline"
+    script = 'printf "%s|" "$SEAHIL_PROBE"; pwd; echo to-stderr >&2; exit 3'
+    result = with_vcan_runner("--", "sh", "-c", script, cwd=tmp_path, env={**os.environ, "SEAHIL_PROBE": probe})
+    assert result.returncode == 3, result.stderr
+    assert result.stdout == f"{probe}|{tmp_path}\n"
+    assert "to-stderr" in result.stderr and "to-stderr" not in result.stdout
+
+
+def test_timeout_kills_the_guest() -> None:
+    require_uml_kernel()
+    result = run_with_vcan("--uml", "--timeout", "3", "--", "sleep", "120")
+    assert result.returncode == 124, result.stderr
+    assert "timeout after 3 s" in result.stderr
