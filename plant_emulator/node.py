@@ -89,7 +89,13 @@ class PlantNode:
             log.warning("%s", err)
 
     def _publish(self, drv: DriverCore, feedback: object) -> None:
-        for m in self.codec.encode_feedback(self.codec.saturate(feedback)[0]):
+        try:
+            msgs = self.codec.encode_feedback(self.codec.saturate(feedback)[0])
+        except MalformedFrame as err:   # e.g. a diverged (NaN) model: report, keep the node alive
+            self.stats.send_failures += 1
+            log.error("node %d: feedback not encodable: %s", drv.node_id, err)
+            return
+        for m in msgs:
             self._send(m)
 
     def _heartbeats(self) -> None:
