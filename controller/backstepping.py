@@ -8,7 +8,7 @@ w = 1 (the paper) makes it ~1e4-1e5 times too large for these units.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from protocol.mechanics import LimbParams, fx_gx, sea_geometry
 
@@ -18,8 +18,7 @@ Measurement = tuple[float, float, float, float, float, float, float, float]
 _FD_STEP_S = 1e-4  # finite-difference horizon for g_x_dot along the current joint velocity
 
 
-@dataclass(frozen=True, slots=True)
-class InnerGains:
+class InnerGains(NamedTuple):
     kp1: float
     kp2: float
     w: float  # cross-term weight (1.0 = paper)
@@ -82,7 +81,8 @@ def _g_dot(q1: float, q2: float, w1: float, w2: float, p: LimbParams) -> tuple[f
     _, _, gp = fx_gx(q1 + w1 * h, q2 + w2 * h, 0.0, 0.0, a1, a2, p)
     _, _, a1, a2, _, _ = sea_geometry(q1 - w1 * h, q2 - w2 * h, p)
     _, _, gm = fx_gx(q1 - w1 * h, q2 - w2 * h, 0.0, 0.0, a1, a2, p)
-    return tuple((x - y) / (2.0 * h) for x, y in zip(gp, gm))  # type: ignore[return-value]
+    h2 = 2.0 * h
+    return (gp[0] - gm[0]) / h2, (gp[1] - gm[1]) / h2, (gp[2] - gm[2]) / h2, (gp[3] - gm[3]) / h2
 
 
 def is_finite_voltage(u: tuple[float, float]) -> bool:

@@ -11,6 +11,18 @@ def _sat(v: float, lim: float) -> float:
     return lim if v > lim else (-lim if v < -lim else v)
 
 
+def limited_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, float], p: LimbParams,
+                    gains: InnerGains, limit_v: float) -> tuple[float, float, bool]:
+    """(u1, u2, saturated): backstepping voltages clipped to +-limit_v; a NaN (degenerate state) commands nothing.
+
+    Plain float code: the offline simulation also compiles it with numba (sea_hil/closed_loop.py)."""
+    u1, u2 = backstepping_voltage(m, vx, s, p, gains)
+    if u1 != u1 or u2 != u2:
+        return 0.0, 0.0, False
+    s1, s2 = _sat(u1, limit_v), _sat(u2, limit_v)
+    return s1, s2, (s1 != u1 or s2 != u2)
+
+
 class InnerLoop:
     def __init__(self, cfg: SeaHilConfig, params: LimbParams, theta0_rad: tuple[float, float]) -> None:
         cc = cfg.controller
@@ -29,10 +41,7 @@ class InnerLoop:
     def voltage(self, m: Measurement) -> tuple[float, float]:
         """Saturated voltages; before the first setpoint, hold the measured deflection (no motion commanded)."""
         vx = self.deflection_m if self.deflection_m is not None else (m[4], m[5])
-        u1, u2 = backstepping_voltage(m, vx, self.sliding, self._p, self.gains)
-        if u1 != u1 or u2 != u2:  # NaN from a degenerate state: command nothing
-            return 0.0, 0.0
-        s1, s2 = _sat(u1, self._limit), _sat(u2, self._limit)
-        if s1 != u1 or s2 != u2:
+        s1, s2, saturated = limited_voltage(m, vx, self.sliding, self._p, self.gains, self._limit)
+        if saturated:
             self.saturated_steps += 1
         return s1, s2

@@ -54,4 +54,7 @@ def initial_state(q1: float, q2: float, w1: float, w2: float, p: LimbParams) -> 
 
 
 def is_finite(x: State) -> bool:
-    return all(math.isfinite(v) for v in x)
+    for v in x:  # explicit loop: also compiles in the offline simulation's numba kernel
+        if not math.isfinite(v):
+            return False
+    return True

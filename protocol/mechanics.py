@@ -11,14 +11,14 @@ theta2 is the knee angle measured so that link 2's absolute angle is theta1 - th
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from typing import NamedTuple
 
 from protocol.config import PlantConfig
 
 
-@dataclass(frozen=True, slots=True)
-class LimbParams:
-    """Plain-float parameters with derived constants precomputed for the hot path."""
+class LimbParams(NamedTuple):
+    """Plain-float parameters with derived constants precomputed for the hot path (a NamedTuple so that the
+    offline simulation can hand it to a numba-compiled kernel unchanged)."""
     d: tuple[float, ...]
     r1: float
     r2: float
@@ -50,7 +50,7 @@ class LimbParams:
 
 
 def limb_params(cfg: PlantConfig) -> LimbParams:
-    d = tuple(cfg.d_m)
+    d = tuple(float(v) for v in cfg.d_m)
     d1, d2, _, _, _, d6, d7 = d[0], d[1], d[2], d[3], d[4], d[5], d[6]
     sigma1 = math.atan2(d2, d1)
     sigma2 = math.atan2(d7, d6)
@@ -69,7 +69,7 @@ def limb_params(cfg: PlantConfig) -> LimbParams:
         grav1=(cfg.m1_kg * cfg.r1_m + cfg.m2_kg * cfg.l1_m) * cfg.g_m_s2,
         grav2=cfg.m2_kg * cfg.r2_m * cfg.g_m_s2,
     )
-    return replace(partial, l_ref=sea_lengths(partial.theta_ref[0], partial.theta_ref[1], partial))
+    return partial._replace(l_ref=sea_lengths(partial.theta_ref[0], partial.theta_ref[1], partial))
 
 
 def apex_angles(q1: float, q2: float, p: LimbParams) -> tuple[float, float]:

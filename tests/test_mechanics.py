@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -46,7 +45,7 @@ def _consistent(p: LimbParams) -> LimbParams:
     """The paper's d's are rounded to mm: d3 = |(d1, d2)| and d8 = |(d6, d7)| hold only to ~0.1 mm; make them exact."""
     d = list(p.d)
     d[2], d[7] = math.hypot(d[0], d[1]), math.hypot(d[5], d[6])
-    return replace(p, d=tuple(d))
+    return p._replace(d=tuple(d))
 
 
 def test_both_forms_of_eq1_agree_over_a_grid(p: LimbParams) -> None:
@@ -61,7 +60,7 @@ def test_both_forms_of_eq1_disagree_for_other_sigmas(p: LimbParams, which: str) 
     sig = {"swapped": (math.atan2(d[0], d[1]), math.atan2(d[5], d[6])),
            "zero": (0.0, 0.0),
            "shifted": (p.sigma1 + 0.05, p.sigma2 - 0.05)}[which]
-    assert _max_diff_between_forms(replace(_consistent(p), sigma1=sig[0], sigma2=sig[1])) > 4e-3
+    assert _max_diff_between_forms(_consistent(p)._replace(sigma1=sig[0], sigma2=sig[1])) > 4e-3
 
 
 def test_lengths_at_reference_angles_define_l_ref(p: LimbParams) -> None:
