@@ -12,7 +12,7 @@ from importlib import resources
 from pathlib import Path
 from typing import Any, Literal
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from protocol.errors import ConfigError
 
@@ -116,6 +116,29 @@ class CanConfig(_Frozen):
         return v
 
 
+class ZenohTlsConfig(_Frozen):
+    """TLS with mutual authentication on every Zenoh link (docs/security.md). PEM paths, relative to the CWD."""
+    enabled: bool = False
+    root_ca_certificate: str = Field("", description="CA that signed every node certificate")
+    certificate: str = Field("", description="this node's certificate (its CN is its identity)")
+    private_key: str = Field("", description="this node's private key")
+    verify_name_on_connect: bool = Field(True, description="check the listener's certificate names its address")
+
+    @model_validator(mode="after")
+    def _paths(self) -> ZenohTlsConfig:
+        missing = [n for n in ("root_ca_certificate", "certificate", "private_key") if not getattr(self, n)]
+        if self.enabled and missing:
+            raise ValueError(f"tls enabled but {', '.join(missing)} not set")
+        return self
+
+
+class ZenohAclConfig(_Frozen):
+    """Zenoh access control by certificate CN (docs/security.md): everything not allowed is denied."""
+    enabled: bool = False
+    controller_cn: str = Field("sea-hil-controller", min_length=1, description="only CN that may command")
+    edge_cn: str = Field("sea-hil-edge", min_length=1, description="only CN that may publish the limb state")
+
+
 class ZenohConfig(_Frozen):
     """Zenoh session and key layout (see docs/zenoh-protocol.md)."""
     prefix: str = "sea"
@@ -124,6 +147,17 @@ class ZenohConfig(_Frozen):
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
     state_period_s: float = Field(0.01, gt=0)
+    tls: ZenohTlsConfig = ZenohTlsConfig()
+    acl: ZenohAclConfig = ZenohAclConfig()
+
+    @model_validator(mode="after")
+    def _secure_profile(self) -> ZenohConfig:
+        if self.acl.enabled and not self.tls.enabled:
+            raise ValueError("acl needs tls (identities are certificate CNs): set zenoh.tls.enabled = true")
+        plain = [ep for ep in (*self.listen, *self.connect) if not ep.startswith("tls/")]
+        if self.tls.enabled and plain:
+            raise ValueError(f"tls enabled: endpoints must be tls/HOST:PORT, not {', '.join(plain)}")
+        return self
 
     @field_validator("prefix", "limb")
     @classmethod

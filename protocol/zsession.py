@@ -1,6 +1,8 @@
 """Helpers on the zenoh 1.x Python API: explicit-endpoint sessions, newest-only subscribers, link-emulated publishers.
 
 Sessions never rely on multicast scouting: one side listens on e.g. `tcp/127.0.0.1:<port>`, the other connects.
+With `[zenoh.tls]` / `[zenoh.acl]` enabled (the secure profile, docs/security.md) `session_config` adds mutual TLS
+and access control from `protocol.zsecurity`.
 """
 from __future__ import annotations
 
@@ -8,6 +10,7 @@ import json
 import re
 import socket
 import time
+from collections.abc import Mapping
 from typing import Any, Protocol
 
 import zenoh
@@ -16,6 +19,7 @@ from protocol.config import ZenohConfig
 from protocol.errors import ConfigError
 from protocol.link import DelayQueue, LinkEmulator
 from protocol.payloads import estimate_wire_bytes
+from protocol.zsecurity import check_tls_files, security_settings
 
 _ENDPOINT = re.compile(r"^[a-z0-9\-]+/\S+$")
 _MODES = ("peer", "client", "router")
@@ -36,8 +40,11 @@ def _insert(cfg: zenoh.Config, key: str, value: Any) -> None:
 
 
 def make_config(*, listen: list[str] | tuple[str, ...] = (), connect: list[str] | tuple[str, ...] = (),
-                mode: str = "peer") -> zenoh.Config:
-    """A zenoh config with multicast scouting off and only the given endpoints (`<proto>/<address>`)."""
+                mode: str = "peer", settings: Mapping[str, Any] | None = None) -> zenoh.Config:
+    """A zenoh config with multicast scouting off and only the given endpoints (`<proto>/<address>`).
+
+    `settings` are extra `{json5 path: value}` entries (e.g. `protocol.zsecurity.security_settings`).
+    """
     if mode not in _MODES:
         raise ConfigError(f"zenoh mode {mode!r} must be one of {', '.join(_MODES)}")
     for ep in (*listen, *connect):
@@ -48,13 +55,21 @@ def make_config(*, listen: list[str] | tuple[str, ...] = (), connect: list[str] 
     _insert(cfg, "scouting/multicast/enabled", False)
     _insert(cfg, "listen/endpoints", list(listen))
     _insert(cfg, "connect/endpoints", list(connect))
+    for key, value in (settings or {}).items():
+        _insert(cfg, key, value)
     return cfg
+
+
+def session_config(z: ZenohConfig) -> zenoh.Config:
+    """The zenoh config of a `[zenoh]` section, including the secure profile when enabled."""
+    check_tls_files(z.tls)
+    return make_config(listen=z.listen, connect=z.connect, mode=z.mode, settings=security_settings(z))
 
 
 def open_session(cfg: zenoh.Config | ZenohConfig) -> zenoh.Session:
     """Open a session; an unusable endpoint or config raises `ConfigError`. Close it with `session.close()`."""
     if isinstance(cfg, ZenohConfig):
-        cfg = make_config(listen=cfg.listen, connect=cfg.connect, mode=cfg.mode)
+        cfg = session_config(cfg)
     try:
         return zenoh.open(cfg)
     except zenoh.ZError as err:

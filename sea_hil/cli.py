@@ -12,7 +12,7 @@ import sys
 
 from protocol.errors import SeaHilError
 
-COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep")
+COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep", "certs")
 
 
 def build_parser() -> argparse.ArgumentParser:
