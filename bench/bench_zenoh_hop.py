@@ -1,0 +1,186 @@
+"""Figure 2: Zenoh hop latency through the project's publish/decode path vs a raw zenoh-python ping-pong.
+
+Run: python bench/bench_zenoh_hop.py [--runs 5] [--pings 2000] [--json OUT]
+This process listens on a free loopback TCP port; an echo child process (this script with `--echo`) connects.
+One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
+  raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
+             53-byte pong of opaque bytes (the sizes of StatePayload and SetpointPayload);
+  project    the real path: encode(StatePayload) + `protocol.zsession.publisher` (express, REAL_TIME, DROP) here;
+             the echo receives like `controller/remote.py` (RingChannel(1) polled with 100 us sleeps), decodes,
+             encodes a SetpointPayload and publishes it; this side receives with blocking recv() and decodes;
+  blocking   the project's payloads and publishers, but the echo uses blocking recv() (isolates the polling cost).
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import threading
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+
+import zenoh  # noqa: E402
+
+from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
+from protocol.payloads import (PayloadCounters, SetpointPayload, StatePayload, TriggerReason,  # noqa: E402
+                               encode)
+from protocol.errors import SeaHilError  # noqa: E402
+from protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
+
+MODES = ("raw", "project", "blocking")
+PING, PONG = "bench/hop/ping", "bench/hop/pong"
+PING_BYTES, PONG_BYTES = 88, 53
+SENTINEL = b"timeout"
+
+
+def _state(seq: int) -> bytes:
+    return encode(StatePayload(seq, time.monotonic_ns(), seq * 1_000_000, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0),
+                               (0.0, 0.0)))
+
+
+def echo(endpoint: str, mode: str) -> int:
+    """Child: answer every ping on PONG until terminated."""
+    session = open_session(make_config(connect=[endpoint]))
+    counters = PayloadCounters()
+    if mode == "raw":
+        sub, pub = session.declare_subscriber(PING), session.declare_publisher(PONG)
+    else:
+        handler = zenoh.handlers.RingChannel(1) if mode == "project" else zenoh.handlers.FifoChannel(1024)
+        sub, pub = session.declare_subscriber(PING, handler), publisher(session, PONG)
+    print("ready", flush=True)
+    pad = bytes(PONG_BYTES - 4)
+    while True:
+        sample = sub.try_recv() if mode == "project" else sub.recv()
+        if sample is None:
+            time.sleep(100e-6)
+            continue
+        data = sample.payload.to_bytes()
+        if mode == "raw":
+            pub.put(data[:4] + pad)
+            continue
+        p = counters.try_decode(data)
+        if isinstance(p, StatePayload):
+            pub.put(encode(SetpointPayload(p.seq, time.monotonic_ns(), p.seq, (0.001, 0.002), (0.0, 0.0),
+                                           TriggerReason.ERROR_BOUND)))
+
+
+class _Watchdog:
+    """Unblocks the pinger's blocking recv() with a local SENTINEL put when no pong came for `timeout_s`."""
+
+    def __init__(self, session: zenoh.Session, timeout_s: float = 1.0) -> None:
+        self.progress_ns = time.monotonic_ns()
+        self._pub = session.declare_publisher(PONG)
+        self._stop = threading.Event()
+        self._timeout_ns = int(timeout_s * 1e9)
+        self._thread = threading.Thread(target=self._run, daemon=True)
+        self._thread.start()
+
+    def _run(self) -> None:
+        while not self._stop.wait(0.1):
+            if time.monotonic_ns() - self.progress_ns > self._timeout_ns:
+                self.progress_ns = time.monotonic_ns()
+                self._pub.put(SENTINEL)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(timeout=2.0)
+        self._pub.undeclare()
+
+
+def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: zenoh.Subscriber, counters: PayloadCounters,
+               dog: _Watchdog) -> int | None:
+    """Hop time in ns (round trip / 2) for ping `seq`, or None if the watchdog fired first."""
+    raw_ping = seq.to_bytes(4, "little") + bytes(PING_BYTES - 4)
+    t0 = time.monotonic_ns()
+    pub.put(raw_ping if mode == "raw" else _state(seq))
+    while True:
+        data = sub.recv().payload.to_bytes()
+        if data == SENTINEL:
+            return None
+        if mode == "raw":
+            ok = int.from_bytes(data[:4], "little") == seq
+        else:
+            p = counters.try_decode(data)
+            ok = isinstance(p, SetpointPayload) and p.state_seq == seq
+        if ok:
+            dog.progress_ns = t1 = time.monotonic_ns()
+            return (t1 - t0) // 2
+
+
+def batch(mode: str, pings: int) -> tuple[list[int], int]:
+    """One echo child in `mode`: warm up, then `pings` timed ping-pongs. Returns (hop ns list, lost count)."""
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    session = open_session(make_config(listen=[endpoint]))
+    proc = subprocess.Popen([sys.executable, __file__, "--echo", endpoint, "--mode", mode], stdout=subprocess.PIPE)
+    dog = None
+    try:
+        wait_ready(proc)
+        pub = session.declare_publisher(PING) if mode == "raw" else publisher(session, PING)
+        sub = session.declare_subscriber(PING.replace("ping", "pong"), zenoh.handlers.FifoChannel(1024))
+        counters = PayloadCounters()
+        dog = _Watchdog(session, timeout_s=0.05)   # warm-up: retry every ~0.1 s until the echo answers
+        deadline = time.monotonic() + 20.0
+        while _ping_once(mode, 0, pub, sub, counters, dog) is None:
+            if time.monotonic() > deadline:
+                raise SeaHilError(f"no answer from the {mode} echo")
+        dog.close()
+        dog = _Watchdog(session, timeout_s=1.0)
+        hops, lost = [], 0
+        for seq in range(1, pings + 1):
+            h = _ping_once(mode, seq, pub, sub, counters, dog)
+            if h is None:
+                lost += 1
+            else:
+                hops.append(h)
+        return hops, lost
+    finally:
+        if dog is not None:
+            dog.close()
+        stop_process(proc)
+        session.close()
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = bench_args(__doc__.splitlines()[0], runs=5)
+    ap.add_argument("--pings", type=int, default=2000, help="timed ping-pongs per mode and run (default 2000)")
+    ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
+    ap.add_argument("--mode", choices=MODES, default="raw", help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    if args.echo:
+        return echo(args.echo, args.mode)
+    pings = 50 if args.quick else args.pings
+    runs = 1 if args.quick else args.runs
+    pooled: dict[str, list[int]] = {m: [] for m in MODES}
+    medians: dict[str, list[float]] = {m: [] for m in MODES}
+    lost: dict[str, int] = {m: 0 for m in MODES}
+    for i in range(runs):
+        for mode in MODES:
+            hops, n_lost = batch(mode, pings)
+            pooled[mode] += hops
+            medians[mode].append(pct(hops, 50) / 1e3)
+            lost[mode] += n_lost
+            print(f"run {i + 1}/{runs} {mode:8s}: median {medians[mode][-1]:.1f} us  p99 {pct(hops, 99) / 1e3:.1f} us"
+                  f"  lost {n_lost}", flush=True)
+    details = [{"mode": m, "hops": len(pooled[m]), "lost": lost[m], "median_us": pct(pooled[m], 50) / 1e3,
+                "p99_us": pct(pooled[m], 99) / 1e3, "min_us": min(pooled[m], default=0) / 1e3,
+                "max_us": max(pooled[m], default=0) / 1e3} for m in MODES]
+    base = pct(medians["raw"], 50)
+    rec = record("2", "Zenoh hop latency, project path vs raw zenoh-python", runs=runs,
+                 metric=f"one-way hop (round trip / 2) on loopback, median per run of {pings} pings; p99 pooled",
+                 unit="us", per_run=medians["project"], p99=pct(pooled["project"], 99) / 1e3, baseline=base,
+                 baseline_label="raw zenoh-python ping-pong, same payload sizes (median of run medians)",
+                 goal="ratio <= 1.3", details=details,
+                 notes="`blocking` row = project payloads/publishers with a blocking receive at the echo: the gap "
+                       "between `project` and `blocking` is the controller's 100 us polling receive.")
+    ratios = [p / r for p, r in zip(medians["project"], medians["raw"])]
+    rec["ratio"] = pct(ratios, 50)   # per-run ratios: both modes of a run share the machine's state
+    rec["notes"] += f" Ratio = median of the per-run ratios project/raw: {', '.join(f'{x:.2f}' for x in ratios)}."
+    rec["goal_met"] = rec["ratio"] <= 1.3
+    emit([rec], args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,190 @@
+"""A real-time rig of N limbs in one process, as `sea_hil/run.py` composes them: one `PlantNode` serving node ids
+1..N on one python-can `virtual` bus, and one `EdgeNode` (inner loop at the feedback rate) per limb, each on its own
+bus handle and its own Zenoh limb key. The remote side is a setpoint echo child process (this file with
+`--feeder ENDPOINT`) that answers every state of every limb with a setpoint holding the measured spring deflection
+(so each edge keeps commanding; 100 setpoints/s per limb, the TT worst case). No recorder runs.
+
+The first `warmup_s` (Zenoh connection, first setpoint, frames queued meanwhile) are run but not counted.
+Edge timing comes from a thin bus wrapper (`TimedBus`): response = wall time of sending the VOLTAGE_CMD minus the
+python-can send timestamp (time.time()) of the limb's last feedback frame received before it (the one that
+completed the sample) -- bus queueing + wake-up + decode + inner loop + encode.
+"""
+from __future__ import annotations
+
+import argparse
+import subprocess
+import sys
+import threading
+import time
+import uuid
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+
+import can  # noqa: E402
+import zenoh  # noqa: E402
+
+from benchlib import stop_process, wait_ready  # noqa: E402
+from controller.edge import EdgeNode  # noqa: E402
+from plant_emulator.node import PlantNode, TickStats  # noqa: E402
+from protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
+from protocol.canbus import open_bus  # noqa: E402
+from protocol.config import SeaHilConfig, load_config  # noqa: E402
+from protocol.histogram import LogHistogram  # noqa: E402
+from protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
+from protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
+
+PREFIX = "sea"
+
+
+class TimedBus:
+    """Delegates to a python-can bus; records the response time of each VOLTAGE_CMD of `node_id` it sends."""
+
+    def __init__(self, bus: can.BusABC, node_id: int, period_s: float) -> None:
+        self._bus, self.node_id, self.period_s = bus, node_id, period_s
+        codec, zero = SeaCodec([node_id]), (0.0, 0.0)
+        self._cmd_id = codec.encode(VoltageCmd(node_id, zero, 0)).arbitration_id
+        sample = Feedback(node_id, 0, 0, zero, zero, zero, zero)
+        self._fb_ids = {m.arbitration_id for m in codec.encode_feedback(sample)}
+        self._last_ts: float | None = None
+        self.response = LogHistogram()
+        self.late = 0
+
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        msg = self._bus.recv(timeout=timeout)
+        if msg is not None and msg.arbitration_id in self._fb_ids:
+            self._last_ts = msg.timestamp
+        return msg
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None:
+        if msg.arbitration_id == self._cmd_id and self._last_ts is not None:
+            dt = time.time() - self._last_ts
+            self.response.record(max(dt, 1e-7))
+            self.late += dt > self.period_s
+        self._bus.send(msg, timeout=timeout)
+
+    def shutdown(self) -> None:
+        self._bus.shutdown()
+
+
+def feeder(endpoint: str) -> int:
+    """Child: answer every `sea/*/state` with a setpoint holding the measured deflection, until terminated."""
+    session = open_session(make_config(connect=[endpoint]))
+    sub = session.declare_subscriber(f"{PREFIX}/*/state", zenoh.handlers.FifoChannel(4096))
+    pubs: dict[str, zenoh.Publisher] = {}
+    counters, seq = PayloadCounters(), 0
+    print("ready", flush=True)
+    while True:
+        sample = sub.recv()
+        p = counters.try_decode(sample.payload.to_bytes())
+        if not isinstance(p, StatePayload):
+            continue
+        limb = str(sample.key_expr).split("/")[-2]
+        pub = pubs.get(limb) or pubs.setdefault(limb, publisher(session, f"{PREFIX}/{limb}/setpoint"))
+        seq += 1
+        pub.put(encode(SetpointPayload(seq, time.monotonic_ns(), p.seq, p.delta_m, (0.0, 0.0),
+                                       TriggerReason.TIME)))
+
+
+@dataclass
+class RigResult:
+    limbs: int
+    wall_s: float
+    cpu_s: float
+    ticks: int
+    overruns: int
+    lateness_p50_us: float
+    lateness_p99_us: float
+    lateness_max_us: float
+    edge_samples: int
+    edge_commands: int
+    edge_late: int
+    edge_p50_us: float
+    edge_p99_us: float
+    edge_max_us: float
+
+    @property
+    def driver_miss_rate(self) -> float:
+        return self.overruns / max(self.ticks + self.overruns, 1)
+
+    @property
+    def edge_miss_rate(self) -> float:
+        """Late responses (> 1 period) plus unanswered samples, over samples."""
+        unanswered = max(self.edge_samples - self.edge_commands, 0)
+        return (self.edge_late + unanswered) / max(self.edge_samples, 1)
+
+    def as_dict(self) -> dict[str, Any]:
+        d = dict(self.__dict__)
+        d.update(driver_miss_rate=self.driver_miss_rate, edge_miss_rate=self.edge_miss_rate,
+                 cpu_pct=100.0 * self.cpu_s / max(self.wall_s, 1e-9))
+        return d
+
+
+def _limb_cfg(cfg: SeaHilConfig, n: int) -> SeaHilConfig:
+    return cfg.model_copy(update={"zenoh": cfg.zenoh.model_copy(update={"prefix": PREFIX, "limb": f"limb{n}"})})
+
+
+def _reset(plant: PlantNode, buses: list[TimedBus], edges: list[EdgeNode]) -> tuple[int, int]:
+    """Forget the warm-up: fresh plant timing statistics and edge response histograms; returns the edges'
+    (feedback, commands) counts so far, to be subtracted."""
+    plant.lateness, plant.stats = LogHistogram(), TickStats()
+    for b in buses:
+        b.response, b.late = LogHistogram(), 0
+    return sum(e.counters.feedback for e in edges), sum(e.counters.commands_sent for e in edges)
+
+
+def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: float = 1.0) -> RigResult:
+    """Run `limbs` limbs in real time for `warmup_s` (not counted) + `duration_s` of wall time; timing statistics."""
+    cfg = load_config(overrides={"can": {"feedback_rate_hz": rate_hz}})
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    session = open_session(make_config(listen=[endpoint]))
+    proc = subprocess.Popen([sys.executable, __file__, "--feeder", endpoint], stdout=subprocess.PIPE)
+    channel = f"virtual:bench-rig-{uuid.uuid4().hex}"
+    ids = tuple(range(1, limbs + 1))
+    plant_bus = open_bus(channel)
+    buses = [TimedBus(open_bus(channel), n, 1.0 / rate_hz) for n in ids]
+    edges: list[EdgeNode] = []
+    warm = (0, 0)
+    threads: list[threading.Thread] = []
+    try:
+        wait_ready(proc)
+        plant = PlantNode(cfg, plant_bus, ids)
+        edges = [EdgeNode(_limb_cfg(cfg, n), bus, session, n) for n, bus in zip(ids, buses)]  # type: ignore[arg-type]
+        threads = [threading.Thread(target=e.run, name=f"edge{e.node_id}", daemon=True) for e in edges]
+        for t in threads:
+            t.start()
+        if warmup_s > 0:    # start-up (connections, first setpoint, queued frames) is not steady-state timing
+            plant.run(warmup_s)
+            warm = _reset(plant, buses, edges)
+        cpu0, t0 = time.process_time(), time.monotonic()
+        plant.run(duration_s)   # the schedule restarts from now; driver state carries on
+        wall_s, cpu_s = time.monotonic() - t0, time.process_time() - cpu0
+    finally:
+        for e in edges:
+            e.stop_event.set()
+        for t in threads:
+            t.join(timeout=5.0)
+        for e in edges:
+            e.close()
+        stop_process(proc)
+        session.close()
+        plant_bus.shutdown()
+        for b in buses:
+            b.shutdown()
+    resp = LogHistogram()
+    for b in buses:
+        resp.merge(b.response)
+    lat = plant.lateness
+    return RigResult(limbs, wall_s, cpu_s, plant.stats.ticks, plant.stats.overruns, lat.percentile(50) * 1e6,
+                     lat.percentile(99) * 1e6, lat.max * 1e6, sum(e.counters.feedback for e in edges) - warm[0],
+                     sum(e.counters.commands_sent for e in edges) - warm[1], sum(b.late for b in buses),
+                     resp.percentile(50) * 1e6 if resp.count else -1.0,
+                     resp.percentile(99) * 1e6 if resp.count else -1.0, resp.max * 1e6 if resp.count else -1.0)
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description="setpoint feeder child of the limb rig")
+    ap.add_argument("--feeder", metavar="ENDPOINT", required=True)
+    sys.exit(feeder(ap.parse_args().feeder))

@@ -1,0 +1,106 @@
+"""Render BENCHMARKS.md from result records (see bench/benchlib.py): a summary table, then per-figure notes with
+the metric definition, the reason and next lever for goals not met, and the detail tables."""
+from __future__ import annotations
+
+import math
+from typing import Any
+
+# Why a goal may be missed and what to try next; shown only for records with goal_met == False.
+LEVERS = {
+    "2": "The `blocking` row isolates the cost of the controller's receive (RingChannel(1) polled with 100 us "
+         "sleeps) from payload encode/decode and publisher QoS. Next lever: a blocking or callback receive in "
+         "controller/remote.py, or a shorter poll period.",
+    "3": "The edge drains Zenoh only when a feedback sample arrives (once per ms), so a setpoint waits for the next "
+         "sample; see the per-run rows. Next lever: wake the edge on setpoint arrival (zenoh callback -> event, or a "
+         "shorter bus recv timeout) and count latency to the next VOLTAGE_CMD separately from arrival.",
+    "4": "Python threads of plant, edge and Zenoh share one GIL and a 2-core machine; lateness tails come from GIL "
+         "hand-off and scheduler pre-emption (the loaded row shows the effect of losing the second core). Next "
+         "levers: run plant and edge in separate processes, SCHED_FIFO + CPU pinning, or move the 1 kHz loops to "
+         "native code.",
+    "6": "Every limb adds a 1 kHz edge thread and 4 CAN frames per ms that the python-can virtual bus deep-copies "
+         "to every bus handle (cost grows ~N^2), all under one GIL. Next levers: one edge thread serving all node "
+         "ids, a process per limb, SocketCAN with kernel filters.",
+    "7": "The recorder's JSON encoding and validation run in Python on the submitting thread. Next lever: a binary "
+         "(e.g. protobuf/flatbuffer) channel encoding for /can/raw, or batching CAN frames per sample.",
+}
+
+
+def fmt(v: Any, unit: str = "") -> str:
+    if v is None or (isinstance(v, float) and not math.isfinite(v)):
+        return "–"
+    if isinstance(v, bool):
+        return "yes" if v else "no"
+    if isinstance(v, float):
+        a = abs(v)
+        s = f"{v:.3g}" if a < 10 else (f"{v:.1f}" if a < 1000 else f"{v:,.0f}")
+    else:
+        s = str(v)
+    return f"{s} {unit}".strip()
+
+
+def _met(r: dict[str, Any]) -> str:
+    return {True: "**met**", False: "**not met**", None: "–"}[r.get("goal_met")]
+
+
+def summary_table(records: list[dict[str, Any]]) -> list[str]:
+    out = ["| fig | what | command | runs | median | p99 | min–max over runs | baseline (same run) | ratio | goal | "
+           "met |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in records:
+        if r.get("error"):
+            out.append(f"| {r['figure']} | {r['title']} | `{r['command']}` | – | FAILED: {r['error']} | | | | | | |")
+            continue
+        u = r.get("unit", "")
+        out.append(f"| {r['figure']} | {r['title']} | `{r['command']}` | {r['runs']} | {fmt(r['median'], u)} | "
+                   f"{fmt(r.get('p99'), u)} | {fmt(r['min'])}–{fmt(r['max'], u)} | {fmt(r.get('baseline'), u)} | "
+                   f"{fmt(r.get('ratio'))} | {r.get('goal', '')} | {_met(r)} |")
+    return out
+
+
+def detail_table(rows: list[dict[str, Any]]) -> list[str]:
+    if not rows:
+        return []
+    keys: list[str] = []
+    for row in rows:
+        keys += [k for k in row if k not in keys]
+    out = ["| " + " | ".join(keys) + " |", "|" + "---|" * len(keys)]
+    out += ["| " + " | ".join(fmt(row.get(k)) for k in keys) + " |" for row in rows]
+    return out
+
+
+def figure_notes(r: dict[str, Any]) -> list[str]:
+    out = [f"### Figure {r['figure']}: {r['title']}", ""]
+    if r.get("error"):
+        return out + [f"Failed: {r['error']}", ""]
+    out.append(f"Metric: {r['metric']}. Unit: {r.get('unit', '')}. Runs: {r['runs']}. Measured {r['date']} "
+               f"(load average {r['host'].get('loadavg_1m')} at the start).")
+    if r.get("baseline_label"):
+        out.append(f"Baseline: {r['baseline_label']}.")
+    if r.get("notes"):
+        out.append(r["notes"])
+    if r.get("goal_met") is False:
+        lever = LEVERS.get(r["figure"].rstrip("abcd"), "")
+        out.append(f"**Goal not met** ({r.get('goal', '')}). {lever}")
+    out.append("")
+    table = detail_table(r.get("details", []))
+    return out + table + ([""] if table else [])
+
+
+def render(records: list[dict[str, Any]], *, preliminary: bool, total_s: float, header: str) -> str:
+    host = next((r["host"] for r in records if r.get("host")), {})
+    lines = ["# Benchmarks", ""]
+    if preliminary:
+        lines += ["> **PRELIMINARY** — produced by `python bench/run_all.py --quick` (tiny sizes, one run, a machine "
+                  "busy with other work). The numbers only show that every script runs; the figures are the ones "
+                  "of a full `python bench/run_all.py` in a quiet window.", ""]
+    lines += [header, "",
+              f"Host: {host.get('hostname')} ({host.get('cpu')}, {host.get('cores')} cores, kernel "
+              f"{host.get('kernel')}), Python {host.get('python')}, eclipse-zenoh {host.get('eclipse-zenoh')}, "
+              f"python-can {host.get('python-can')}, mcap {host.get('mcap')}. All scripts together took "
+              f"{total_s:.0f} s.", "",
+              "median / min–max are over the per-run values of each figure's metric; p99 is defined per figure "
+              "(notes below). Every row is reproducible with the command beside it; `python bench/run_all.py` "
+              "re-runs all of them and rewrites this file (`--quick` for a smoke run).", ""]
+    lines += summary_table(records) + ["", "## Notes per figure", ""]
+    for r in records:
+        lines += figure_notes(r)
+    return "\n".join(lines).rstrip() + "\n"

@@ -1,0 +1,122 @@
+"""Smoke tests of bench/: each script in its quickest mode writes well-formed result records (shape, not timing),
+and run_all's parsers and markdown renderer work. The scripts needing a full `sea-hil run` session (figures 3 and
+5, and run_all itself) are covered through their pure record builders."""
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+BENCH = REPO / "bench"
+sys.path.insert(0, str(BENCH))
+
+import bench_bandwidth  # noqa: E402
+import bench_closed_loop_latency  # noqa: E402
+import run_all  # noqa: E402
+from report_md import render  # noqa: E402
+
+KEYS = {"figure", "title", "command", "runs", "metric", "unit", "median", "p99", "min", "max", "baseline", "goal",
+        "goal_met", "date", "host", "notes", "details"}
+
+
+def _run_script(name: str, tmp_path: Path, *args: str) -> list[dict]:
+    out = tmp_path / f"{name}.json"
+    proc = subprocess.run([sys.executable, str(BENCH / f"{name}.py"), *args, "--json", str(out)], cwd=REPO,
+                          capture_output=True, text=True, timeout=120)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    records = json.loads(out.read_text())
+    _check_shape(records)
+    return records
+
+
+def _check_shape(records: list[dict]) -> None:
+    assert isinstance(records, list) and records
+    for r in records:
+        assert KEYS <= set(r), KEYS - set(r)
+        assert r["command"].startswith("python bench/")
+        assert "--json" not in r["command"]
+        assert r["runs"] >= 1 and r["host"]["cores"] >= 1
+        assert r["goal_met"] in (True, False, None)
+
+
+@pytest.mark.slow
+def test_zenoh_hop_quick(tmp_path):
+    (rec,) = _run_script("bench_zenoh_hop", tmp_path, "--quick")
+    assert rec["figure"] == "2" and rec["baseline"] > 0 and rec["median"] > 0
+    assert {d["mode"] for d in rec["details"]} == {"raw", "project", "blocking"}
+    assert all(d["hops"] + d["lost"] == 50 for d in rec["details"])
+
+
+@pytest.mark.slow
+def test_driver_timing_quick_with_edge(tmp_path):
+    recs = _run_script("bench_driver_timing", tmp_path, "--quick", "--edge")
+    assert [r["figure"] for r in recs] == ["4a", "4c"]
+    (row,) = recs[0]["details"]
+    assert row["ticks"] > 0 and row["edge_samples"] > 0 and row["edge_commands"] > 0
+
+
+@pytest.mark.slow
+def test_scale_quick(tmp_path):
+    (rec,) = _run_script("bench_scale", tmp_path, "--quick")
+    assert [d["limbs"] for d in rec["details"]][:1] == [1]
+    assert rec["per_run"][0] in (0, 1, 2)
+    assert "CAN bits per sample" in rec["notes"]
+
+
+@pytest.mark.slow
+def test_mcap_quick_on_a_small_session(tmp_path):
+    from protocol.recording import SessionRecorder
+    src = tmp_path / "small.mcap"
+    with SessionRecorder(src) as rec:
+        for i in range(300):
+            t = 1_000_000 * i
+            rec.record("/can/raw", t, t, {"can_id": 33, "dlc": 8, "data_hex": f"{i:016x}", "direction": "rx"})
+            rec.record("/can/feedback", t, t, {"node_id": 1, "seq": i % 256, "theta1_rad": 0.001 * i})
+    recs = _run_script("bench_mcap", tmp_path, "--quick", "--session", str(src))
+    assert [r["figure"] for r in recs] == ["7", "7b"]
+    assert recs[0]["details"][0]["written"] == 600 and recs[0]["details"][0]["dropped"] == 0
+
+
+def _summary(controller: str, downlink: int) -> dict:
+    return {"controller": controller, "transmissions": {"downlink_msgs": downlink, "downlink_bytes": 53 * downlink,
+                                                        "uplink_msgs": 1000},
+            "tracking": {"max_abs_error_rad": [0.01, 0.02], "rms_error_rad": [0.001, 0.002]},
+            "duration_s": 10.0, "wall_s": 11.0,
+            "latency_us": {"min": 500.0, "p50": 900.0, "p90": 1500.0, "p99": 2500.0, "max": 4000.0}}
+
+
+def test_bandwidth_and_latency_records():
+    rows = [bench_bandwidth._row(_summary("et", 300), "realtime", 1),
+            bench_bandwidth._row(_summary("tt", 1000), "realtime", 1)]
+    rec = bench_bandwidth._record("realtime", "5a", rows, 1, "python bench/bench_bandwidth.py")
+    _check_shape([rec])
+    assert rec["median"] == 300 and rec["baseline"] == 1000 and rec["ratio"] == pytest.approx(0.3)
+    assert rec["goal_met"] is True
+    def lat(p99_us: float) -> dict:
+        return bench_closed_loop_latency.latency_record(
+            [{"p50_us": 900.0, "p99_us": p99_us}, {"p50_us": 1100.0, "p99_us": p99_us}], "et", "python bench/l.py")
+    ok, bad = lat(2500.0), lat(3500.0)
+    _check_shape([ok, bad])
+    assert (ok["median"], ok["min"], ok["max"], ok["p99"]) == (1000.0, 900.0, 1100.0, 2500.0)
+    assert ok["goal_met"] is True and bad["goal_met"] is False
+
+
+def test_run_all_parsers_and_render():
+    sim = run_all.parse_simulate("CPU s per run: median 0.300  min 0.250  max 0.400\n", "python bench/x.py", 3)
+    lock = run_all.parse_lockstep('{"runs": 3, "cycles": 1, "et": {"session_wall_s_per_cycle": {"median": 9.0, '
+                                  '"min": 8.5, "max": 9.5}, "process_wall_s_per_cycle": {"median": 11.0}}}',
+                                  "python bench/y.py", 3)
+    _check_shape(sim + lock)
+    assert (sim[0]["median"], sim[0]["min"], sim[0]["max"]) == (0.3, 0.25, 0.4)
+    assert lock[0]["figure"] == "1b" and lock[0]["median"] == 9.0
+    failed = {"figure": "2", "title": "bench_zenoh_hop", "command": "python bench/bench_zenoh_hop.py",
+              "error": "boom", "date": "now"}
+    md = render(sim + lock + [failed], preliminary=True, total_s=1.0, header="hdr")
+    assert "PRELIMINARY" in md and "FAILED: boom" in md
+    assert md.count("\n| 1") == 2   # one table row per record of figure 1
+    with pytest.raises(ValueError):
+        run_all.parse_simulate("nothing useful", "cmd", 1)
