@@ -6,9 +6,9 @@ One hop = round trip / 2, on this process's monotonic clock, in three modes, int
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
              53-byte pong of opaque bytes (the sizes of StatePayload and SetpointPayload);
   project    the real path: encode(StatePayload) + `protocol.zsession.publisher` (express, REAL_TIME, DROP) here;
-             the echo receives like `controller/remote.py` (RingChannel(1) polled with 100 us sleeps), decodes,
+             the echo receives like `controller/remote.py` (`LatestSubscriber`, newest-only slot), decodes,
              encodes a SetpointPayload and publishes it; this side receives with blocking recv() and decodes;
-  blocking   the project's payloads and publishers, but the echo uses blocking recv() (isolates the polling cost).
+  blocking   the project's payloads and publishers, but the echo uses a FIFO with blocking recv().
 """
 from __future__ import annotations
 
@@ -27,7 +27,7 @@ from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # 
 from protocol.payloads import (PayloadCounters, SetpointPayload, StatePayload, TriggerReason,  # noqa: E402
                                encode)
 from protocol.errors import SeaHilError  # noqa: E402
-from protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
+from protocol.zsession import LatestSubscriber, free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")
 PING, PONG = "bench/hop/ping", "bench/hop/pong"
@@ -46,15 +46,15 @@ def echo(endpoint: str, mode: str) -> int:
     counters = PayloadCounters()
     if mode == "raw":
         sub, pub = session.declare_subscriber(PING), session.declare_publisher(PONG)
+    elif mode == "project":
+        sub, pub = LatestSubscriber(session, PING), publisher(session, PONG)
     else:
-        handler = zenoh.handlers.RingChannel(1) if mode == "project" else zenoh.handlers.FifoChannel(1024)
-        sub, pub = session.declare_subscriber(PING, handler), publisher(session, PONG)
+        sub, pub = session.declare_subscriber(PING, zenoh.handlers.FifoChannel(1024)), publisher(session, PONG)
     print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
     while True:
-        sample = sub.try_recv() if mode == "project" else sub.recv()
+        sample = sub.recv(1.0) if mode == "project" else sub.recv()
         if sample is None:
-            time.sleep(100e-6)
             continue
         data = sample.payload.to_bytes()
         if mode == "raw":

@@ -12,8 +12,10 @@ from __future__ import annotations
 
 import json
 import logging
+import queue
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import can
@@ -29,8 +31,8 @@ from protocol.histogram import LogHistogram
 from protocol.keys import Keys
 from protocol.link import DelayQueue, LinkEmulator
 from protocol.mechanics import limb_params
-from protocol.payloads import (AckPayload, PayloadCounters, SequenceTracker, SetpointPayload, StatePayload,
-                               VoltagePayload, encode)
+from protocol.payloads import (AckPayload, PayloadCounters, SequenceTracker, SeqVerdict, SetpointPayload,
+                               StatePayload, VoltagePayload, encode)
 from protocol.zsession import LinkedPublisher, publisher
 
 log = logging.getLogger("sea_hil.edge")
@@ -46,6 +48,9 @@ class EdgeCounters:
     setpoint_bytes: int = 0
     voltages: int = 0
     stale_setpoints: int = 0
+    unexpected_payloads: int = 0
+    controller_restarts: int = 0
+    bus_errors: int = 0
     clear_errors_sent: int = 0
     lockstep_resends: int = 0
     commands_sent: int = 0
@@ -72,9 +77,11 @@ class EdgeNode:
         self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
         self.pending_down: DelayQueue[object] = DelayQueue()
         self.stats_pub = publisher(session, self.keys.stats, express=False)
-        self.sp_sub = session.declare_subscriber(self.keys.setpoint, zenoh.handlers.FifoChannel(1024))
-        self.v_sub = session.declare_subscriber(self.keys.voltage, zenoh.handlers.FifoChannel(1024))
-        self.ack_sub = session.declare_subscriber(self.keys.control, zenoh.handlers.FifoChannel(1024))
+        # one FIFO fed by callbacks (is_ack, payload): lockstep waits block on it instead of polling
+        self._inbox: queue.SimpleQueue[tuple[bool, bytes]] = queue.SimpleQueue()
+        self.sp_sub = session.declare_subscriber(self.keys.setpoint, self._to_inbox(False))
+        self.v_sub = session.declare_subscriber(self.keys.voltage, self._to_inbox(False))
+        self.ack_sub = session.declare_subscriber(self.keys.control, self._to_inbox(True))
         self.payloads = PayloadCounters()
         self.sp_seq = SequenceTracker()
         self.counters = EdgeCounters()
@@ -84,6 +91,7 @@ class EdgeNode:
         self._state_seq = 0
         self._sent_at: dict[int, int] = {}
         self._last_setpoint_ns: int | None = None
+        self._last_rx_ns = 0          # sample time of the newest accepted setpoint/voltage
         self._voltage: tuple[float, float] | None = None
         self._driver_state = DriverState.INIT
         self._last_fb_seq: int | None = None
@@ -95,7 +103,13 @@ class EdgeNode:
     # ---- CAN side -----------------------------------------------------------------------------------------------
     def run(self) -> None:
         while not self.stop_event.is_set():
-            msg = self.bus.recv(timeout=0.05)
+            try:
+                msg = self.bus.recv(timeout=0.05)
+            except (can.CanError, OSError) as err:   # e.g. interface down: count, log, keep running
+                self.counters.bus_errors += 1
+                log.warning("CAN receive failed: %s", err)
+                self.stop_event.wait(0.05)
+                continue
             if msg is None:
                 continue
             try:
@@ -115,6 +129,7 @@ class EdgeNode:
         try:
             send_with_retry(self.bus, msg, self.cfg.can.send_retries, 0.0002)
         except BusError as err:
+            self.counters.bus_errors += 1
             log.warning("%s", err)
 
     def _on_feedback(self, fb: Feedback) -> None:
@@ -135,8 +150,7 @@ class EdgeNode:
         u = self._command(fb, now)
         if u is None:
             return
-        cmd, _ = self.codec.saturate(VoltageCmd(self.node_id, u, fb.seq))
-        self._last_cmd = self.codec.encode(cmd)
+        self._last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
         self._send(self._last_cmd)
         self.counters.commands_sent += 1
 
@@ -186,31 +200,73 @@ class EdgeNode:
                 self.counters.lockstep_resends += 1
                 last_progress = now
             else:
-                time.sleep(50e-6)
+                try:
+                    if self._dispatch(self._inbox.get(timeout=(self.resend_ns - (now - last_progress)) * 1e-9)):
+                        last_progress = time.monotonic_ns()
+                except queue.Empty:
+                    pass
+
+    def _to_inbox(self, is_ack: bool) -> Callable[[zenoh.Sample], None]:
+        put = self._inbox.put
+        return lambda s: put((is_ack, s.payload.to_bytes()))
+
+    def _dispatch(self, item: tuple[bool, bytes]) -> bool:
+        is_ack, data = item
+        return self.on_ack(data) if is_ack else self.on_downlink(data)
 
     def _drain_zenoh(self) -> bool:
         got = False
-        while (s := self.ack_sub.try_recv()) is not None:
-            p = self.payloads.try_decode(s.payload.to_bytes())
-            if isinstance(p, AckPayload):
-                self._acks[p.state_seq] = p
-                self._acks.pop(p.state_seq - 1000, None)
-                got = True
-        for sub in (self.sp_sub, self.v_sub):
-            while (s := sub.try_recv()) is not None:
-                data = s.payload.to_bytes()
-                p = self.payloads.try_decode(data)
-                if not isinstance(p, (SetpointPayload, VoltagePayload)):
-                    continue
-                if self.sp_seq.feed(p.seq) != 0:      # SeqVerdict.NEW == 0
-                    self.counters.stale_setpoints += 1
-                    continue
-                got = True
-                self._seen_setpoints.add(p.seq)
-                at = self.downlink.submit(self._sample_t_ns, len(data))
-                if at is not None:
-                    self.pending_down.push(at, p)
-        return got
+        while True:
+            try:
+                item = self._inbox.get_nowait()
+            except queue.Empty:
+                return got
+            got = self._dispatch(item) or got
+
+    def on_downlink(self, data: bytes) -> bool:
+        """Handle one setpoint/voltage payload from Zenoh: malformed (counted by reason) or wrong-type payloads and
+        stale/duplicated seqs (`stale_setpoints`) are dropped; True if it entered the downlink emulator."""
+        p = self.payloads.try_decode(data)
+        if p is None:
+            return False
+        if not isinstance(p, (SetpointPayload, VoltagePayload)):
+            self.counters.unexpected_payloads += 1
+            return False
+        if self.sp_seq.feed(p.seq) is not SeqVerdict.NEW:
+            if not self._controller_restarted(p.seq):
+                self.counters.stale_setpoints += 1
+                return False
+        self._seen_setpoints.add(p.seq)
+        self._last_rx_ns = self._sample_t_ns
+        at = self.downlink.submit(self._sample_t_ns, len(data))
+        if at is not None:
+            self.pending_down.push(at, p)
+        return True
+
+    def _controller_restarted(self, seq: int) -> bool:
+        """A not-newer seq starts a new setpoint stream only after the old one timed out (the driver is then in its
+        safe state) and only if it looks like a fresh sender (seq < the tracker window); counted."""
+        timed_out = self._sample_t_ns - self._last_rx_ns > self.timeout_ns
+        if self.lockstep or not timed_out or seq >= self.sp_seq.window:
+            return False
+        self.sp_seq.restart()
+        self.sp_seq.feed(seq)
+        self._seen_setpoints.clear()
+        self.counters.controller_restarts += 1
+        log.warning("setpoint stream restarted at seq %d (controller restart)", seq)
+        return True
+
+    def on_ack(self, data: bytes) -> bool:
+        """Handle one payload from the control key (lockstep ACKs); anything else is counted and dropped."""
+        p = self.payloads.try_decode(data)
+        if p is None:
+            return False
+        if not isinstance(p, AckPayload):
+            self.counters.unexpected_payloads += 1
+            return False
+        self._acks[p.state_seq] = p
+        self._acks.pop(p.state_seq - 1000, None)
+        return True
 
     def _take_downlink(self, now: int) -> None:
         self._drain_zenoh()
@@ -239,6 +295,8 @@ class EdgeNode:
             "voltage_msgs_applied": c.voltages, "stale_setpoints": c.stale_setpoints,
             "clear_errors_sent": c.clear_errors_sent, "lockstep_resends": c.lockstep_resends,
             "commands_sent": c.commands_sent, "payload_rejected": self.payloads.as_dict()["rejected_total"],
+            "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
+            "bus_errors": c.bus_errors,
             "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": self.inner.saturated_steps,
             "seq_lost": self.sp_seq.lost, "seq_reordered": self.sp_seq.reordered, "seq_duplicates": self.sp_seq.duplicates,
             "latency_count": lat["count"],

@@ -11,8 +11,8 @@ from dataclasses import dataclass, field
 
 from plant_emulator.dynamics import State, deflections, initial_state, saturate
 from plant_emulator.integrator import Disturbance, advance
-from protocol.can_codec import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
-                                VoltageCmd)
+from protocol.can_frames import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
+                                 VoltageCmd)
 from protocol.mechanics import LimbParams
 
 U16 = 0xFFFF

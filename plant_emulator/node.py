@@ -20,7 +20,8 @@ import can
 
 from plant_emulator.disturbance import make_disturbance
 from plant_emulator.driver import DriverCore
-from protocol.can_codec import ErrorFlags, SeaCodec, VoltageCmd
+from protocol.can_codec import SeaCodec
+from protocol.can_frames import ErrorFlags, Feedback, VoltageCmd
 from protocol.canbus import send_with_retry
 from protocol.config import SeaHilConfig
 from protocol.errors import BusError, MalformedFrame
@@ -36,6 +37,7 @@ class TickStats:
     overruns: int = 0
     send_retries: int = 0
     send_failures: int = 0
+    bus_errors: int = 0
 
 
 class PlantNode:
@@ -83,14 +85,19 @@ class PlantNode:
             self.stats.send_retries += send_with_retry(self.bus, msg, self.cfg.can.send_retries, 0.0002)
         except BusError as err:
             self.stats.send_failures += 1
-            drv = self.drivers.get(msg.arbitration_id >> 5)
-            if drv is not None:
-                drv.flags |= ErrorFlags.BUS_ERROR
-            log.warning("%s", err)
+            self._bus_error(str(err))
 
-    def _publish(self, drv: DriverCore, feedback: object) -> None:
+    def _bus_error(self, what: str) -> None:
+        """Flag BUS_ERROR on every driver and count; log the first error and every 1000th (no log flood)."""
+        for drv in self.drivers.values():
+            drv.flags |= ErrorFlags.BUS_ERROR
+        self.stats.bus_errors += 1
+        if self.stats.bus_errors == 1 or self.stats.bus_errors % 1000 == 0:
+            log.warning("%s (%d bus errors so far)", what, self.stats.bus_errors)
+
+    def _publish(self, drv: DriverCore, feedback: Feedback) -> None:
         try:
-            msgs = self.codec.encode_feedback(self.codec.saturate(feedback)[0])
+            msgs = self.codec.encode_feedback(feedback, saturate=True)
         except MalformedFrame as err:   # e.g. a diverged (NaN) model: report, keep the node alive
             self.stats.send_failures += 1
             log.error("node %d: feedback not encodable: %s", drv.node_id, err)
@@ -112,7 +119,12 @@ class PlantNode:
             remaining = deadline_ns - now
             if remaining <= 0:
                 return
-            msg = self.bus.recv(timeout=remaining * 1e-9)
+            try:
+                msg = self.bus.recv(timeout=remaining * 1e-9)
+            except (can.CanError, OSError) as err:   # e.g. interface down: flag, count, keep the schedule
+                self._bus_error(f"CAN receive failed: {err}")
+                self.stop_event.wait(min(remaining * 1e-9, 0.01))
+                continue
             if msg is not None:
                 self._on_message(msg, time.monotonic_ns())
 

@@ -62,17 +62,6 @@ def open_bus(spec: str, *, receive_own_messages: bool = False, fd: bool = False)
         raise BusError(f"cannot open CAN bus {spec!r}: {err}{hint}") from None
 
 
-def frame_bits(dlc: int, *, worst_case: bool = True) -> int:
-    """Bit times of a classic base-format (11-bit id) data frame with `dlc` bytes, 3-bit interframe space included.
-
-    Worst case adds one stuff bit per 4 bits after the first of the 34 + 8*dlc stuffed bits (SOF .. CRC).
-    """
-    if not 0 <= dlc <= 8:
-        raise ConfigError(f"classic CAN DLC must be 0..8, got {dlc}")
-    stuff = (34 + 8 * dlc - 1) // 4 if worst_case else 0
-    return 47 + 8 * dlc + stuff
-
-
 def is_buffer_full(err: BaseException) -> bool:
     """True for the transient 'transmit queue full' failures (ENOBUFS, python-can's 'Transmit buffer full')."""
     if getattr(err, "error_code", None) == errno.ENOBUFS or getattr(err, "errno", None) == errno.ENOBUFS:

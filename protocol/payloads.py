@@ -250,7 +250,7 @@ class SequenceTracker:
 
     `lost` counts skipped sequence numbers; a skipped number that still arrives within the last `window` numbers
     is moved from `lost` to `reordered`. Older arrivals cannot be classified and count as `reordered`. Call
-    `reset()` when the sender restarts its sequence.
+    `restart()` when the sender restarts its sequence (`reset()` also clears the counters).
     """
 
     def __init__(self, window: int = 64) -> None:
@@ -264,6 +264,10 @@ class SequenceTracker:
         self._seen = 0  # bit i set = (last - i) was seen
         self._span = 0  # how many numbers back from `last` the bitmap covers (<= window; stops at the first)
         self.accepted = self.lost = self.reordered = self.duplicates = 0
+
+    def restart(self) -> None:
+        """The sender restarted its sequence: forget the window, keep the counters (the next seq is NEW)."""
+        self.last, self._seen, self._span = None, 0, 0
 
     def feed(self, seq: int) -> SeqVerdict:
         seq = _uint("seq", seq, U32_MAX)

@@ -1,8 +1,10 @@
 """The recorder node: every Zenoh message under `<prefix>/**` and every CAN frame on the bus into one MCAP file.
 
 Binary payloads are decoded (rejects counted, raw size kept); JSON stats/tracking messages are flattened into
-their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/feedback` / `/can/command`.
-Writing is done by the recorder's writer thread (bounded queue: a recorder that falls behind drops and counts).
+their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/feedback` / `/can/command`
+(`protocol.recording_can`). With an in-process `SessionRecorder` the node decodes and the recorder's writer thread
+writes (bounded queue: a recorder that falls behind drops and counts); with a `RecorderProcess` the node only
+forwards raw frames and the child process decodes and writes.
 """
 from __future__ import annotations
 
@@ -15,14 +17,14 @@ from typing import Any
 import can
 import zenoh
 
-from protocol.can_codec import FeedbackAngle, FeedbackDeflection, FeedbackVelocity, SeaCodec, VoltageCmd
-from protocol.errors import MalformedFrame
+from protocol.can_codec import SeaCodec
 from protocol.keys import everything
 from protocol.payloads import (AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload)
+from protocol.recorder_process import RecorderProcess
 from protocol.recording import SessionRecorder
+from protocol.recording_can import RawFrame, can_records
 
 log = logging.getLogger("sea_hil.record")
-
 
 
 def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str, dict[str, Any]] | None:
@@ -61,9 +63,10 @@ def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str,
 
 
 class RecorderNode:
-    def __init__(self, recorder: SessionRecorder, session: zenoh.Session | None, prefix: str,
-                 bus: can.BusABC | None = None) -> None:
+    def __init__(self, recorder: SessionRecorder | RecorderProcess, session: zenoh.Session | None, prefix: str,
+                 bus: can.BusABC | None = None, *, tap_batch_s: float = 0.0) -> None:
         self.rec = recorder
+        self.tap_batch_s = tap_batch_s
         self.payloads = PayloadCounters()
         self.codec = SeaCodec()
         self.stop_event = threading.Event()
@@ -85,9 +88,8 @@ class RecorderNode:
         while self._sub is not None:
             s = self._sub.try_recv()
             if s is None:
-                if self.stop_event.is_set():
+                if self.stop_event.wait(max(0.001, self.tap_batch_s)):   # idle: wait, then drain the batch
                     return
-                time.sleep(0.001)
                 continue
             now = time.time_ns()
             out = zenoh_record(str(s.key_expr), s.payload.to_bytes(), self.payloads)
@@ -97,37 +99,33 @@ class RecorderNode:
                 self.rec.submit(out[0], now, sent if isinstance(sent, int) else now, out[1])
 
     def _can_loop(self) -> None:
+        """Wait for a frame, take everything queued, then (`tap_batch_s` > 0) pause: the tap wakes once per batch
+        rather than once per frame, leaving the CPU to the nodes; frames keep their bus timestamps."""
         assert self._bus is not None
         while not self.stop_event.is_set():
             msg = self._bus.recv(timeout=0.05)
-            if msg is not None:
+            if msg is None:
+                if isinstance(self.rec, RecorderProcess):
+                    self.rec.flush()   # idle bus: deliver what is batched
+                continue
+            while msg is not None:
                 self.on_can(msg)
+                msg = self._bus.recv(timeout=0)
+            if self.tap_batch_s > 0:
+                self.stop_event.wait(self.tap_batch_s)
 
     def on_can(self, msg: can.Message) -> None:
-        now = time.time_ns()
+        """Record one frame, logged at its bus timestamp (receive time when the bus gives none)."""
+        t_ns = round(msg.timestamp * 1e9) if msg.timestamp > 0 else time.time_ns()
+        frame = RawFrame.of(t_ns, msg)
         self.can_frames += 1
-        data = bytes(msg.data or b"")
-        self.rec.submit("/can/raw", now, now, {"can_id": msg.arbitration_id, "dlc": msg.dlc, "data_hex": data.hex(),
-                                               "direction": "rx", "is_extended": bool(msg.is_extended_id),
-                                               "node_id": msg.arbitration_id >> 5})
-        try:
-            f = self.codec.decode(msg)
-        except MalformedFrame:
-            self.can_rejected += 1
+        if isinstance(self.rec, RecorderProcess):
+            self.rec.submit_can(frame)    # decoded (and rejects counted) by the recorder process
             return
-        if isinstance(f, VoltageCmd):
-            self.rec.submit("/can/command", now, now, {"node_id": f.node_id, "seq": f.seq, "kind": "voltage",
-                                                       "u1_v": f.voltage_v[0], "u2_v": f.voltage_v[1]})
-        elif isinstance(f, FeedbackAngle):
-            self.rec.submit("/can/feedback", now, now, {"node_id": f.node_id, "seq": f.seq, "t_us": f.t_us,
-                                                        "theta1_rad": f.theta_rad[0], "theta2_rad": f.theta_rad[1]})
-        elif isinstance(f, FeedbackDeflection):
-            self.rec.submit("/can/feedback", now, now, {"node_id": f.node_id, "seq": f.seq,
-                                                        "delta1_m": f.delta_m[0], "delta2_m": f.delta_m[1]})
-        elif isinstance(f, FeedbackVelocity):
-            self.rec.submit("/can/feedback", now, now, {"node_id": f.node_id, "seq": f.seq,
-                                                        "omega1_rad_s": f.omega_rad_s[0],
-                                                        "omega2_rad_s": f.omega_rad_s[1]})
+        records, rejected = can_records(self.codec, frame)
+        self.can_rejected += rejected
+        for topic, payload in records:
+            self.rec.submit(topic, frame.t_ns, frame.t_ns, payload)
 
     def stop(self) -> None:
         self.stop_event.set()

@@ -1,36 +1,33 @@
-"""MCAP session recording: a thread-safe JSON/jsonschema writer with a bounded queue, and a truncation-tolerant reader.
+"""MCAP session recording: a thread-safe JSON/jsonschema writer with a bounded queue and a signal-safe finaliser.
 
-See docs/recording.md for channels, metadata names, drop policy and recovery.
+Metadata/header helpers live in `protocol.recording_meta`, the reader in `protocol.recording_reader` (both
+re-exported here). See docs/recording.md for channels, metadata names, drop policy and recovery.
 """
 from __future__ import annotations
 
 import atexit
 import contextlib
 import json
-import math
 import os
-import platform
 import queue
 import signal
-import socket
-import sys
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from dataclasses import dataclass, field
-from importlib import metadata as importlib_metadata
-from typing import Any, NamedTuple
+from typing import Any
 
-from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader, breakup_chunk
-from mcap.writer import MCAP0_MAGIC, CompressionType, Writer
+from mcap.writer import CompressionType, Writer
 
-from protocol.config import RecordConfig, SeaHilConfig, config_to_toml
+from protocol.config import RecordConfig, SeaHilConfig
 from protocol.errors import RecordingError
+from protocol.recording_meta import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, encode_payload,
+                                     session_metadata, write_session_header)
+from protocol.recording_reader import RecordedMessage, SessionData, read_session
 from protocol.schemas import TOPICS, schema_bytes, schema_name, validate_payload
 
-META_SESSION, META_CONFIG, META_FINAL = "sea-hil.session", "sea-hil.config", "sea-hil.final"
-CONFIG_ATTACHMENT = "config.toml"
+__all__ = ["CONFIG_ATTACHMENT", "META_CONFIG", "META_FINAL", "META_SESSION", "RecordedMessage", "SessionData",
+           "SessionRecorder", "encode_payload", "install_finalizer", "read_session", "session_metadata",
+           "write_session_header"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _STOP = object()
 
@@ -59,47 +56,6 @@ class _Sink:
     def close(self) -> None:
         self._f.close()
 
-
-def _finite(v: Any) -> Any:
-    return None if isinstance(v, float) and not math.isfinite(v) else v
-
-
-def encode_payload(payload: Mapping[str, Any]) -> bytes:
-    """Compact JSON; non-finite floats become null, numpy scalars become Python numbers."""
-    def default(o: Any) -> Any:
-        if hasattr(o, "item"):
-            return _finite(o.item())
-        raise TypeError(f"not JSON serialisable: {type(o).__name__}")
-    try:
-        return json.dumps(payload, separators=(",", ":"), allow_nan=False, default=default).encode()
-    except ValueError:
-        clean = {k: _finite(v) for k, v in payload.items()}
-        return json.dumps(clean, separators=(",", ":"), allow_nan=False, default=default).encode()
-
-
-def _version(dist: str) -> str:
-    try:
-        return importlib_metadata.version(dist)
-    except importlib_metadata.PackageNotFoundError:
-        return "not installed"
-
-
-def session_metadata(seed: int | None = None, argv: list[str] | None = None) -> dict[str, str]:
-    """Host, command line and library versions for the `sea-hil.session` metadata record."""
-    return {"python": platform.python_version(), "platform": platform.platform(), "host": socket.gethostname(),
-            "pid": str(os.getpid()), "argv": json.dumps(sys.argv if argv is None else argv),
-            "seed": "" if seed is None else str(seed), "start_wall_time_ns": str(time.time_ns()),
-            "start_monotonic_ns": str(time.monotonic_ns()),
-            **{f"version.{d}": _version(d) for d in ("sea-hil", "eclipse-zenoh", "python-can", "mcap", "numpy")}}
-
-
-def _flatten(prefix: str, d: Mapping[str, Any], out: dict[str, str]) -> dict[str, str]:
-    for k, v in d.items():
-        if isinstance(v, Mapping):
-            _flatten(f"{prefix}{k}.", v, out)
-        else:
-            out[f"{prefix}{k}"] = json.dumps(v)
-    return out
 
 
 class SessionRecorder:
@@ -160,10 +116,7 @@ class SessionRecorder:
     def write_session_header(self, config: SeaHilConfig | None = None, *, seed: int | None = None,
                              argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None:
         """Metadata `sea-hil.session` (+ `extra`), `sea-hil.config` and attachment `config.toml`."""
-        self.add_metadata(META_SESSION, {**session_metadata(seed, argv), **(extra or {})})
-        if config is not None:
-            self.add_metadata(META_CONFIG, _flatten("", config.model_dump(mode="json"), {}))
-            self.add_attachment(CONFIG_ATTACHMENT, config_to_toml(config).encode(), "application/toml")
+        write_session_header(self, config, seed=seed, argv=argv, extra=extra)
 
     # -- messages ------------------------------------------------------------------------------------------------
     def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> None:
@@ -276,86 +229,3 @@ def install_finalizer(recorder: SessionRecorder,
         atexit.unregister(recorder.close)
     return uninstall
 
-
-class RecordedMessage(NamedTuple):
-    log_time_ns: int
-    publish_time_ns: int
-    payload: dict[str, Any]
-
-
-@dataclass
-class SessionData:
-    """Everything read back from a session file. `complete` (footer and closing magic read) is False for a
-    truncated (recovered) file; `tail_error` then says why reading stopped, `chunks` counts complete chunks."""
-    messages: dict[str, list[RecordedMessage]] = field(default_factory=dict)
-    schemas: dict[str, dict[str, Any]] = field(default_factory=dict)
-    encodings: dict[str, tuple[str, str]] = field(default_factory=dict)  # topic -> (schema enc, message enc)
-    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
-    attachments: dict[str, bytes] = field(default_factory=dict)
-    complete: bool = False
-    chunks: int = 0
-    undecodable: int = 0
-    tail_error: str | None = None
-
-    @property
-    def message_count(self) -> int:
-        return sum(len(v) for v in self.messages.values())
-
-
-def read_session(path: str | os.PathLike[str]) -> SessionData:
-    """Read all messages (per topic, log_time order), schemas, metadata and attachments. Works on truncated files
-    (no summary/footer after SIGKILL): every complete chunk is read, the incomplete tail is ignored."""
-    out = SessionData()
-    schemas: dict[int, Schema] = {}
-    channels: dict[int, Channel] = {}
-    footer_seen: list[bool] = []
-
-    def on_record(rec: Any) -> None:
-        if isinstance(rec, Schema):
-            schemas[rec.id] = rec
-        elif isinstance(rec, Channel):
-            channels[rec.id] = rec
-            sch = schemas.get(rec.schema_id)
-            out.encodings[rec.topic] = (sch.encoding if sch else "", rec.message_encoding)
-            out.messages.setdefault(rec.topic, [])
-            if sch is not None and sch.encoding == "jsonschema":
-                out.schemas[rec.topic] = json.loads(sch.data)
-        elif isinstance(rec, Message):
-            ch = channels.get(rec.channel_id)
-            try:
-                payload = json.loads(rec.data)
-            except (ValueError, UnicodeDecodeError):
-                payload = None
-            if ch is None or not isinstance(payload, dict):
-                out.undecodable += 1
-                return
-            out.messages[ch.topic].append(RecordedMessage(rec.log_time, rec.publish_time, payload))
-        elif isinstance(rec, Metadata):
-            out.metadata[rec.name] = dict(rec.metadata)
-        elif isinstance(rec, Attachment):
-            out.attachments[rec.name] = bytes(rec.data)
-        elif isinstance(rec, Footer):
-            footer_seen.append(True)
-
-    try:
-        with open(path, "rb") as f:
-            if f.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
-                raise RecordingError(f"{path} is not an MCAP file (bad magic)")
-            f.seek(0)
-            try:
-                for rec in StreamReader(f, emit_chunks=True).records:
-                    if isinstance(rec, Chunk):
-                        inner = breakup_chunk(rec, validate_crc=True)  # all-or-nothing per chunk
-                        out.chunks += 1
-                        for r in inner:
-                            on_record(r)
-                    else:
-                        on_record(rec)
-            except Exception as err:  # noqa: BLE001 - any failure past the last good record is the torn tail
-                out.tail_error = f"{type(err).__name__}: {err}"
-    except OSError as err:
-        raise RecordingError(f"cannot read recording {path}: {err}") from None
-    out.complete = bool(footer_seen) and out.tail_error is None
-    for msgs in out.messages.values():
-        msgs.sort(key=lambda m: m.log_time_ns)
-    return out

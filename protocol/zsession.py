@@ -9,7 +9,7 @@ from __future__ import annotations
 import json
 import re
 import socket
-import time
+import threading
 from collections.abc import Mapping
 from typing import Any, Protocol
 
@@ -84,28 +84,39 @@ def publisher(session: zenoh.Session, key: str, *, express: bool = True,
 
 
 class LatestSubscriber:
-    """Newest-sample-only subscriber: a zenoh `RingChannel(1)` (bounded in Rust, no Python thread, no backlog).
+    """Newest-sample-only subscriber: a ring of depth 1 (one slot, overwritten by every arrival; never a backlog).
 
-    `try_latest()` takes the newest unread sample (or None). `recv(timeout_s)` waits for one by polling
-    `try_latest` every `poll_interval_s` (the 1.x Python handler has no timed receive), so it adds at most
-    that much latency; loops that already tick should call `try_latest` instead.
+    zenoh's callback thread only swaps the slot's reference and notifies; `try_latest()` takes the newest unread
+    sample (or None) and `recv(timeout_s)` blocks on a condition until one arrives, so a waiting loop wakes as soon
+    as the sample is in (the 1.x Python `RingChannel` has no timed receive, and polling it adds its poll period to
+    every hop: bench/bench_zenoh_hop.py). `overwritten` counts samples replaced before anyone read them.
     """
 
-    def __init__(self, session: zenoh.Session, key: str, *, poll_interval_s: float = 200e-6) -> None:
+    def __init__(self, session: zenoh.Session, key: str) -> None:
         self.key = key
-        self.poll_interval_s = poll_interval_s
-        self._sub = session.declare_subscriber(key, zenoh.handlers.RingChannel(1))
+        self.overwritten = 0
+        self._latest: zenoh.Sample | None = None
+        self._cond = threading.Condition()
+        self._sub = session.declare_subscriber(key, self._on_sample)
+
+    def _on_sample(self, sample: zenoh.Sample) -> None:
+        with self._cond:
+            if self._latest is not None:
+                self.overwritten += 1
+            self._latest = sample
+            self._cond.notify()
 
     def try_latest(self) -> zenoh.Sample | None:
-        return self._sub.try_recv()
+        with self._cond:
+            sample, self._latest = self._latest, None
+            return sample
 
     def recv(self, timeout_s: float) -> zenoh.Sample | None:
-        deadline = time.monotonic_ns() + round(timeout_s * 1e9)
-        while True:
-            sample = self._sub.try_recv()
-            if sample is not None or time.monotonic_ns() >= deadline:
-                return sample
-            time.sleep(self.poll_interval_s)
+        with self._cond:
+            if self._latest is None:
+                self._cond.wait(timeout_s)
+            sample, self._latest = self._latest, None
+            return sample
 
     def close(self) -> None:
         self._sub.undeclare()

@@ -9,14 +9,22 @@ import argparse
 import importlib
 import logging
 import sys
+from typing import NoReturn
 
 from protocol.errors import SeaHilError
 
 COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep", "certs")
 
 
+class OneLineParser(argparse.ArgumentParser):
+    """argparse with one-line errors: `sea-hil run: error: ... (see sea-hil run --help)`, exit 2, no usage dump."""
+
+    def error(self, message: str) -> NoReturn:
+        self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="sea-hil", description=(
+    parser = OneLineParser(prog="sea-hil", description=(
         "Networked HIL emulator: event-triggered SMC of a 2-DOF SEA lower limb over CAN and Zenoh."))
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v info, -vv debug)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")

@@ -32,6 +32,7 @@ def _main(args: argparse.Namespace) -> int:
     try:
         done = node.run(args.timeout)
     finally:
+        node.publish_stats(final=True)
         node.close()
         session.close()
     return 0 if done else 3

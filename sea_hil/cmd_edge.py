@@ -24,9 +24,16 @@ def _main(args: argparse.Namespace) -> int:
     from protocol.canbus import open_bus
     from protocol.zsession import open_session
     cfg = config_from_args(args)
-    bus = open_bus(cfg.can.interface)
     session = open_session(cfg.zenoh)
-    node = EdgeNode(cfg, bus, session, args.node, inner=args.inner, lockstep=args.lockstep)
+    bus = None
+    try:
+        bus = open_bus(cfg.can.interface)
+        node = EdgeNode(cfg, bus, session, args.node, inner=args.inner, lockstep=args.lockstep)
+    except BaseException:
+        if bus is not None:
+            bus.shutdown()
+        session.close()
+        raise
     signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())
     try:
         node.run()

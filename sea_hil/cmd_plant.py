@@ -25,12 +25,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     from plant_emulator.node import PlantNode
     from protocol.canbus import open_bus
-    can_ov = {k: v for k, v in (("feedback_rate_hz", args.rate), ("watchdog_timeout_s", args.watchdog)) if v}
+    can_ov = {k: v for k, v in (("feedback_rate_hz", args.rate), ("watchdog_timeout_s", args.watchdog))
+              if v is not None}
     cfg = config_from_args(args, {"can": can_ov} if can_ov else None)
     bus = open_bus(cfg.can.interface)
-    node = PlantNode(cfg, bus, tuple(args.node or cfg.can.node_ids), lockstep=args.lockstep)
-    signal.signal(signal.SIGTERM, lambda *_: node.stop())
     try:
+        node = PlantNode(cfg, bus, tuple(args.node or cfg.can.node_ids), lockstep=args.lockstep)
+        signal.signal(signal.SIGTERM, lambda *_: node.stop())
         node.run(args.duration)
     finally:
         bus.shutdown()

@@ -33,8 +33,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     from sea_hil.run import RunOptions, print_summary, run_session
+    from protocol.errors import ConfigError
     if args.cycles < 1:
-        raise SystemExit("sea-hil run: error: --cycles must be >= 1")
+        raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args)
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, listen=tuple(args.listen),

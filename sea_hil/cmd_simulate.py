@@ -23,8 +23,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     from sea_hil.simulate import run_compare, run_simulation
+    from protocol.errors import ConfigError
     if args.cycles is not None and args.cycles < 1:
-        raise SystemExit("sea-hil simulate: error: --cycles must be >= 1")
+        raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args)
     if args.compare:
         _, _, table = run_compare(cfg, args.out, args.cycles)

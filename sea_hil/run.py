@@ -22,7 +22,8 @@ from protocol.canbus import open_bus
 from protocol.config import SeaHilConfig, config_to_toml
 from protocol.errors import SeaHilError
 from protocol.recorder_node import RecorderNode
-from protocol.recording import SessionRecorder, read_session
+from protocol.recorder_process import RecorderProcess
+from protocol.recording import read_session
 from protocol.zsession import free_tcp_port, make_config, open_session
 from sea_hil.report import write_report_figures
 from sea_hil.session_summary import session_summary
@@ -57,11 +58,11 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     spec = opts.can or cfg.can.interface
     session = open_session(make_config(listen=[endpoint, *opts.listen[1:]]))
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
-    rec = SessionRecorder.from_config(opts.out / "session.mcap", cfg.record)
+    rec = RecorderProcess(opts.out / "session.mcap", cfg.record)   # decode + JSON + MCAP off this GIL
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})
-    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2])
+    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002)
     plant = PlantNode(cfg, buses[0], (opts.node_id,), lockstep=opts.lockstep)
     edge = EdgeNode(cfg, buses[1], session, opts.node_id, inner=opts.inner, lockstep=opts.lockstep)
     threads = [threading.Thread(target=plant.run, name="plant", daemon=True),

@@ -1,7 +1,6 @@
 """Tests of protocol/sea.dbc + protocol/can_codec.py (bit layout in docs/can-protocol.md)."""
 from __future__ import annotations
 
-import itertools
 import math
 import random
 import subprocess
@@ -13,10 +12,10 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from protocol.can_codec import (FEEDBACK_PARTS, FRAME_TYPES, SEQ_MODULUS, T_US_MODULUS, ClearErrors,
-                                DeflectionSetpoint, DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle,
-                                FeedbackAssembler, FeedbackDeflection, FeedbackVelocity, Heartbeat, SeaCodec,
-                                VoltageCmd, can_id_of, load_database, seq_gap, unwrap_us)
+from protocol.can_codec import (FEEDBACK_PARTS, FRAME_TYPES, SEQ_MODULUS, ClearErrors, DeflectionSetpoint,
+                                DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle, FeedbackDeflection,
+                                FeedbackVelocity, Heartbeat, SeaCodec, VoltageCmd, can_id_of, load_database)
+from protocol.can_frames import T_US_MODULUS
 from protocol.errors import MalformedFrame
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -236,59 +235,6 @@ def test_saturate(codec: SeaCodec) -> None:
         codec.encode(nan_cmd)
 
 
-def _fb(seq: int, node: int = 1) -> Feedback:
-    return Feedback(node, seq, 1000 + seq, (0.5, -0.25), (1.0, -2.0), (0.001, -0.002), (0.1, -0.2))
-
-
-def test_assembler_pairs_any_order(codec: SeaCodec) -> None:
-    for order in itertools.permutations(range(3)):
-        asm = FeedbackAssembler()
-        parts = [codec.decode(m) for m in codec.encode_feedback(_fb(7))]
-        results = [asm.push(parts[i]) for i in order]
-        assert results[:2] == [None, None] and results[2] == _fb(7)
-        assert (asm.incomplete, asm.stale) == (0, 0)
-
-
-def test_assembler_drops_incomplete_stale_and_duplicates() -> None:
-    asm = FeedbackAssembler(max_pending=2)
-    a, d, v = _fb(10).parts()
-    assert asm.push(a) is None and asm.push(d) is None         # sample 10 lacks its velocity frame
-    assert [asm.push(p) for p in _fb(11).parts()][-1] == _fb(11)
-    assert asm.incomplete == 1                                  # 10 dropped once 11 completed
-    assert asm.push(v) is None and asm.stale == 1               # late part of the closed sample 10
-    assert asm.push(_fb(11).parts()[0]) is None and asm.stale == 2  # repeat of a completed sample
-    a12 = _fb(12).parts()[0]
-    assert asm.push(a12) is None and asm.push(a12) is None and asm.stale == 3  # duplicate part
-    for seq in (13, 14):                                        # > max_pending open samples: oldest evicted
-        asm.push(_fb(seq).parts()[0])
-    assert asm.incomplete == 2
-    assert [asm.push(p) for p in _fb(12, node=2).parts()][-1] == _fb(12, node=2)  # nodes are independent
-    with pytest.raises(TypeError):
-        asm.push(EStop(1))  # type: ignore[arg-type]
-
-
-def test_assembler_across_seq_wrap() -> None:
-    asm = FeedbackAssembler()
-    got = [fb for seq in range(250, 270) for p in _fb(seq % 256).parts() if (fb := asm.push(p))]
-    assert [fb.seq for fb in got] == [s % 256 for s in range(250, 270)]
-    assert (asm.incomplete, asm.stale) == (0, 0)
-
-
-@given(full=st.integers(0, 10**12), gap=st.integers(-32768, 32767))
-def test_unwrap_us_property(full: int, gap: int) -> None:
-    assert unwrap_us(full, (full + gap) % T_US_MODULUS) == full + gap
-
-
-def test_unwrap_us_examples_and_errors() -> None:
-    assert unwrap_us(65_500, 20) == 65_556          # forward across the wrap
-    assert unwrap_us(70_000, 69_995 - 65_536) == 69_995  # a slightly older sample
-    assert unwrap_us(0, 1000) == 1000
-    for bad in (-1, 65_536, 1.5):
-        with pytest.raises(MalformedFrame):
-            unwrap_us(0, bad)  # type: ignore[arg-type]
-    assert (seq_gap(255, 0), seq_gap(3, 3), seq_gap(10, 5)) == (1, 0, 251)
-
-
 def test_cantools_cli_decodes_candump_for_any_node() -> None:
     lines = "  vcan0  041   [5]  C8 39 30 80 F3\n  vcan0  047   [7]  02 11 02 01 FF FF 11\n"  # node 2
     out = subprocess.run([sys.executable, "-m", "cantools", "decode", "-m", "0x1F", str(ROOT / "protocol/sea.dbc")],
@@ -298,4 +244,40 @@ def test_cantools_cli_decodes_candump_for_any_node() -> None:
 
 
 def test_feedback_parts_types() -> None:
-    assert tuple(type(p) for p in _fb(1).parts()) == FEEDBACK_PARTS
+    fb = Feedback(1, 1, 1001, (0.5, -0.25), (1.0, -2.0), (0.001, -0.002), (0.1, -0.2))
+    assert tuple(type(p) for p in fb.parts()) == FEEDBACK_PARTS
+
+
+def test_encode_with_saturate_equals_saturate_then_encode(codec: SeaCodec) -> None:
+    for obj in (VoltageCmd(1, (40.0, -math.inf), 3), VoltageCmd(1, (1.0, 2.0), 4),
+                Heartbeat(1, DriverState.RUNNING, ErrorFlags(0), 70000, 3, 1)):
+        assert bytes(codec.encode(obj, saturate=True).data) == bytes(codec.encode(codec.saturate(obj)[0]).data)
+    fb = Feedback(1, 2, 3, (4.0, 0.0), (0.0, -31.0), (0.0, 0.1), (0.7, 0.0))
+    assert ([bytes(m.data) for m in codec.encode_feedback(fb, saturate=True)]
+            == [bytes(m.data) for m in codec.encode_feedback(codec.saturate(fb)[0])])
+    with pytest.raises(MalformedFrame):
+        codec.encode(VoltageCmd(1, (math.nan, 0.0), 3), saturate=True)
+
+
+def test_decode_raw_matches_decode(codec: SeaCodec) -> None:
+    msg = codec.encode(VoltageCmd(3, (1.25, -0.5), 9))
+    assert codec.decode_raw(0x61, bytes(msg.data), 5) == codec.decode(msg) == VoltageCmd(3, (1.25, -0.5), 9)
+    for kw in ({"is_extended": True}, {"is_error": True}, {"is_remote": True}, {"is_fd": True}):
+        with pytest.raises(MalformedFrame, match="not accepted"):
+            codec.decode_raw(0x61, bytes(msg.data), 5, **kw)
+    with pytest.raises(MalformedFrame, match="DLC"):
+        codec.decode_raw(0x61, bytes(msg.data), 8)
+
+
+def test_encoded_data_is_immutable_and_virtual_bus_copies_are_independent(codec: SeaCodec) -> None:
+    msg = codec.encode(VoltageCmd(1, (1.0, 2.0), 5))
+    assert isinstance(msg.data, bytes)
+    a, b = can.Bus(interface="virtual", channel="codec-copy"), can.Bus(interface="virtual", channel="codec-copy")
+    try:
+        a.send(msg)
+        got = b.recv(timeout=5.0)
+        assert got is not None and got is not msg and bytes(got.data) == msg.data
+        assert codec.decode(got) == VoltageCmd(1, (1.0, 2.0), 5)
+    finally:
+        a.shutdown()
+        b.shutdown()

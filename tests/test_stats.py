@@ -104,6 +104,7 @@ def test_can_frame_bits_formula() -> None:
     assert can_frame_bits(0) == 47 + 33 // 4 == 55
     assert can_frame_bits(8, extended=True) == 64 + 67 + 117 // 4 == 160
     assert can_frame_bits(15) == can_frame_bits(8)
+    assert can_frame_bits(8, worst_case=False) == 111 and can_frame_bits(8, True, worst_case=False) == 131
     with pytest.raises(MalformedFrame):
         can_frame_bits(16)
 

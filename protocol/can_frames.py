@@ -1,0 +1,188 @@
+"""The sea-hil CAN frame types (one frozen dataclass per DBC message), ids and rolling-counter constants.
+
+`can_id = node_id << 5 | cmd_id`. Each frame class names its DBC message (`DBC`) and maps its fields to DBC signals
+(`FIELDS`); encoding/decoding lives in `protocol.can_codec`, pairing the feedback frames in `protocol.can_assembly`.
+"""
+from __future__ import annotations
+
+import numbers
+from dataclasses import dataclass
+from enum import IntEnum, IntFlag
+from typing import Any, ClassVar, Union
+
+from protocol.errors import MalformedFrame
+
+NODE_ID_MIN, NODE_ID_MAX = 1, 63
+CMD_BITS = 5
+CMD_MASK = (1 << CMD_BITS) - 1
+SEQ_MODULUS = 1 << 8
+T_US_MODULUS = 1 << 16
+Pair = tuple[float, float]
+
+
+class DriverState(IntEnum):
+    """HEARTBEAT.state (VAL_ table of the DBC)."""
+    INIT = 0
+    RUNNING = 1
+    FAULT = 2
+    ESTOP = 3
+
+
+class ErrorFlags(IntFlag):
+    """HEARTBEAT error bits; bit i of byte 1 is DBC signal `err_<name>`."""
+    WATCHDOG = 1
+    ESTOP = 2
+    BAD_FRAME = 4
+    OVERRUN = 8
+    BUS_ERROR = 16
+    SATURATED = 32
+
+
+ROLLING = frozenset({"seq", "t_us"})  # counters that wrap; never saturated
+_FLAG_SIGNALS = tuple((f, "err_" + (f.name or "").lower()) for f in ErrorFlags)
+
+
+class _Signals:
+    """Mixin: dataclass field <-> DBC signal mapping declared by `FIELDS` (a pair field maps to two signals)."""
+    DBC: ClassVar[str]
+    FIELDS: ClassVar[tuple[tuple[str, str | tuple[str, str]], ...]] = ()
+
+    def to_signals(self) -> dict[str, Any]:
+        out: dict[str, Any] = {}
+        for name, sig in self.FIELDS:
+            value = getattr(self, name)
+            if isinstance(sig, tuple):
+                out[sig[0]], out[sig[1]] = value  # ValueError/TypeError unless a pair
+            else:
+                out[sig] = value
+        return out
+
+    @classmethod
+    def from_signals(cls, node_id: int, s: dict[str, Any]) -> Any:
+        kw = {n: (s[g[0]], s[g[1]]) if isinstance(g, tuple) else s[g] for n, g in cls.FIELDS}
+        return cls(node_id=node_id, **kw)  # type: ignore[call-arg]
+
+
+@dataclass(frozen=True)
+class EStop(_Signals):
+    node_id: int
+    DBC: ClassVar[str] = "ESTOP"
+
+
+@dataclass(frozen=True)
+class ClearErrors(_Signals):
+    node_id: int
+    DBC: ClassVar[str] = "CLEAR_ERRORS"
+
+
+@dataclass(frozen=True)
+class VoltageCmd(_Signals):
+    node_id: int
+    voltage_v: Pair
+    seq: int
+    DBC: ClassVar[str] = "VOLTAGE_CMD"
+    FIELDS: ClassVar = (("voltage_v", ("voltage1", "voltage2")), ("seq", "seq"))
+
+
+@dataclass(frozen=True)
+class DeflectionSetpoint(_Signals):
+    node_id: int
+    deflection_m: Pair
+    seq: int
+    DBC: ClassVar[str] = "DEFLECTION_SETPOINT"
+    FIELDS: ClassVar = (("deflection_m", ("vx1", "vx2")), ("seq", "seq"))
+
+
+@dataclass(frozen=True)
+class Heartbeat(_Signals):
+    node_id: int
+    state: DriverState
+    flags: ErrorFlags
+    rejected_frames: int
+    overruns: int
+    seq: int
+    DBC: ClassVar[str] = "HEARTBEAT"
+    FIELDS: ClassVar = (("state", "state"), ("rejected_frames", "rejected_frames"), ("overruns", "overruns"),
+                        ("seq", "seq"))
+
+    def to_signals(self) -> dict[str, Any]:
+        flags = int(self.flags)
+        if flags & ~sum(int(f) for f, _ in _FLAG_SIGNALS):
+            raise ValueError(f"unknown error flag bits in 0x{flags:X}")
+        return {**super().to_signals(), "state": int(DriverState(self.state)),
+                **{sig: int(bool(flags & f)) for f, sig in _FLAG_SIGNALS}}
+
+    @classmethod
+    def from_signals(cls, node_id: int, s: dict[str, Any]) -> Heartbeat:
+        flags = ErrorFlags(sum(int(f) for f, sig in _FLAG_SIGNALS if s[sig]))
+        return cls(node_id, DriverState(s["state"]), flags, s["rejected_frames"], s["overruns"], s["seq"])
+
+
+@dataclass(frozen=True)
+class FeedbackAngle(_Signals):
+    node_id: int
+    seq: int
+    t_us: int
+    theta_rad: Pair
+    DBC: ClassVar[str] = "FEEDBACK_ANGLE"
+    FIELDS: ClassVar = (("seq", "seq"), ("t_us", "t_us"), ("theta_rad", ("theta1", "theta2")))
+
+
+@dataclass(frozen=True)
+class FeedbackDeflection(_Signals):
+    node_id: int
+    seq: int
+    delta_m: Pair
+    DBC: ClassVar[str] = "FEEDBACK_DEFLECTION"
+    FIELDS: ClassVar = (("seq", "seq"), ("delta_m", ("delta1", "delta2")))
+
+
+@dataclass(frozen=True)
+class FeedbackVelocity(_Signals):
+    node_id: int
+    seq: int
+    omega_rad_s: Pair
+    nut_vel_m_s: Pair
+    DBC: ClassVar[str] = "FEEDBACK_VELOCITY"
+    FIELDS: ClassVar = (("seq", "seq"), ("omega_rad_s", ("omega1", "omega2")),
+                        ("nut_vel_m_s", ("nut_vel1", "nut_vel2")))
+
+
+@dataclass(frozen=True)
+class Feedback:
+    """One driver sample, carried by three frames sharing `seq`. `t_us` is the rolling 16-bit value (`unwrap_us`)."""
+    node_id: int
+    seq: int
+    t_us: int
+    theta_rad: Pair
+    omega_rad_s: Pair
+    delta_m: Pair
+    nut_vel_m_s: Pair
+
+    def parts(self) -> tuple[FeedbackAngle, FeedbackDeflection, FeedbackVelocity]:
+        n, q = self.node_id, self.seq
+        return (FeedbackAngle(n, q, self.t_us, self.theta_rad), FeedbackDeflection(n, q, self.delta_m),
+                FeedbackVelocity(n, q, self.omega_rad_s, self.nut_vel_m_s))
+
+    @classmethod
+    def from_parts(cls, a: FeedbackAngle, d: FeedbackDeflection, v: FeedbackVelocity) -> Feedback:
+        return cls(a.node_id, a.seq, a.t_us, a.theta_rad, v.omega_rad_s, d.delta_m, v.nut_vel_m_s)
+
+
+Frame = Union[EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
+              FeedbackAngle, FeedbackDeflection, FeedbackVelocity]
+FRAME_TYPES: tuple[type, ...] = (EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
+                                 FeedbackAngle, FeedbackDeflection, FeedbackVelocity)
+FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackDeflection, FeedbackVelocity)
+
+
+def can_id_of(node_id: int, cmd_id: int) -> int:
+    """11-bit identifier of command `cmd_id` for node `node_id`."""
+    return check_node_id(node_id) << CMD_BITS | (cmd_id & CMD_MASK)
+
+
+def check_node_id(node_id: Any) -> int:
+    if not isinstance(node_id, numbers.Integral) or not NODE_ID_MIN <= int(node_id) <= NODE_ID_MAX:
+        raise MalformedFrame(f"node id {node_id!r} not in {NODE_ID_MIN}..{NODE_ID_MAX}")
+    return int(node_id)
+

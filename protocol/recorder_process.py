@@ -1,0 +1,187 @@
+"""The MCAP writer in a child process: CAN decoding, JSON encoding and MCAP writing off the caller's GIL.
+
+`RecorderProcess(path, cfg)` starts ``python -m protocol.recorder_process PATH RECORD_CONFIG_JSON`` and offers the
+recorder interface the recorder node and `sea-hil run` use (`submit`, `record`, `add_metadata`, `add_attachment`,
+`write_session_header`, `close`) plus `submit_can(raw_frame)`: raw frames are shipped as they are and decoded in
+the child (`protocol.recording_can.can_records`, exactly what the in-process recorder writes). Operations are
+batched (`batch_ops`) into length-prefixed pickles on the child's stdin (a private pipe between two processes of
+the same program). A child that dies is reported by `close` (`RecordingError`); operations that could not be
+delivered are counted in `dropped`, never raised into the submitting node.
+"""
+from __future__ import annotations
+
+import logging
+import os
+import pickle
+import struct
+import subprocess
+import sys
+import threading
+from collections.abc import Mapping
+from typing import Any, BinaryIO
+
+from protocol.can_codec import SeaCodec
+from protocol.config import RecordConfig, SeaHilConfig
+from protocol.errors import RecordingError
+from protocol.recording import SessionRecorder
+from protocol.recording_can import RawFrame, can_records
+from protocol.recording_meta import write_session_header
+from protocol.schemas import validate_payload
+
+log = logging.getLogger("sea_hil.record")
+_LEN = struct.Struct("<I")
+CAN, RECORD, METADATA, ATTACHMENT, CLOSE = "c", "r", "m", "a", "x"
+
+
+class RecorderProcess:
+    """Parent-side proxy of a `SessionRecorder` running in a child process. Thread-safe."""
+
+    def __init__(self, path: str | os.PathLike[str], cfg: RecordConfig, *, batch_ops: int = 512,
+                 close_timeout_s: float = 300.0, nice: int = 10) -> None:
+        self.path = os.fspath(path)
+        self.batch_ops = batch_ops
+        self.close_timeout_s = close_timeout_s
+        self._proc = subprocess.Popen([sys.executable, "-m", "protocol.recorder_process", self.path,
+                                       cfg.model_dump_json(), str(nice)], stdin=subprocess.PIPE)
+        self._lock = threading.Lock()
+        self._pending: list[tuple[Any, ...]] = []
+        self._closed = False
+        self.sent_ops = self.dropped = 0
+
+    # -- the recorder interface ----------------------------------------------------------------------------------
+    def submit_can(self, frame: RawFrame) -> None:
+        """Queue one raw frame (decoded and written by the child)."""
+        self._put((CAN, frame))
+
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> bool:
+        """Validate here (bad input fails at its source) and queue; False once the child is gone."""
+        validate_payload(topic, payload)
+        return self._put((RECORD, topic, log_time_ns, publish_time_ns, dict(payload)))
+
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> None:
+        self.submit(topic, log_time_ns, publish_time_ns, payload)
+        self.flush()
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        self._put((METADATA, name, dict(data)))
+        self.flush()
+
+    def add_attachment(self, name: str, data: bytes, media_type: str = "text/plain",
+                       t_ns: int | None = None) -> None:
+        self._put((ATTACHMENT, name, bytes(data), media_type, t_ns))
+        self.flush()
+
+    def write_session_header(self, config: SeaHilConfig | None = None, *, seed: int | None = None,
+                             argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None:
+        write_session_header(self, config, seed=seed, argv=argv, extra=extra)
+
+    def flush(self) -> None:
+        with self._lock:
+            self._flush_locked()
+
+    def close(self, final_stats: Mapping[str, Any] | None = None) -> None:
+        """Deliver everything, let the child write `sea-hil.final` and the index, wait for it. Idempotent."""
+        with self._lock:
+            if self._closed:
+                return
+            self._pending.append((CLOSE, {**(final_stats or {}), "recorder_dropped_ops": self.dropped}))
+            self._flush_locked()
+            self._closed = True
+            try:
+                self._stdin.close()
+            except OSError:
+                pass
+        try:
+            code = self._proc.wait(timeout=self.close_timeout_s)
+        except subprocess.TimeoutExpired:
+            self._proc.kill()
+            self._proc.wait()
+            raise RecordingError(f"recorder process did not finish {self.path} in {self.close_timeout_s} s") from None
+        if code != 0:
+            raise RecordingError(f"recorder process for {self.path} exited with status {code}")
+
+    def counters(self) -> dict[str, int]:
+        return {"sent_ops": self.sent_ops, "dropped": self.dropped}
+
+    # -- transport -----------------------------------------------------------------------------------------------
+    @property
+    def _stdin(self) -> BinaryIO:
+        assert self._proc.stdin is not None
+        return self._proc.stdin
+
+    def _put(self, op: tuple[Any, ...]) -> bool:
+        with self._lock:
+            if self._closed:
+                self.dropped += 1
+                return False
+            self._pending.append(op)
+            if len(self._pending) >= self.batch_ops:
+                self._flush_locked()
+        return True
+
+    def _flush_locked(self) -> None:
+        if not self._pending or self._closed:
+            return
+        ops, self._pending = self._pending, []
+        blob = pickle.dumps(ops, protocol=pickle.HIGHEST_PROTOCOL)
+        try:
+            self._stdin.write(_LEN.pack(len(blob)) + blob)
+            self._stdin.flush()
+            self.sent_ops += len(ops)
+        except (OSError, ValueError) as err:   # child gone: count, keep the caller alive
+            self.dropped += len(ops)
+            log.error("recorder process pipe: %s", err)
+
+
+def _apply(rec: SessionRecorder, codec: SeaCodec, ops: list[tuple[Any, ...]], counts: dict[str, int]) -> bool:
+    """Apply one batch in the child; True when the batch closed the recording."""
+    for op in ops:
+        kind = op[0]
+        try:
+            if kind == CAN:
+                frame: RawFrame = op[1]
+                counts["can_frames"] += 1
+                msgs, rejected = can_records(codec, frame)
+                counts["can_rejected"] += rejected
+                for topic, payload in msgs:
+                    rec.record(topic, frame.t_ns, frame.t_ns, payload)
+            elif kind == RECORD:
+                rec.record(*op[1:])
+            elif kind == METADATA:
+                rec.add_metadata(*op[1:])
+            elif kind == ATTACHMENT:
+                rec.add_attachment(*op[1:])
+            elif kind == CLOSE:
+                rec.close(final_stats={**op[1], **counts})  # the child's CAN counts are authoritative
+                return True
+        except RecordingError as err:   # one bad message: counted in the file's final metadata, keep going
+            rec.write_errors += 1
+            rec.last_error = str(err)
+    return False
+
+
+def _read_exact(f: BinaryIO, n: int) -> bytes | None:
+    buf = f.read(n)
+    return buf if buf is not None and len(buf) == n else None
+
+
+def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0) -> int:
+    """The child: apply batches from `stream` until CLOSE; end of stream without CLOSE still finalises the file.
+    `nice` > 0 lowers its CPU priority: recording is background work that must not delay the nodes."""
+    if nice > 0:
+        os.nice(nice)
+    rec = SessionRecorder.from_config(path, RecordConfig.model_validate_json(cfg_json))
+    codec, counts = SeaCodec(), {"can_frames": 0, "can_rejected": 0}
+    while (head := _read_exact(stream, _LEN.size)) is not None:
+        blob = _read_exact(stream, _LEN.unpack(head)[0])
+        if blob is None:
+            break
+        if _apply(rec, codec, pickle.loads(blob), counts):
+            return 0
+    rec.closed_by = "eof"   # the parent went away without closing: finalise what arrived
+    rec.close(final_stats=counts)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(child_main(sys.argv[1], sys.argv[2], sys.stdin.buffer, int(sys.argv[3]) if len(sys.argv) > 3 else 0))

@@ -1,0 +1,204 @@
+"""Multi-process lockstep sessions for the guest tests: ``sea-hil plant|edge|record|controller`` as separate processes
+on a real SocketCAN interface, optionally in network namespaces.
+
+Separate processes rather than ``sea-hil run --can socketcan:vcan0`` (which also works in the guest): the plant and
+the edge then share nothing but the kernel's vcan0, and the recorder taps it with a socket of its own, as in a
+multi-host deployment. The session's trajectory is a short slice of the default gait (``write_gait_slice_config``)
+to keep guest time small; the slice keeps the real gait's dynamics (only the duration is cut).
+"""
+from __future__ import annotations
+
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import dataclass
+from pathlib import Path
+from typing import IO, Any
+
+REPO = Path(__file__).resolve().parents[2]
+SAMPLE_STEP_S = 0.005        # CSV resolution of the gait slice (spline-interpolated by the controller)
+STOP_TIMEOUT_S = 30.0
+CONNECT_TIMEOUT_S = 60.0
+
+
+def sea_hil_cmd(*args: str, netns: str | None = None) -> list[str]:
+    """argv running ``sea-hil ARGS`` with this interpreter, inside network namespace ``netns`` if given."""
+    cmd = [sys.executable, "-m", "sea_hil.cli", *args]
+    return ["ip", "netns", "exec", netns, *cmd] if netns else cmd
+
+
+def write_gait_slice_config(directory: Path, duration_s: float) -> Path:
+    """Write ``gait-slice.csv`` (the default gait's first ``duration_s``) and ``session.toml`` using it; -> TOML."""
+    from controller.trajectory import GaitTrajectory
+    from protocol.config import load_config
+    gait = GaitTrajectory(load_config().trajectory.period_s)
+    rows = ["t,theta1,theta2"]
+    for i in range(int(round(duration_s / SAMPLE_STEP_S)) + 1):
+        t_s = i * SAMPLE_STEP_S
+        q = gait.sample(t_s).theta_rad
+        rows.append(f"{t_s:.6f},{q[0]!r},{q[1]!r}")
+    csv_path = directory / "gait-slice.csv"
+    csv_path.write_text("\n".join(rows) + "\n", encoding="utf-8")
+    toml_path = directory / "session.toml"
+    toml_path.write_text(f'[trajectory]\nkind = "csv"\ncsv_path = "{csv_path}"\n', encoding="utf-8")
+    return toml_path
+
+
+def write_client_config(directory: Path) -> Path:
+    """A config making a node a Zenoh *client*: a peer (the edge) routes every peer's traffic to its clients,
+    so a recorder connected as client sees the remote controller's messages too."""
+    path = directory / "client.toml"
+    path.write_text('[zenoh]\nmode = "client"\n', encoding="utf-8")
+    return path
+
+
+class NodeGroup:
+    """Processes started by a test; each one's output goes to ``<log_dir>/<name>.log``. On exit every process
+    still running is terminated (then killed) and reaped."""
+
+    def __init__(self, log_dir: Path) -> None:
+        self.log_dir = log_dir
+        self.procs: dict[str, subprocess.Popen[bytes]] = {}
+        self._logs: list[IO[bytes]] = []
+
+    def start(self, name: str, cmd: list[str]) -> subprocess.Popen[bytes]:
+        """Start ``cmd`` as node ``name`` (cwd = repository root)."""
+        log = open(self.log_dir / f"{name}.log", "wb")  # noqa: SIM115 - closed in close()
+        self._logs.append(log)
+        proc = subprocess.Popen(cmd, cwd=REPO, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT)
+        self.procs[name] = proc
+        return proc
+
+    def stop(self, name: str) -> int:
+        """SIGTERM node ``name`` (a clean shutdown) and return its exit status; kill it if it does not exit."""
+        proc = self.procs[name]
+        if proc.poll() is None:
+            proc.terminate()
+        try:
+            return proc.wait(timeout=STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            raise AssertionError(f"{name} ignored SIGTERM for {STOP_TIMEOUT_S} s:\n{self.output(name)}") from None
+
+    def output(self, name: str) -> str:
+        """What node ``name`` printed so far."""
+        return (self.log_dir / f"{name}.log").read_text(errors="replace")
+
+    def outputs(self) -> str:
+        """Every node's output, for assertion messages."""
+        return "\n".join(f"--- {n}:\n{self.output(n)[-3000:]}" for n in self.procs)
+
+    def close(self) -> None:
+        """End and reap every process still running; close the log files."""
+        for proc in self.procs.values():
+            if proc.poll() is None:
+                proc.terminate()
+                try:
+                    proc.wait(timeout=STOP_TIMEOUT_S)
+                except subprocess.TimeoutExpired:
+                    proc.kill()
+                    proc.wait()
+        for log in self._logs:
+            log.close()
+
+
+@contextmanager
+def node_group(log_dir: Path) -> Iterator[NodeGroup]:
+    """A :class:`NodeGroup` closed on exit (also when the test fails)."""
+    group = NodeGroup(log_dir)
+    try:
+        yield group
+    finally:
+        group.close()
+
+
+def tcp_sockets(port: int, state: str, netns: str | None) -> int:
+    """Number of TCP sockets in ``state`` (ss syntax: listening, established) with local port ``port``."""
+    cmd = ["ss", "-Htan", "state", state, f"( sport = :{port} )"]
+    cmd = ["ip", "netns", "exec", netns, *cmd] if netns else cmd
+    out = subprocess.run(cmd, check=True, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=30)
+    return sum(1 for line in out.stdout.splitlines() if line.strip())
+
+
+def wait_for_sockets(port: int, state: str, count: int, netns: str | None, proc: subprocess.Popen[bytes],
+                     timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """Block until ``count`` TCP sockets on local ``port`` are in ``state`` (polling ``ss``), or raise after
+    ``timeout_s`` or as soon as ``proc`` (the node owning the port) exits."""
+    deadline = time.monotonic() + timeout_s
+    while tcp_sockets(port, state, netns) < count:
+        if proc.poll() is not None:
+            raise AssertionError(f"the node exited ({proc.returncode}) before {count} {state} socket(s) on {port}")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"fewer than {count} {state} socket(s) on port {port} within {timeout_s} s")
+        try:
+            proc.wait(timeout=0.2)   # bounded wait on the node doubles as the poll interval
+        except subprocess.TimeoutExpired:
+            pass
+
+
+@dataclass(frozen=True)
+class NodeSession:
+    """Where the nodes of one lockstep session run. Plant, edge and recorder share the CAN interface (and
+    ``bus_netns``); the controller runs in ``controller_netns`` and connects to the edge's ``listen`` endpoint."""
+
+    config: Path
+    client_config: Path
+    can: str
+    listen_host: str
+    port: int
+    bus_netns: str | None = None
+    controller_netns: str | None = None
+    controller: str = "et"
+    timeout_s: float = 300.0
+
+    @property
+    def endpoint(self) -> str:
+        return f"tcp/{self.listen_host}:{self.port}"
+
+
+@dataclass(frozen=True)
+class NodeSessionResult:
+    """What one node session left: its summary (also written to ``out/summary.json``), the recording, and the
+    plant's closing report line (ticks, overruns)."""
+
+    summary: dict[str, Any]
+    data: Any   # protocol.recording.SessionData
+    plant_report: str
+
+
+def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
+    """Run one lockstep cycle with plant, edge, recorder and controller as separate processes, stop them in order
+    (the edge before the recorder, so that its final stats are recorded) and summarise ``out/session.mcap``."""
+    cfg, mcap = str(s.config), out / "session.mcap"
+    with node_group(out) as nodes:
+        edge = nodes.start("edge", sea_hil_cmd("edge", "--can", s.can, "--lockstep", "--listen", s.endpoint,
+                                               "--config", cfg, netns=s.bus_netns))
+        nodes.start("plant", sea_hil_cmd("plant", "--can", s.can, "--lockstep", "--config", cfg, netns=s.bus_netns))
+        try:
+            wait_for_sockets(s.port, "listening", 1, s.bus_netns, edge)   # a Zenoh client does not retry
+            nodes.start("record", sea_hil_cmd("record", "--can", s.can, "--out", str(mcap), "--connect", s.endpoint,
+                                              "--config", str(s.client_config), netns=s.bus_netns))
+            wait_for_sockets(s.port, "established", 1, s.bus_netns, edge)  # the recorder is in before the controller
+        except AssertionError as err:
+            raise AssertionError(f"{err}\n{nodes.outputs()}") from None
+        ctl = nodes.start("controller", sea_hil_cmd("controller", "--controller", s.controller, "--cycles", "1",
+                                                    "--lockstep", "--connect", s.endpoint, "--config", cfg,
+                                                    "--timeout", str(s.timeout_s), netns=s.controller_netns))
+        try:
+            status = ctl.wait(timeout=s.timeout_s + STOP_TIMEOUT_S)
+        except subprocess.TimeoutExpired:
+            raise AssertionError(f"controller did not finish in {s.timeout_s} s:\n{nodes.outputs()}") from None
+        assert status == 0, f"controller exited with {status}:\n{nodes.outputs()}"
+        for name in ("edge", "plant", "record"):
+            assert nodes.stop(name) == 0, f"{name} did not exit cleanly:\n{nodes.outputs()}"
+        plant_lines = nodes.output("plant").strip().splitlines()
+    from protocol.recording import read_session
+    from sea_hil.session_summary import session_summary
+    from sea_hil.summary import write_summary
+    data = read_session(mcap)
+    summary = session_summary(data, s.controller)
+    write_summary(out / "summary.json", summary)
+    return NodeSessionResult(summary, data, plant_lines[-1] if plant_lines else "")

@@ -1,0 +1,63 @@
+"""The remote controller in its own network namespace, reaching the edge over Zenoh TCP across a veth pair with
+``tc netem delay`` on both ends: the latencies the session records must contain the configured link delay.
+
+Namespace ``bus`` holds its own vcan0 with the plant, the edge (listening on 192.0.2.1) and the recorder;
+namespace ``ctl`` holds only the controller (192.0.2.2), which connects to the edge's endpoint. Lockstep, so the
+session's result does not depend on the delay; only its latency figures do: the edge's closed-loop latency (state
+published -> setpoint for that state applied) must be >= 2 D for every setpoint, and the one-way figure (edge's
+state send -> controller's setpoint send, one CLOCK_MONOTONIC across namespaces) >= D. Without netem both are a
+few ms in the guest, so the bounds fail if the delay is not on the path. Addresses are TEST-NET-1 (RFC 5737).
+"""
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
+from test_netem import CLIENT_ADDR, SERVER_ADDR, run, veth_namespaces  # noqa: F401 - veth_namespaces: fixture reused
+
+DELAY_MS = 25
+DURATION_S = 1.0
+EDGE_ADDR, CONTROLLER_ADDR = SERVER_ADDR, CLIENT_ADDR
+US_PER_MS = 1000
+
+
+@pytest.fixture
+def delayed_namespaces(veth_namespaces: tuple[str, str]) -> tuple[str, str]:
+    """test_netem's veth pair (edge side 192.0.2.1, controller side 192.0.2.2) plus a vcan0 in the edge's
+    namespace and netem delay on both veth ends -> (bus namespace, controller namespace)."""
+    bus_ns, ctl_ns = veth_namespaces
+    run("ip", "-n", bus_ns, "link", "add", "vcan0", "type", "vcan")
+    run("ip", "-n", bus_ns, "link", "set", "vcan0", "up")
+    for ns, dev in ((bus_ns, "v0"), (ctl_ns, "v1")):
+        run("ip", "netns", "exec", ns, "tc", "qdisc", "add", "dev", dev, "root", "netem", "delay", f"{DELAY_MS}ms")
+    return bus_ns, ctl_ns
+
+
+def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces: tuple[str, str]) -> None:
+    from protocol.zsession import free_tcp_port
+    from sea_hil.report import state_to_setpoint_latency_us
+    bus_ns, ctl_ns = delayed_namespaces
+    session = NodeSession(config=write_gait_slice_config(tmp_path, DURATION_S),
+                          client_config=write_client_config(tmp_path), can="socketcan:vcan0",
+                          listen_host=EDGE_ADDR, port=free_tcp_port(), bus_netns=bus_ns, controller_netns=ctl_ns)
+    result = run_node_session(session, tmp_path)
+    summary = result.summary
+
+    # the session completed across the delayed link
+    assert summary["duration_s"] == pytest.approx(DURATION_S, abs=0.01)
+    tx = summary["transmissions"]
+    assert 0 < tx["downlink_msgs"] < summary["edge"]["uplink_msgs"], (tx, summary["edge"])
+    assert summary["latency_samples"] == tx["downlink_msgs"], summary
+
+    # closed loop (edge): every setpoint crossed the veth twice
+    latency_us = summary["latency_us"]
+    assert latency_us["min"] >= 2 * DELAY_MS * US_PER_MS, latency_us
+    assert latency_us["p50"] >= 2 * DELAY_MS * US_PER_MS, latency_us
+    # one way: edge publishes state k -> controller sends the setpoint for k (uplink crossing only)
+    one_way_us = state_to_setpoint_latency_us(result.data)
+    print(f"netem delay {DELAY_MS} ms per direction: closed-loop latency [us] {latency_us}; one-way [us] min "
+          f"{one_way_us.min():.0f} median {float(np.median(one_way_us)):.0f} (n={len(one_way_us)})")
+    assert len(one_way_us) >= tx["downlink_msgs"], one_way_us   # a re-answered duplicate state counts twice
+    assert one_way_us.min() >= DELAY_MS * US_PER_MS, one_way_us

@@ -1,0 +1,109 @@
+"""Replay safety: stale or duplicated sequence numbers are ignored and counted -- setpoints/voltages at the edge,
+states at the controller -- and a restarted sender is accepted only after its old stream timed out."""
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+
+import pytest
+
+from controller.edge import EdgeNode
+from controller.remote import RemoteController
+from protocol.canbus import open_bus
+from protocol.config import load_config
+from protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
+from protocol.zsession import make_config, open_session
+
+MS = 1_000_000
+
+
+@pytest.fixture
+def nodes() -> Iterator[tuple[EdgeNode, RemoteController]]:
+    cfg = load_config()
+    session = open_session(make_config())
+    bus = open_bus(f"virtual:replay-{uuid.uuid4().hex[:8]}")
+    edge = EdgeNode(cfg, bus, session, 1)
+    ctrl = RemoteController(cfg, session, "tt")
+    try:
+        yield edge, ctrl
+    finally:
+        edge.close()
+        ctrl.close()
+        session.close()
+        bus.shutdown()
+
+
+def setpoint(seq: int, d1: float = 0.001, reason: TriggerReason = TriggerReason.ERROR_BOUND) -> bytes:
+    return encode(SetpointPayload(seq, 0, seq, (d1, 0.0), (0.0, 0.0), reason))
+
+
+def state(seq: int, sample_t_ns: int) -> bytes:
+    return encode(StatePayload(seq, 0, sample_t_ns, (0.05, 0.28), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)))
+
+
+def apply(edge: EdgeNode, now_ns: int) -> None:
+    edge._sample_t_ns = now_ns
+    edge._take_downlink(now_ns)
+
+
+def test_edge_ignores_and_counts_duplicated_and_older_setpoints(nodes: tuple[EdgeNode, RemoteController]) -> None:
+    edge, _ = nodes
+    verdicts = [edge.on_downlink(setpoint(s, d1=s * 1e-4)) for s in (1, 2, 2, 5, 3, 5, 1, 6)]
+    assert verdicts == [True, True, False, True, False, False, False, True]
+    apply(edge, 0)
+    c = edge.counters
+    assert c.stale_setpoints == 4 and c.setpoints == 4            # 1, 2, 5, 6 applied
+    assert edge.inner.deflection_m == pytest.approx((6e-4, 0.0))
+    st = edge.stats_dict()
+    assert (st["stale_setpoints"], st["seq_duplicates"], st["seq_reordered"]) == (4, 3, 1)
+
+
+def test_edge_voltage_stream_shares_the_replay_guard(nodes: tuple[EdgeNode, RemoteController]) -> None:
+    edge, _ = nodes
+    v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
+    assert [edge.on_downlink(x) for x in v] == [True, False, False, True]
+    apply(edge, 0)
+    assert edge.counters.voltages == 2 and edge._voltage == (11.0, 0.0) and edge.counters.stale_setpoints == 2
+
+
+def test_restarted_controller_is_accepted_only_after_the_stream_timed_out(
+        nodes: tuple[EdgeNode, RemoteController]) -> None:
+    edge, _ = nodes
+    edge._sample_t_ns = 1000 * MS
+    for s in range(1, 101):
+        assert edge.on_downlink(setpoint(s))
+    apply(edge, 1000 * MS)
+    timeout_ms = edge.timeout_ns // MS
+    edge._sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a replayed seq 1 is refused
+    assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))
+    edge._sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): an old seq >= window
+    assert not edge.on_downlink(setpoint(edge.sp_seq.window))   # is still refused, a fresh sender's seq is not
+    assert edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))
+    assert not edge.on_downlink(setpoint(1))                     # and the new stream is guarded again
+    assert edge.on_downlink(setpoint(2))
+    assert edge.counters.controller_restarts == 1 and edge.counters.stale_setpoints == 3
+    assert edge.stats_dict()["controller_restarts"] == 1
+
+
+def test_controller_ignores_and_counts_duplicated_and_older_states(nodes: tuple[EdgeNode, RemoteController]) -> None:
+    _, ctrl = nodes
+    for s, t_ms in ((1, 0), (2, 10), (2, 10), (4, 30), (3, 20), (1, 0), (5, 40)):
+        ctrl.handle(state(s, t_ms * MS), now_ns=t_ms * MS)
+    assert ctrl.states == 4 and ctrl.setpoint_seq == 4           # TT: one setpoint per handled state
+    st = ctrl.stats_dict()
+    assert st["ignored_states"] == 3 and st["state_seq_duplicates"] == 2 and st["state_seq_reordered"] == 1
+
+
+def test_controller_accepts_a_restarted_edge_after_silence_and_continues_the_trajectory(
+        nodes: tuple[EdgeNode, RemoteController]) -> None:
+    _, ctrl = nodes
+    for s in range(1, 201):
+        ctrl.handle(state(s, s * 10 * MS), now_ns=s * 10 * MS)
+    gap_ns = ctrl.restart_gap_ns
+    ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS)              # within the gap: a replay, ignored
+    assert ctrl.states == 200 and ctrl.edge_restarts == 0
+    ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS + gap_ns + 1)  # new edge: sample time restarts near 0
+    assert ctrl.states == 201 and ctrl.edge_restarts == 1
+    assert ctrl._last_t_ns == 1990 * MS                            # trajectory time continues where it stopped
+    ctrl.handle(state(2, 17 * MS), now_ns=2100 * MS + gap_ns)
+    assert ctrl.states == 202 and ctrl._last_t_ns == 2000 * MS
