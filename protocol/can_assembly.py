@@ -6,7 +6,7 @@ from collections import OrderedDict, deque
 from typing import Any
 
 from protocol.can_frames import (FEEDBACK_PARTS, SEQ_MODULUS, T_US_MODULUS, Feedback, FeedbackAngle,
-                                 FeedbackDeflection, FeedbackVelocity)
+                                 FeedbackJoint1, FeedbackJoint2)
 from protocol.errors import MalformedFrame
 
 
@@ -37,7 +37,7 @@ class FeedbackAssembler:
         self.incomplete = 0
         self.stale = 0
 
-    def push(self, part: FeedbackAngle | FeedbackDeflection | FeedbackVelocity) -> Feedback | None:
+    def push(self, part: FeedbackAngle | FeedbackJoint1 | FeedbackJoint2) -> Feedback | None:
         if not isinstance(part, FEEDBACK_PARTS):
             raise TypeError(f"FeedbackAssembler.push needs a feedback frame, got {type(part).__name__}")
         node, seq = part.node_id, part.seq
@@ -56,7 +56,7 @@ class FeedbackAssembler:
                 if old == seq:
                     break
                 self.incomplete += 1
-            return Feedback.from_parts(parts[FeedbackAngle], parts[FeedbackDeflection], parts[FeedbackVelocity])
+            return Feedback.from_parts(parts[FeedbackAngle], parts[FeedbackJoint1], parts[FeedbackJoint2])
         while len(pending) > self._max_pending:
             closed.append(pending.popitem(last=False)[0])
             self.incomplete += 1

@@ -20,13 +20,13 @@ from cantools.database import DecodeError, EncodeError
 from protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
 from protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
                                  SEQ_MODULUS, T_US_MODULUS, ClearErrors, DeflectionSetpoint, DriverState, ErrorFlags,
-                                 EStop, Feedback, FeedbackAngle, FeedbackDeflection, FeedbackVelocity, Frame,
+                                 EStop, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Frame,
                                  Heartbeat, Pair, VoltageCmd, can_id_of, check_node_id)
 from protocol.errors import ConfigError, MalformedFrame
 
 __all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",
            "T_US_MODULUS", "ClearErrors", "DeflectionSetpoint", "DriverState", "ErrorFlags", "EStop", "Feedback",
-           "FeedbackAngle", "FeedbackAssembler", "FeedbackDeflection", "FeedbackVelocity", "Frame", "Heartbeat",
+           "FeedbackAngle", "FeedbackAssembler", "FeedbackJoint1", "FeedbackJoint2", "Frame", "Heartbeat",
            "Pair", "SeaCodec", "VoltageCmd", "can_id_of", "check_node_id", "load_database", "seq_gap", "unwrap_us"]
 
 

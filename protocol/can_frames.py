@@ -129,23 +129,27 @@ class FeedbackAngle(_Signals):
 
 
 @dataclass(frozen=True)
-class FeedbackDeflection(_Signals):
+class _FeedbackJoint(_Signals):
+    """Feedback of one SEA (one joint): joint velocity, spring deflection, nut velocity."""
     node_id: int
     seq: int
-    delta_m: Pair
-    DBC: ClassVar[str] = "FEEDBACK_DEFLECTION"
-    FIELDS: ClassVar = (("seq", "seq"), ("delta_m", ("delta1", "delta2")))
+    omega_rad_s: float
+    delta_m: float
+    nut_vel_m_s: float
 
 
 @dataclass(frozen=True)
-class FeedbackVelocity(_Signals):
-    node_id: int
-    seq: int
-    omega_rad_s: Pair
-    nut_vel_m_s: Pair
-    DBC: ClassVar[str] = "FEEDBACK_VELOCITY"
-    FIELDS: ClassVar = (("seq", "seq"), ("omega_rad_s", ("omega1", "omega2")),
-                        ("nut_vel_m_s", ("nut_vel1", "nut_vel2")))
+class FeedbackJoint1(_FeedbackJoint):
+    DBC: ClassVar[str] = "FEEDBACK_JOINT1"
+    FIELDS: ClassVar = (("seq", "seq"), ("omega_rad_s", "omega1"), ("delta_m", "delta1"),
+                        ("nut_vel_m_s", "nut_vel1"))
+
+
+@dataclass(frozen=True)
+class FeedbackJoint2(_FeedbackJoint):
+    DBC: ClassVar[str] = "FEEDBACK_JOINT2"
+    FIELDS: ClassVar = (("seq", "seq"), ("omega_rad_s", "omega2"), ("delta_m", "delta2"),
+                        ("nut_vel_m_s", "nut_vel2"))
 
 
 @dataclass(frozen=True)
@@ -159,21 +163,22 @@ class Feedback:
     delta_m: Pair
     nut_vel_m_s: Pair
 
-    def parts(self) -> tuple[FeedbackAngle, FeedbackDeflection, FeedbackVelocity]:
-        n, q = self.node_id, self.seq
-        return (FeedbackAngle(n, q, self.t_us, self.theta_rad), FeedbackDeflection(n, q, self.delta_m),
-                FeedbackVelocity(n, q, self.omega_rad_s, self.nut_vel_m_s))
+    def parts(self) -> tuple[FeedbackAngle, FeedbackJoint1, FeedbackJoint2]:
+        n, q, w, d, v = self.node_id, self.seq, self.omega_rad_s, self.delta_m, self.nut_vel_m_s
+        return (FeedbackAngle(n, q, self.t_us, self.theta_rad), FeedbackJoint1(n, q, w[0], d[0], v[0]),
+                FeedbackJoint2(n, q, w[1], d[1], v[1]))
 
     @classmethod
-    def from_parts(cls, a: FeedbackAngle, d: FeedbackDeflection, v: FeedbackVelocity) -> Feedback:
-        return cls(a.node_id, a.seq, a.t_us, a.theta_rad, v.omega_rad_s, d.delta_m, v.nut_vel_m_s)
+    def from_parts(cls, a: FeedbackAngle, j1: FeedbackJoint1, j2: FeedbackJoint2) -> Feedback:
+        return cls(a.node_id, a.seq, a.t_us, a.theta_rad, (j1.omega_rad_s, j2.omega_rad_s), (j1.delta_m, j2.delta_m),
+                   (j1.nut_vel_m_s, j2.nut_vel_m_s))
 
 
 Frame = Union[EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
-              FeedbackAngle, FeedbackDeflection, FeedbackVelocity]
+              FeedbackAngle, FeedbackJoint1, FeedbackJoint2]
 FRAME_TYPES: tuple[type, ...] = (EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
-                                 FeedbackAngle, FeedbackDeflection, FeedbackVelocity)
-FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackDeflection, FeedbackVelocity)
+                                 FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
+FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
 
 
 def can_id_of(node_id: int, cmd_id: int) -> int:

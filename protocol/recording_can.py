@@ -9,7 +9,7 @@ from typing import Any, NamedTuple
 import can
 
 from protocol.can_codec import SeaCodec
-from protocol.can_frames import CMD_BITS, FeedbackAngle, FeedbackDeflection, FeedbackVelocity, VoltageCmd
+from protocol.can_frames import CMD_BITS, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd
 from protocol.errors import MalformedFrame
 
 
@@ -46,10 +46,8 @@ def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str,
     elif isinstance(d, FeedbackAngle):
         out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, "t_us": d.t_us,
                                       "theta1_rad": d.theta_rad[0], "theta2_rad": d.theta_rad[1]}))
-    elif isinstance(d, FeedbackDeflection):
+    elif isinstance(d, (FeedbackJoint1, FeedbackJoint2)):
+        j = 1 if isinstance(d, FeedbackJoint1) else 2
         out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq,
-                                      "delta1_m": d.delta_m[0], "delta2_m": d.delta_m[1]}))
-    elif isinstance(d, FeedbackVelocity):
-        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq,
-                                      "omega1_rad_s": d.omega_rad_s[0], "omega2_rad_s": d.omega_rad_s[1]}))
+                                      f"omega{j}_rad_s": d.omega_rad_s, f"delta{j}_m": d.delta_m}))
     return out, False

@@ -26,6 +26,7 @@ from protocol.config import DisturbanceConfig, SeaHilConfig
 from protocol.errors import SeaHilError
 from protocol.mechanics import limb_params
 from sea_hil.jit import compiled
+from sea_hil.wire_quantiser import EXACT, dbc_resolutions, quantised
 
 
 @dataclass
@@ -51,10 +52,12 @@ def inner_ratio(cfg: SeaHilConfig) -> int:
 def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, int]]:
     """The inner-step kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, gains, limit_v, dist_tab, volts):  # noqa
+    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, gains, limit_v, dist_tab, volts,  # noqa
+                    lsb):
         """Inner steps k0 .. k0 + n_steps - 1: measurement -> limited backstepping voltage (written to volts[k]) ->
         `substeps` RK4 sub-steps with the disturbance torques of dist_tab row k * substeps + i (d(t_i),
-        d(t_i + h/2), d(t_i + h)). Returns (x, saturated step count, first step whose result is not finite or -1).
+        d(t_i + h/2), d(t_i + h)). `lsb` = (theta, omega, delta, nut velocity, voltage) resolutions of the CAN
+        frames (sea_hil/wire_quantiser.py; zeros: exact values) rounds what the inner loop sees and sends. Returns (x, saturated step count, first step whose result is not finite or -1).
         Plain float code, untyped: this body is what numba compiles."""
         fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
         h = dt / substeps
@@ -62,9 +65,11 @@ def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, i
         for k in range(k0, k0 + n_steps):
             t = k * dt
             dl1, dl2, _, _ = deflections(x, p)
-            v = (dl1, dl2) if hold_measured else vx
-            u1, u2, saturated = limited_voltage((x[0], x[1], x[2], x[3], dl1, dl2, x[6], x[7]), v, s, p, gains,
-                                                limit_v)
+            m = (quantised(x[0], lsb[0]), quantised(x[1], lsb[0]), quantised(x[2], lsb[1]), quantised(x[3], lsb[1]),
+                 quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
+            v = (m[4], m[5]) if hold_measured else vx
+            u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v)
+            u1, u2 = quantised(u1, lsb[4]), quantised(u2, lsb[4])
             if saturated:
                 saturated_count += 1
             volts[k, 0] = u1
@@ -93,8 +98,10 @@ def disturbance_table(dist: Disturbance, cfg: DisturbanceConfig, n_inner: int, d
     return values.reshape(n_inner * substeps, 6)
 
 
-def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool = True) -> SimResult:
-    """Closed loop over `cycles` trajectory periods; jit=False runs `inner_steps` as plain Python (the reference)."""
+def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool = True, quantise: bool = False
+             ) -> SimResult:
+    """Closed loop over `cycles` trajectory periods; jit=False runs `inner_steps` as plain Python (the reference).
+    quantise=True rounds every measurement and voltage to its CAN frame's resolution, as the networked path does."""
     p = limb_params(cfg.plant)
     traj = make_trajectory(cfg.trajectory)
     ratio = inner_ratio(cfg)
@@ -109,6 +116,7 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
     outer = OuterController(cfg, p, mode)
     inner = InnerLoop(cfg, p, d0.theta_rad)
     dist_tab = disturbance_table(make_disturbance(cfg.disturbance), cfg.disturbance, n_inner, dt, substeps)
+    lsb = dbc_resolutions() if quantise else EXACT
     kernel = compiled(make_inner_steps) if jit else None
     steps = kernel if kernel is not None else make_inner_steps()
     tab = dist_tab if kernel is not None else dist_tab.tolist()  # plain floats for the Python path
@@ -121,7 +129,9 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
         k0 = j * ratio
         t = k0 * dt
         ds = traj.sample(t)
-        sp = outer.step(k0 * dt_ns, j, JointState((x[0], x[1]), (x[2], x[3])), ds)
+        seen = JointState((quantised(x[0], lsb[0]), quantised(x[1], lsb[0])),
+                          (quantised(x[2], lsb[1]), quantised(x[3], lsb[1])))
+        sp = outer.step(k0 * dt_ns, j, seen, ds)
         if sp is not None:
             inner.hold(sp.deflection_m, sp.sliding)
             ev_t.append(t)
@@ -130,7 +140,7 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
         desired.append(ds.theta_rad)
         held = inner.deflection_m
         x, n_sat, bad_k = steps(x, k0, min(ratio, n_inner - k0), dt, substeps, held or (0.0, 0.0), inner.sliding,
-                                held is None, p, inner.gains, p.voltage_limit, tab, volts)
+                                held is None, p, inner.gains, p.voltage_limit, tab, volts, lsb)
         inner.saturated_steps += n_sat
         if bad_k >= 0:
             raise SeaHilError(f"simulation diverged at t = {bad_k * dt:.3f} s")

@@ -16,6 +16,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--compare", action="store_true", help="run both and write DIR/compare.md (TT vs ET vs paper)")
     p.add_argument("--trajectory", metavar="CSV", help="desired trajectory CSV with columns t, theta1, theta2 (rad)")
     p.add_argument("--cycles", type=int, help="walking cycles to simulate (default from config: 1)")
+    p.add_argument("--quantise", action="store_true",
+                   help="round measurements and voltages to their CAN frame resolutions (docs/can-protocol.md)")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
     add_config_args(p)
     p.set_defaults(func=_main)
@@ -28,9 +30,9 @@ def _main(args: argparse.Namespace) -> int:
         raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args)
     if args.compare:
-        _, _, table = run_compare(cfg, args.out, args.cycles)
+        _, _, table = run_compare(cfg, args.out, args.cycles, quantise=args.quantise)
         print(table)
     else:
-        summary = run_simulation(cfg, args.controller, args.out, args.cycles)
+        summary = run_simulation(cfg, args.controller, args.out, args.cycles, quantise=args.quantise)
         print(json.dumps(summary, indent=2, sort_keys=True))
     return 0

@@ -29,11 +29,12 @@ def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:
     }
 
 
-def run_simulation(cfg: SeaHilConfig, mode: str, out: Path, cycles: int | None) -> dict[str, Any]:
+def run_simulation(cfg: SeaHilConfig, mode: str, out: Path, cycles: int | None, quantise: bool = False
+                   ) -> dict[str, Any]:
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.process_time()
-    res = simulate(cfg, mode, cycles)
-    summary = summarize(res, time.process_time() - t0)
+    res = simulate(cfg, mode, cycles, quantise=quantise)
+    summary = {**summarize(res, time.process_time() - t0), "quantised": quantise}
     title = "ET-SMC" if mode == "et" else "TT-SMC"
     tracking_figure(out / f"tracking_{mode}.png", res.t_s, res.theta_rad, res.desired_rad, title)
     inter_event_figure(out / f"inter_event_{mode}.png", res.event_t_s, title)
@@ -41,9 +42,10 @@ def run_simulation(cfg: SeaHilConfig, mode: str, out: Path, cycles: int | None) 
     return summary
 
 
-def run_compare(cfg: SeaHilConfig, out: Path, cycles: int | None) -> tuple[dict[str, Any], dict[str, Any], str]:
-    tt = run_simulation(cfg, "tt", out / "tt", cycles)
-    et = run_simulation(cfg, "et", out / "et", cycles)
+def run_compare(cfg: SeaHilConfig, out: Path, cycles: int | None, quantise: bool = False
+                ) -> tuple[dict[str, Any], dict[str, Any], str]:
+    tt = run_simulation(cfg, "tt", out / "tt", cycles, quantise)
+    et = run_simulation(cfg, "et", out / "et", cycles, quantise)
     table = compare_table(tt, et)
     (out / "compare.md").write_text("# TT-SMC vs ET-SMC (offline simulation)\n\n" + table, encoding="utf-8")
     return tt, et, table

@@ -13,8 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from protocol.can_codec import (FEEDBACK_PARTS, FRAME_TYPES, SEQ_MODULUS, ClearErrors, DeflectionSetpoint,
-                                DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle, FeedbackDeflection,
-                                FeedbackVelocity, Heartbeat, SeaCodec, VoltageCmd, can_id_of, load_database)
+                                DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle, FeedbackJoint1,
+                                FeedbackJoint2, Heartbeat, SeaCodec, VoltageCmd, can_id_of, load_database)
 from protocol.can_frames import T_US_MODULUS
 from protocol.errors import MalformedFrame
 
@@ -42,14 +42,18 @@ EXACT = [
     # 63 << 5 | 7; state FAULT=2; flags WATCHDOG(bit0)|BUS_ERROR(bit4) = 0x11; 258 = 0x0102; 65535; seq 17 = 0x11
     (Heartbeat(63, DriverState.FAULT, ErrorFlags.WATCHDOG | ErrorFlags.BUS_ERROR, 258, 65535, 17),
      0x7E7, "02 11 0201 ffff 11"),
-    # seq 5; t_us 0xBEEF; 1.5708 rad / 1e-4 = 15708 = 0x3D5C; -1e-4 -> 0xFFFF
-    (FeedbackAngle(1, 5, 0xBEEF, (1.5708, -0.0001)), 0x023, "05 efbe 5c3d ffff"),
-    # 0.03 m -> 30000 = 0x7530; -0.03 m -> -30000 = 0x8AD0
-    (FeedbackDeflection(1, 5, (0.03, -0.03)), 0x024, "05 3075 d08a"),
-    # bits: seq 0..7 = 5 | omega1 8..22 = 500 | omega2 23..37 = -15000 -> 2^15-15000 = 17768
-    #       | nut_vel1 38..50 = 3000 | nut_vel2 51..63 = -1 -> 8191; as one little-endian 64-bit integer:
-    (FeedbackVelocity(1, 5, (1.0, -30.0), (0.6, -0.0002)), 0x025,
-     (5 | 500 << 8 | 17768 << 23 | 3000 << 38 | 8191 << 51).to_bytes(8, "little").hex()),
+    # seq 5 | t_us 0xBEEF at bit 8 | theta1 bits 24..43 = 1.5708 rad / 1e-5 = 157080 | theta2 bits 44..63 = -1e-5
+    # rad -> -1 -> 2^20 - 1; as one little-endian 64-bit integer:
+    (FeedbackAngle(1, 5, 0xBEEF, (1.5708, -0.00001)), 0x023,
+     (5 | 0xBEEF << 8 | 157080 << 24 | (2**20 - 1) << 44).to_bytes(8, "little").hex()),
+    # seq 5 | omega1 bits 8..25 = 1 rad/s / 2.5e-4 = 4000 | delta1 bits 26..44 = 0.03 m / 1.25e-7 = 240000
+    # | nut_vel1 bits 45..63 = -0.6 m/s / 2.5e-6 = -240000 -> 2^19 - 240000 = 284288
+    (FeedbackJoint1(1, 5, 1.0, 0.03, -0.6), 0x024,
+     (5 | 4000 << 8 | 240000 << 26 | 284288 << 45).to_bytes(8, "little").hex()),
+    # seq 6 | omega2 = -30 rad/s -> -120000 -> 2^18 - 120000 = 142144 | delta2 = -1.25e-7 m -> 2^19 - 1
+    # | nut_vel2 = 2.5e-6 m/s -> 1
+    (FeedbackJoint2(2, 6, -30.0, -0.000000125, 0.0000025), 0x045,
+     (6 | 142144 << 8 | (2**19 - 1) << 26 | 1 << 45).to_bytes(8, "little").hex()),
 ]
 
 
@@ -62,7 +66,7 @@ def test_exact_bytes_and_round_trip(codec: SeaCodec, obj, can_id: int, hexdata: 
     assert type(back) is type(obj)
     for name, val in vars(obj).items():
         got = getattr(back, name)
-        if isinstance(val, tuple):
+        if isinstance(val, (tuple, float)):
             assert got == pytest.approx(val, abs=1e-12)
         else:
             assert got == val
@@ -78,8 +82,8 @@ def test_every_frame_type_covered_and_ids_unique(codec: SeaCodec) -> None:
 def test_dbc_meets_required_ranges_and_resolutions() -> None:
     db = load_database()
     need = {  # signal: (required |range|, required resolution)
-        "voltage1": (30, 1e-3), "vx1": (0.03, 1e-6), "theta1": (3.2, 1e-4), "omega1": (30, 2e-3),
-        "delta1": (0.03, 1e-6), "nut_vel1": (0.6, 2e-4),
+        "voltage1": (30, 1e-3), "vx1": (0.03, 1e-6), "theta1": (3.2, 1e-5), "omega1": (30, 2.5e-4),
+        "delta1": (0.03, 1.25e-7), "nut_vel1": (0.6, 2.5e-6),
     }
     sigs = {s.name: s for m in db.messages for s in m.signals}
     for name, (rng, res) in need.items():
@@ -108,8 +112,8 @@ BAD_ENCODE = [
     VoltageCmd(1, (0.0, 0.0), 1.5), VoltageCmd(1, (0.0,), 1), VoltageCmd(1, "ab", 1),  # type: ignore[arg-type]
     VoltageCmd(0, (0.0, 0.0), 1), VoltageCmd(64, (0.0, 0.0), 1), DeflectionSetpoint(1, (0.0301, 0.0), 0),
     FeedbackAngle(1, 0, 65536, (0.0, 0.0)), FeedbackAngle(1, 0, 0, (3.2001, 0.0)),
-    FeedbackVelocity(1, 0, (30.01, 0.0), (0.0, 0.0)), FeedbackVelocity(1, 0, (0.0, 0.0), (0.0, -0.6002)),
-    FeedbackDeflection(1, 0, (0.0, math.nan)),
+    FeedbackJoint1(1, 0, 30.01, 0.0, 0.0), FeedbackJoint2(1, 0, 0.0, 0.0, -0.6002),
+    FeedbackJoint2(1, 0, 0.0, math.nan, 0.0), FeedbackJoint1(1, 0, 0.0, 0.0301, 0.0),
     Heartbeat(1, 7, ErrorFlags(0), 0, 0, 0),  # type: ignore[arg-type]
     Heartbeat(1, DriverState.RUNNING, 64, 0, 0, 0),  # type: ignore[arg-type]
     Heartbeat(1, DriverState.RUNNING, ErrorFlags(0), 65536, 0, 0),
@@ -139,7 +143,7 @@ BAD_DECODE = [
     ("extended", can.Message(arbitration_id=0x021, data=bytes(5), is_extended_id=True)),
     ("FD", can.Message(arbitration_id=0x021, data=bytes(5), is_extended_id=False, is_fd=True)),
     ("outside", _msg(0x021, "00 3175 0000")),                      # 30001 mV > 30 V
-    ("outside", _msg(0x023, "00 0000 017d 0000")),                 # theta1 raw 32001 > 3.2 rad
+    ("outside", _msg(0x023, (320001 << 24).to_bytes(8, "little").hex())),  # theta1 raw 320001 > 3.2 rad
     ("enum", _msg(0x027, "04 00 0000 0000 00")),                   # state 4
     ("reserved", _msg(0x027, "01 40 0000 0000 00")),               # flag bit 6 reserved
 ]
@@ -206,8 +210,8 @@ def test_random_frames_seeded_cover_both_outcomes(codec: SeaCodec) -> None:
 
 def test_quantisation_error_bounds(codec: SeaCodec) -> None:
     rng = random.Random(7)
-    half_lsb = {"voltage_v": 0.5e-3, "deflection_m": 0.5e-6, "theta_rad": 0.5e-4, "omega_rad_s": 1e-3,
-                "delta_m": 0.5e-6, "nut_vel_m_s": 1e-4}
+    half_lsb = {"voltage_v": 0.5e-3, "deflection_m": 0.5e-6, "theta_rad": 0.5e-5, "omega_rad_s": 1.25e-4,
+                "delta_m": 0.625e-7, "nut_vel_m_s": 1.25e-6}
     for _ in range(300):
         u = lambda lim: (rng.uniform(-lim, lim), rng.uniform(-lim, lim))  # noqa: E731
         objs = [VoltageCmd(1, u(30.0), 1), DeflectionSetpoint(1, u(0.03), 1),
@@ -216,7 +220,9 @@ def test_quantisation_error_bounds(codec: SeaCodec) -> None:
             back = codec.decode(codec.encode(obj))
             for name, bound in half_lsb.items():
                 if hasattr(obj, name):
-                    err = max(abs(a - b) for a, b in zip(getattr(obj, name), getattr(back, name)))
+                    sent, got = getattr(obj, name), getattr(back, name)
+                    pairs = zip(sent, got) if isinstance(sent, tuple) else [(sent, got)]
+                    err = max(abs(a - b) for a, b in pairs)
                     assert err <= bound * (1 + 1e-6), (name, err)
 
 

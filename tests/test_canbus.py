@@ -156,7 +156,7 @@ def test_frame_bits_and_documented_bus_load() -> None:
     assert [can_frame_bits(n) for n in (0, 5, 7, 8)] == [55, 105, 125, 135]
     assert [can_frame_bits(n, worst_case=False) for n in (0, 5, 7, 8)] == [47, 87, 103, 111]
     dlc = {m.name: m.length for m in load_database().messages}
-    feedback = sum(can_frame_bits(dlc[n]) for n in ("FEEDBACK_ANGLE", "FEEDBACK_DEFLECTION", "FEEDBACK_VELOCITY"))
-    assert feedback == 365  # docs/can-protocol.md: 36.5 % of 1 Mbit/s at 1 kHz
+    feedback = sum(can_frame_bits(dlc[n]) for n in ("FEEDBACK_ANGLE", "FEEDBACK_JOINT1", "FEEDBACK_JOINT2"))
+    assert feedback == 405  # docs/can-protocol.md: 40.5 % of 1 Mbit/s at 1 kHz
     per_s = 1000 * (feedback + can_frame_bits(dlc["VOLTAGE_CMD"])) + 10 * can_frame_bits(dlc["HEARTBEAT"])
-    assert per_s == 471_250  # 47.1 % with the inner loop on the edge
+    assert per_s == 511_250  # 51.1 % with the inner loop on the edge
