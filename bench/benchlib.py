@@ -29,6 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 from protocol.errors import SeaHilError  # noqa: E402
+from sea_hil.processes import end_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -156,13 +157,7 @@ def wait_ready(proc: subprocess.Popen[bytes], timeout_s: float = 20.0) -> None:
 
 def stop_process(proc: subprocess.Popen[bytes]) -> None:
     """Terminate a child, kill it if it does not end within 5 s, and reap it."""
-    if proc.poll() is None:
-        proc.terminate()
-    try:
-        proc.wait(timeout=5)
-    except subprocess.TimeoutExpired:
-        proc.kill()
-        proc.wait()
+    end_process(proc)
 
 
 def sea_hil_run(out: Path, *, controller: str = "et", lockstep: bool = False, cycles: int = 1,

@@ -25,6 +25,7 @@ from protocol.recorder_node import RecorderNode
 from protocol.recorder_process import RecorderProcess
 from protocol.recording import read_session
 from protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.processes import end_process
 from sea_hil.report import write_report_figures
 from sea_hil.session_summary import session_summary
 from sea_hil.summary import write_summary
@@ -92,13 +93,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
         if proc.returncode != 0:
             raise SeaHilError(f"controller process exited with status {proc.returncode}")
     finally:
-        if proc.poll() is None:
-            proc.terminate()
-            try:
-                proc.wait(timeout=5)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                proc.wait()
+        end_process(proc)
         plant.stop()
         edge.stop_event.set()
         for t in threads:
