@@ -1,5 +1,6 @@
 """The SEA driver node: owns a CAN bus, serves one or more limbs (node ids) with `DriverCore`, sends feedback on a
-drift-free schedule (absolute deadlines) and heartbeats. Malformed frames are rejected, counted and logged.
+drift-free schedule (absolute deadlines) and heartbeats. Malformed frames are rejected, counted and logged; well-formed ids of nodes it does not serve are
+ignored like drive firmware's acceptance filter does (`is_foreign`, counted in `TickStats.foreign_frames`).
 
 Real-time mode: one tick per feedback period; waiting for the next deadline is done in `bus.recv(timeout)` so
 commands are handled as they arrive. Lateness of each tick is recorded; a tick later than one period is an overrun
@@ -14,14 +15,14 @@ import logging
 import threading
 import time
 from dataclasses import dataclass
-from typing import Callable
+from typing import Callable, Container
 
 import can
 
 from plant_emulator.disturbance import make_disturbance
 from plant_emulator.driver import DriverCore
-from protocol.can_codec import SeaCodec
-from protocol.can_frames import ErrorFlags, Feedback, VoltageCmd
+from protocol.can_codec import SeaCodec, load_database
+from protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback, VoltageCmd
 from protocol.canbus import send_with_retry
 from protocol.config import SeaHilConfig
 from protocol.errors import BusError, MalformedFrame
@@ -38,6 +39,22 @@ class TickStats:
     send_retries: int = 0
     send_failures: int = 0
     bus_errors: int = 0
+    foreign_frames: int = 0   # well-formed ids of node ids this node does not serve: ignored, not rejected
+
+
+def command_ids() -> frozenset[int]:
+    """The command ids (low `CMD_BITS` of the CAN id) the DBC defines."""
+    return frozenset(m.frame_id & CMD_MASK for m in load_database().messages)
+
+
+def is_foreign(msg: can.Message, served: Container[int], cmd_ids: frozenset[int]) -> bool:
+    """True for a classic data frame whose 11-bit id names a DBC command of a valid node id not in `served`: the
+    id alone decides (an acceptance filter never looks at another node's payload)."""
+    if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd:
+        return False
+    node_id = msg.arbitration_id >> CMD_BITS
+    return (0 <= msg.arbitration_id <= 0x7FF and NODE_ID_MIN <= node_id <= NODE_ID_MAX and node_id not in served
+            and msg.arbitration_id & CMD_MASK in cmd_ids)
 
 
 class PlantNode:
@@ -48,6 +65,7 @@ class PlantNode:
         self.cfg = cfg
         self.bus = bus
         self.codec = SeaCodec(node_ids)
+        self.cmd_ids = command_ids()
         self.lockstep = lockstep
         self.resend_ns = int(resend_s * 1e9)
         p = limb_params(cfg.plant)
@@ -64,10 +82,13 @@ class PlantNode:
 
     # ---- frames -------------------------------------------------------------------------------------------------
     def _on_message(self, msg: can.Message, now_ns: int) -> None:
+        if msg.arbitration_id >> CMD_BITS not in self.drivers and is_foreign(msg, self.drivers, self.cmd_ids):
+            self.stats.foreign_frames += 1   # another driver's traffic on a shared bus
+            return
         try:
             frame = self.codec.decode(msg)
         except MalformedFrame as err:
-            node = msg.arbitration_id >> 5
+            node = msg.arbitration_id >> CMD_BITS
             target = self.drivers.get(node) or next(iter(self.drivers.values()))
             target.reject()
             log.info("rejected frame: %s", err)
@@ -76,7 +97,7 @@ class PlantNode:
         if drv is None or not hasattr(frame, "node_id"):
             return
         if not drv.handle(frame, now_ns):
-            return  # feedback/heartbeat of another driver, or unsupported: nothing to do
+            return  # feedback/heartbeat (a driver's own output, never a command to it): nothing to do
         if self.lockstep and isinstance(frame, VoltageCmd) and frame.seq == drv.seq & 0xFF:
             self._answered.add(frame.node_id)
 

@@ -20,11 +20,10 @@ import threading
 from collections.abc import Mapping
 from typing import Any, BinaryIO
 
-from protocol.can_codec import SeaCodec
 from protocol.config import RecordConfig, SeaHilConfig
 from protocol.errors import RecordingError
 from protocol.recording import SessionRecorder
-from protocol.recording_can import RawFrame, can_records
+from protocol.recording_can import CanTap, RawFrame
 from protocol.recording_meta import write_session_header
 from protocol.schemas import validate_payload
 
@@ -133,17 +132,14 @@ class RecorderProcess:
             log.error("recorder process pipe: %s", err)
 
 
-def _apply(rec: SessionRecorder, codec: SeaCodec, ops: list[tuple[Any, ...]], counts: dict[str, int]) -> bool:
+def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]]) -> bool:
     """Apply one batch in the child; True when the batch closed the recording."""
     for op in ops:
         kind = op[0]
         try:
             if kind == CAN:
                 frame: RawFrame = op[1]
-                counts["can_frames"] += 1
-                msgs, rejected = can_records(codec, frame)
-                counts["can_rejected"] += rejected
-                for topic, payload in msgs:
+                for topic, payload in tap.records(frame):
                     rec.record(topic, frame.t_ns, frame.t_ns, payload)
             elif kind == RECORD:
                 rec.record(*op[1:])
@@ -152,7 +148,7 @@ def _apply(rec: SessionRecorder, codec: SeaCodec, ops: list[tuple[Any, ...]], co
             elif kind == ATTACHMENT:
                 rec.add_attachment(*op[1:])
             elif kind == CLOSE:
-                rec.close(final_stats={**op[1], **counts})  # the child's CAN counts are authoritative
+                rec.close(final_stats={**op[1], **tap.counters()})  # the child's CAN counts are authoritative
                 return True
         except RecordingError as err:   # one bad message: counted in the file's final metadata, keep going
             rec.write_errors += 1
@@ -171,15 +167,15 @@ def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0) -> int
     if nice > 0:
         os.nice(nice)
     rec = SessionRecorder.from_config(path, RecordConfig.model_validate_json(cfg_json))
-    codec, counts = SeaCodec(), {"can_frames": 0, "can_rejected": 0}
+    tap = CanTap()
     while (head := _read_exact(stream, _LEN.size)) is not None:
         blob = _read_exact(stream, _LEN.unpack(head)[0])
         if blob is None:
             break
-        if _apply(rec, codec, pickle.loads(blob), counts):
+        if _apply(rec, tap, pickle.loads(blob)):
             return 0
     rec.closed_by = "eof"   # the parent went away without closing: finalise what arrived
-    rec.close(final_stats=counts)
+    rec.close(final_stats=tap.counters())
     return 0
 
 

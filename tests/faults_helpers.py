@@ -23,6 +23,7 @@ from protocol.link import LinkCounters, LinkEmulator
 from protocol.recorder_node import RecorderNode
 from protocol.recording import SessionRecorder
 from protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.processes import end_process as _end_process
 
 REPO = Path(__file__).resolve().parents[1]
 NODE = 1
@@ -42,14 +43,8 @@ def wait_for(cond: Callable[[], bool], timeout_s: float, poll_s: float = 0.002) 
 
 
 def end_process(proc: subprocess.Popen[bytes] | subprocess.Popen[str]) -> None:
-    """Terminate (then kill) and reap a child process; safe to call twice."""
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    """`sea_hil.processes.end_process` with this module's stop timeout; safe to call twice."""
+    _end_process(proc, STOP_TIMEOUT_S)
 
 
 def sea_hil_cmd(*args: str) -> list[str]:

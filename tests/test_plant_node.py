@@ -37,8 +37,8 @@ DLC_OF_CMD = {m.frame_id & 0x1F: m.length for m in load_database().messages}
 class Peer:
     """The test's end of the bus: decodes what the node sends, sends frames to it."""
 
-    def __init__(self, bus: can.BusABC) -> None:
-        self.bus, self.codec, self.assembler = bus, SeaCodec([NODE]), FeedbackAssembler()
+    def __init__(self, bus: can.BusABC, node_ids: tuple[int, ...] = (NODE,)) -> None:
+        self.bus, self.codec, self.assembler = bus, SeaCodec(node_ids), FeedbackAssembler()
 
     def send(self, frame: Any) -> None:
         self.bus.send(self.codec.encode(frame))
@@ -62,29 +62,40 @@ class Peer:
 
 
 @contextmanager
-def running_node(cfg: SeaHilConfig, *, lockstep: bool) -> Iterator[tuple[PlantNode, Peer]]:
+def running_plants(cfg: SeaHilConfig, served: tuple[tuple[int, ...], ...], *,
+                   lockstep: bool) -> Iterator[tuple[list[PlantNode], Peer]]:
+    """One running `PlantNode` per entry of `served` (its node ids), all on one fresh virtual bus, and a peer."""
     channel = f"virtual:plant-test-{uuid.uuid4().hex}"
-    node_bus, peer_bus = open_bus(channel), open_bus(channel)
-    node = PlantNode(cfg, node_bus, (NODE,), lockstep=lockstep)
+    buses = [open_bus(channel) for _ in range(len(served) + 1)]
+    nodes = [PlantNode(cfg, bus, ids, lockstep=lockstep) for bus, ids in zip(buses, served)]
     errors: list[BaseException] = []
 
-    def target() -> None:
+    def target(node: PlantNode) -> None:
         try:
             node.run(None)
         except BaseException as err:  # re-raised in the test thread
             errors.append(err)
 
-    thread = threading.Thread(target=target, name="plant-node", daemon=True)
-    thread.start()
+    threads = [threading.Thread(target=target, args=(n,), name="plant-node", daemon=True) for n in nodes]
+    for thread in threads:
+        thread.start()
     try:
-        yield node, Peer(peer_bus)
+        yield nodes, Peer(buses[-1], tuple(sorted({n for ids in served for n in ids})))
     finally:
-        node.stop()
-        thread.join(timeout=5.0)
-        node_bus.shutdown()
-        peer_bus.shutdown()
-    assert not thread.is_alive(), "PlantNode.run did not return after stop()"
+        for node in nodes:
+            node.stop()
+        for thread in threads:
+            thread.join(timeout=5.0)
+        for bus in buses:
+            bus.shutdown()
+    assert not any(t.is_alive() for t in threads), "PlantNode.run did not return after stop()"
     assert not errors, f"PlantNode.run raised {errors[0]!r}"
+
+
+@contextmanager
+def running_node(cfg: SeaHilConfig, *, lockstep: bool) -> Iterator[tuple[PlantNode, Peer]]:
+    with running_plants(cfg, ((NODE,),), lockstep=lockstep) as (nodes, peer):
+        yield nodes[0], peer
 
 
 def is_hb(state: DriverState, flags: ErrorFlags | None = None) -> Callable[[Any], bool]:
@@ -153,12 +164,12 @@ def _frames_bad_by_construction() -> st.SearchStrategy[can.Message]:
     nan_payload = st.tuples(st.sampled_from([1, 2]), st.integers(0, 255), st.booleans()).map(lambda t: can.Message(
         arbitration_id=NODE << 5 | t[0], is_extended_id=False,
         data=bytes([t[1]]) + (nan_hi + bytes(2) if t[2] else bytes(2) + nan_hi)))
-    other_node = st.tuples(st.integers(2, 63), own_cmd).map(lambda t: can.Message(
-        arbitration_id=t[0] << 5 | t[1], data=bytes(DLC_OF_CMD[t[1]]), is_extended_id=False))
+    foreign_remote = st.tuples(st.integers(2, 63), own_cmd).map(lambda t: can.Message(   # RTR: never a command
+        arbitration_id=t[0] << 5 | t[1], is_remote_frame=True, is_extended_id=False))
     extended = st.integers(0, 0x1FFFFFFF).map(lambda i: can.Message(arbitration_id=i, data=b"", is_extended_id=True))
     bad_state = st.integers(4, 255).map(lambda s: can.Message(arbitration_id=NODE << 5 | 7, is_extended_id=False,
                                                               data=bytes([s]) + bytes(6)))
-    return st.one_of(wrong_dlc, unknown_cmd, out_of_range, nan_payload, other_node, extended, bad_state)
+    return st.one_of(wrong_dlc, unknown_cmd, out_of_range, nan_payload, foreign_remote, extended, bad_state)
 
 
 def _random_frames() -> st.SearchStrategy[can.Message]:
@@ -169,6 +180,12 @@ def _random_frames() -> st.SearchStrategy[can.Message]:
         arbitration_id=i, data=d, is_extended_id=False, is_remote_frame=remote,
         dlc=(len(d) + 1) % 9 if dlc_lie else len(d), check=False),
         ids, st.one_of(st.binary(max_size=8), nan_bytes), st.booleans(), st.booleans())
+
+
+def _addressed_to_another_node(msg: can.Message) -> bool:
+    """The test's own statement of the acceptance filter: a classic data frame with a DBC command id of node 2..63."""
+    plain = not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd)
+    return plain and 2 <= msg.arbitration_id >> 5 <= 63 and msg.arbitration_id & 0x1F in DLC_OF_CMD
 
 
 @pytest.fixture(scope="module")
@@ -200,13 +217,43 @@ def test_malformed_frames_rejected_and_counted(idle_node: PlantNode, msg: can.Me
 @given(msg=_random_frames())
 def test_random_frames_never_crash_and_count_exactly_the_rejects(idle_node: PlantNode, oracle: SeaCodec,
                                                                 msg: can.Message) -> None:
-    before = _rejected(idle_node)
+    before, foreign_before = _rejected(idle_node), idle_node.stats.foreign_frames
+    foreign = _addressed_to_another_node(msg)
     try:
         expected = 0 if isinstance(oracle.decode(msg), ClearErrors) else before  # CLEAR_ERRORS resets the count
     except MalformedFrame:
-        expected = before + 1
+        expected = before if foreign else before + 1
     idle_node._on_message(msg, time.monotonic_ns())
     assert _rejected(idle_node) == expected
+    assert idle_node.stats.foreign_frames == foreign_before + foreign
+
+
+@settings(max_examples=300, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture])
+@given(node_id=st.integers(2, 63), cmd=st.sampled_from(sorted(DLC_OF_CMD)), data=st.binary(max_size=8))
+def test_frames_for_other_node_ids_are_ignored_not_rejected(idle_node: PlantNode, node_id: int, cmd: int,
+                                                            data: bytes) -> None:
+    """Whatever the payload: the id names another driver's command/feedback, so firmware never looks at it."""
+    drv = idle_node.drivers[NODE]
+    before, flags, state, foreign = _rejected(idle_node), drv.flags, drv.state, idle_node.stats.foreign_frames
+    idle_node._on_message(can.Message(arbitration_id=node_id << 5 | cmd, data=data, is_extended_id=False), 0)
+    assert (_rejected(idle_node), drv.flags, drv.state) == (before, flags, state)
+    assert idle_node.stats.foreign_frames == foreign + 1
+
+
+def test_two_drivers_on_one_bus_ignore_each_other() -> None:
+    """Node 1 is commanded until RUNNING; node 2 sees those commands and node 1's feedback and heartbeats."""
+    other = NODE + 1
+    with running_plants(load_config(overrides=FAST_RT), ((NODE,), (other,)), lockstep=False) as (nodes, peer):
+        def command(frame: Any) -> None:
+            if isinstance(frame, FeedbackAngle) and frame.node_id == NODE:
+                peer.send(VoltageCmd(NODE, (1.0, 0.0), frame.seq))
+        peer.wait_for(lambda f: is_hb(DriverState.RUNNING)(f) and f.node_id == NODE, timeout_s=5.0, on_frame=command)
+        hb = peer.wait_for(lambda f: isinstance(f, Heartbeat) and f.node_id == other, timeout_s=5.0,
+                           on_frame=command)
+        assert hb.rejected_frames == 0 and ErrorFlags.BAD_FRAME not in hb.flags and hb.state is DriverState.INIT
+    one, two = nodes
+    assert two.drivers[other].counters.rejected_frames == 0 and one.drivers[NODE].counters.rejected_frames == 0
+    assert two.stats.foreign_frames > 0 and one.stats.foreign_frames > 0   # each saw the other's traffic
 
 
 def test_node_still_accepts_commands_after_garbage(idle_node: PlantNode) -> None:

@@ -1,18 +1,24 @@
-"""The out-of-process MCAP writer: same file content as the in-process path, child death and parent death."""
+"""The out-of-process MCAP writer: same file content as the in-process path, child death and parent death; the CAN
+counters (rejects, frames missed by seq gaps) both paths put into the final stats."""
 from __future__ import annotations
 
+import threading
+import time
+import uuid
+from collections.abc import Callable
 from pathlib import Path
 
 import can
 import pytest
 
 from protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from protocol.canbus import open_bus
 from protocol.config import load_config
 from protocol.errors import RecordingError
 from protocol.recorder_node import RecorderNode
 from protocol.recorder_process import RecorderProcess
 from protocol.recording import META_FINAL, SessionRecorder, read_session
-from protocol.recording_can import RawFrame, can_records
+from protocol.recording_can import CanTap, RawFrame, SeqGapCounter, can_records
 
 CFG = load_config().record
 CAN_TOPICS = ("/can/raw", "/can/feedback", "/can/command")
@@ -101,3 +107,77 @@ def test_parent_going_away_still_finalises_the_file(tmp_path: Path) -> None:
     data = read_session(tmp_path / "eof.mcap")
     assert data.complete and data.metadata[META_FINAL]["closed_by"] == "eof"
     assert len(data.messages["/can/command"]) == 1
+
+
+def test_seq_gap_counter_counts_forward_gaps_per_id_only() -> None:
+    gaps = SeqGapCounter()
+    assert [gaps.feed(0x21, q) for q in (7, 8, 8, 11, 12)] == [0, 0, 0, 2, 0]     # a repeat is no gap
+    assert [gaps.feed(0x41, q) for q in (100, 101)] == [0, 0]                     # another id: its own count
+    assert [gaps.feed(0x21, q) for q in (254, 255, 1)] == [241, 0, 1]             # 12 -> 254; wraps 255 -> 0 -> 1
+    assert gaps.missed == 2 + 241 + 1
+
+
+def _voltage_frames(seqs: list[int], node_id: int = 1) -> list[RawFrame]:
+    codec = SeaCodec()
+    return [RawFrame.of(1_000 + i, codec.encode(VoltageCmd(node_id, (0.5, 0.0), q))) for i, q in enumerate(seqs)]
+
+
+def test_can_tap_counts_frames_rejects_and_missed_feedback_and_commands() -> None:
+    codec, tap = SeaCodec(), CanTap()
+    fb = [RawFrame.of(i, m) for i, q in enumerate((3, 4, 6))
+          for m in codec.encode_feedback(Feedback(1, q, q, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)))]
+    for f in [*fb, *_voltage_frames([3, 4, 4, 9]), RawFrame(9, 0x3F, 0, b"")]:   # + one unknown id
+        tap.records(f)
+    feedback_missed = 3 * 1   # seq 5 of each of the 3 feedback frame ids
+    voltage_missed = 4        # seq 5..8
+    assert tap.counters() == {"can_frames": len(fb) + 5, "can_rejected": 1,
+                              "can_frames_missed": feedback_missed + voltage_missed}
+
+
+def test_missed_frames_reach_the_final_stats_in_both_recorder_paths(tmp_path: Path) -> None:
+    frames = _voltage_frames([0, 1, 2, 5, 6, 10])   # 2 + 3 missed
+    proc = RecorderProcess(tmp_path / "p.mcap", CFG)
+    node = RecorderNode(proc, None, "sea")
+    for f in frames:
+        proc.submit_can(f)
+    proc.close(final_stats=node.counters())
+    assert read_session(tmp_path / "p.mcap").metadata[META_FINAL]["can_frames_missed"] == "5"
+    with SessionRecorder.from_config(tmp_path / "i.mcap", CFG) as rec:
+        node = RecorderNode(rec, None, "sea")
+        for f in frames:
+            node.on_can(can.Message(timestamp=f.t_ns * 1e-9, arbitration_id=f.can_id, data=f.data,
+                                    is_extended_id=False))
+        counters = node.counters()
+    assert (counters["can_frames"], counters["can_rejected"], counters["can_frames_missed"]) == (6, 0, 5)
+
+
+def test_stopping_tap_records_what_is_still_queued(tmp_path: Path) -> None:
+    """The tap pauses between batches (`tap_batch_s`); frames queued during the pause are recorded on stop."""
+    channel = f"virtual:rec-stop-{uuid.uuid4().hex[:8]}"
+    tap_bus, sender = open_bus(channel), open_bus(channel)
+    frames = _voltage_frames(list(range(11)))
+    try:
+        with SessionRecorder.from_config(tmp_path / "s.mcap", CFG) as rec:
+            node = RecorderNode(rec, None, "sea", tap_bus, tap_batch_s=60.0)
+            node.start()
+            try:
+                sender.send(can.Message(arbitration_id=frames[0].can_id, data=frames[0].data, is_extended_id=False))
+                assert _wait(lambda: node.tap.frames == 1, timeout_s=10.0)   # now pausing for 60 s
+                for f in frames[1:]:
+                    sender.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=False))
+            finally:
+                node.stop()
+            counters = node.counters()
+    finally:
+        tap_bus.shutdown()
+        sender.shutdown()
+    assert (counters["can_frames"], counters["can_frames_missed"], counters["can_tap_unfinished"]) == (11, 0, 0)
+
+
+def _wait(cond: Callable[[], bool], timeout_s: float) -> bool:
+    deadline, tick = time.monotonic() + timeout_s, threading.Event()
+    while not cond():
+        if time.monotonic() > deadline:
+            return False
+        tick.wait(0.002)
+    return True

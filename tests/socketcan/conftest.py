@@ -9,7 +9,8 @@ host without CAN support run them through User Mode Linux: ``scripts/with-vcan -
 - ``cansend(frame)`` -> runs ``cansend <channel> <frame>`` (can-utils syntax, e.g. "123#DEADBEEF");
 - ``start_candump(*args)`` -> a running ``candump -L`` (:class:`CanDump`), ended at teardown;
 - ``netns(prefix)`` -> name of a fresh network namespace, deleted at teardown (root only);
-- ``require_netem`` -> skips unless a netem qdisc can be added in a fresh namespace.
+- ``require_netem`` -> skips unless a netem qdisc can be added in a fresh namespace;
+- ``veth_namespaces`` -> (server, client) namespaces joined by a veth pair (``netns_helpers.veth_pair``).
 """
 from __future__ import annotations
 
@@ -22,6 +23,7 @@ from pathlib import Path
 
 import can
 import pytest
+from netns_helpers import run, veth_pair
 from socketcan_helpers import PROCESS_TIMEOUT_S, CanDump, interface_is_up
 
 HERE = Path(__file__).resolve().parent
@@ -101,12 +103,6 @@ def start_candump(vcan_channel: str) -> Iterator[Callable[..., CanDump]]:
         dump.stop()
 
 
-def run_ip(*args: str) -> subprocess.CompletedProcess[str]:
-    """Run an iproute2 ``ip``/``tc`` command line (first arg is the tool), raising on failure."""
-    return subprocess.run(list(args), check=True, stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                          timeout=PROCESS_TIMEOUT_S)
-
-
 @pytest.fixture
 def netns() -> Iterator[Callable[[str], str]]:
     """Factory creating uniquely named network namespaces (``ip netns add``); deleted at teardown."""
@@ -115,7 +111,7 @@ def netns() -> Iterator[Callable[[str], str]]:
 
     def _add(prefix: str) -> str:
         name = f"{prefix}-{uuid.uuid4().hex[:8]}"
-        run_ip("ip", "netns", "add", name)
+        run("ip", "netns", "add", name)
         names.append(name)
         return name
 
@@ -134,3 +130,10 @@ def require_netem() -> None:
                             capture_output=True, text=True, timeout=PROCESS_TIMEOUT_S)
     if result.returncode != 0:
         pytest.skip(f"netem unavailable here: {result.stderr.strip() or result.returncode}")
+
+
+@pytest.fixture
+def veth_namespaces(require_netem: None, netns: Callable[[str], str]) -> tuple[str, str]:
+    """(server namespace, client namespace) joined by veth ``v0``/``v1`` with addresses and links up."""
+    del require_netem
+    return veth_pair(netns)

@@ -8,6 +8,7 @@ to keep guest time small; the slice keeps the real gait's dynamics (only the dur
 """
 from __future__ import annotations
 
+import signal
 import subprocess
 import sys
 import time
@@ -16,6 +17,8 @@ from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
+
+from sea_hil.processes import end_process
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE_STEP_S = 0.005        # CSV resolution of the gait slice (spline-interpolated by the controller)
@@ -73,15 +76,10 @@ class NodeGroup:
 
     def stop(self, name: str) -> int:
         """SIGTERM node ``name`` (a clean shutdown) and return its exit status; kill it if it does not exit."""
-        proc = self.procs[name]
-        if proc.poll() is None:
-            proc.terminate()
-        try:
-            return proc.wait(timeout=STOP_TIMEOUT_S)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-            raise AssertionError(f"{name} ignored SIGTERM for {STOP_TIMEOUT_S} s:\n{self.output(name)}") from None
+        status = end_process(self.procs[name], STOP_TIMEOUT_S)
+        if status == -signal.SIGKILL:
+            raise AssertionError(f"{name} ignored SIGTERM for {STOP_TIMEOUT_S} s:\n{self.output(name)}")
+        return status
 
     def output(self, name: str) -> str:
         """What node ``name`` printed so far."""
@@ -94,13 +92,7 @@ class NodeGroup:
     def close(self) -> None:
         """End and reap every process still running; close the log files."""
         for proc in self.procs.values():
-            if proc.poll() is None:
-                proc.terminate()
-                try:
-                    proc.wait(timeout=STOP_TIMEOUT_S)
-                except subprocess.TimeoutExpired:
-                    proc.kill()
-                    proc.wait()
+            end_process(proc, STOP_TIMEOUT_S)
         for log in self._logs:
             log.close()
 

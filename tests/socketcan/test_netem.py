@@ -10,25 +10,14 @@ import json
 import select
 import subprocess
 import sys
-from collections.abc import Callable
 from pathlib import Path
 
-import pytest
+from netns_helpers import SERVER_ADDR, run
 from socketcan_helpers import PROCESS_TIMEOUT_S
 
 UDP_ECHO = Path(__file__).resolve().parent / "udp_echo.py"
-SERVER_ADDR = "192.0.2.1"
-CLIENT_ADDR = "192.0.2.2"
 DELAY_MS = 20
 NS_PER_MS = 1_000_000
-
-
-def run(*args: str) -> None:
-    """Run a command, raising with its stderr on failure."""
-    result = subprocess.run(list(args), stdin=subprocess.DEVNULL, capture_output=True, text=True,
-                            timeout=PROCESS_TIMEOUT_S, check=False)
-    if result.returncode != 0:
-        raise AssertionError(f"{' '.join(args)} failed ({result.returncode}): {result.stderr.strip()}")
 
 
 def read_line(proc: subprocess.Popen[str], timeout_s: float) -> str:
@@ -57,19 +46,6 @@ def measure_rtts_ns(server_ns: str, client_ns: str, count: int) -> list[int]:
         if server.poll() is None:
             server.kill()
         server.communicate()
-
-
-@pytest.fixture
-def veth_namespaces(require_netem: None, netns: Callable[[str], str]) -> tuple[str, str]:
-    """(server namespace, client namespace) joined by veth ``v0``/``v1`` with addresses and links up."""
-    del require_netem
-    server_ns, client_ns = netns("seahil-srv"), netns("seahil-cli")
-    run("ip", "link", "add", "v0", "netns", server_ns, "type", "veth", "peer", "name", "v1", "netns", client_ns)
-    for ns, dev, addr in ((server_ns, "v0", SERVER_ADDR), (client_ns, "v1", CLIENT_ADDR)):
-        run("ip", "-n", ns, "addr", "add", f"{addr}/24", "dev", dev)
-        run("ip", "-n", ns, "link", "set", dev, "up")
-        run("ip", "-n", ns, "link", "set", "lo", "up")
-    return server_ns, client_ns
 
 
 def test_netem_delay_adds_to_udp_round_trip(veth_namespaces: tuple[str, str]) -> None:

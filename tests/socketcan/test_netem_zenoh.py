@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
-from test_netem import CLIENT_ADDR, SERVER_ADDR, run, veth_namespaces  # noqa: F401 - veth_namespaces: fixture reused
+from netns_helpers import CLIENT_ADDR, SERVER_ADDR, run
 
 DELAY_MS = 25
 DURATION_S = 1.0
@@ -25,7 +25,7 @@ US_PER_MS = 1000
 
 @pytest.fixture
 def delayed_namespaces(veth_namespaces: tuple[str, str]) -> tuple[str, str]:
-    """test_netem's veth pair (edge side 192.0.2.1, controller side 192.0.2.2) plus a vcan0 in the edge's
+    """conftest's veth pair (edge side 192.0.2.1, controller side 192.0.2.2) plus a vcan0 in the edge's
     namespace and netem delay on both veth ends -> (bus namespace, controller namespace)."""
     bus_ns, ctl_ns = veth_namespaces
     run("ip", "-n", bus_ns, "link", "add", "vcan0", "type", "vcan")
