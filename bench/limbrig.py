@@ -5,9 +5,9 @@ bus handle and its own Zenoh limb key. The remote side is a setpoint echo child 
 (so each edge keeps commanding; 100 setpoints/s per limb, the TT worst case). No recorder runs.
 
 The first `warmup_s` (Zenoh connection, first setpoint, frames queued meanwhile) are run but not counted.
-Edge timing comes from a thin bus wrapper (`TimedBus`): response = wall time of sending the VOLTAGE_CMD minus the
-python-can send timestamp (time.time()) of the limb's last feedback frame received before it (the one that
-completed the sample) -- bus queueing + wake-up + decode + inner loop + encode.
+Edge timing comes from the edge's own loop-time histogram (`EdgeNode.counters.loop`, `loop_overruns`): response =
+VOLTAGE_CMD sent minus the bus timestamp of the feedback frame that completed the sample (on the `virtual` bus: the
+driver's send time) -- bus queueing + wake-up + decode + inner loop + encode + send.
 """
 from __future__ import annotations
 
@@ -23,13 +23,11 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
-import can  # noqa: E402
 import zenoh  # noqa: E402
 
 from benchlib import stop_process, wait_ready  # noqa: E402
 from controller.edge import EdgeNode  # noqa: E402
 from plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
 from protocol.canbus import open_bus  # noqa: E402
 from protocol.config import SeaHilConfig, load_config  # noqa: E402
 from protocol.histogram import LogHistogram  # noqa: E402
@@ -37,36 +35,6 @@ from protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, Tr
 from protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 PREFIX = "sea"
-
-
-class TimedBus:
-    """Delegates to a python-can bus; records the response time of each VOLTAGE_CMD of `node_id` it sends."""
-
-    def __init__(self, bus: can.BusABC, node_id: int, period_s: float) -> None:
-        self._bus, self.node_id, self.period_s = bus, node_id, period_s
-        codec, zero = SeaCodec([node_id]), (0.0, 0.0)
-        self._cmd_id = codec.encode(VoltageCmd(node_id, zero, 0)).arbitration_id
-        sample = Feedback(node_id, 0, 0, zero, zero, zero, zero)
-        self._fb_ids = {m.arbitration_id for m in codec.encode_feedback(sample)}
-        self._last_ts: float | None = None
-        self.response = LogHistogram()
-        self.late = 0
-
-    def recv(self, timeout: float | None = None) -> can.Message | None:
-        msg = self._bus.recv(timeout=timeout)
-        if msg is not None and msg.arbitration_id in self._fb_ids:
-            self._last_ts = msg.timestamp
-        return msg
-
-    def send(self, msg: can.Message, timeout: float | None = None) -> None:
-        if msg.arbitration_id == self._cmd_id and self._last_ts is not None:
-            dt = time.time() - self._last_ts
-            self.response.record(max(dt, 1e-7))
-            self.late += dt > self.period_s
-        self._bus.send(msg, timeout=timeout)
-
-    def shutdown(self) -> None:
-        self._bus.shutdown()
 
 
 def feeder(endpoint: str) -> int:
@@ -126,12 +94,12 @@ def _limb_cfg(cfg: SeaHilConfig, n: int) -> SeaHilConfig:
     return cfg.model_copy(update={"zenoh": cfg.zenoh.model_copy(update={"prefix": PREFIX, "limb": f"limb{n}"})})
 
 
-def _reset(plant: PlantNode, buses: list[TimedBus], edges: list[EdgeNode]) -> tuple[int, int]:
-    """Forget the warm-up: fresh plant timing statistics and edge response histograms; returns the edges'
+def _reset(plant: PlantNode, edges: list[EdgeNode]) -> tuple[int, int]:
+    """Forget the warm-up: fresh plant timing statistics and edge loop-time histograms; returns the edges'
     (feedback, commands) counts so far, to be subtracted."""
     plant.lateness, plant.stats = LogHistogram(), TickStats()
-    for b in buses:
-        b.response, b.late = LogHistogram(), 0
+    for e in edges:
+        e.counters.loop, e.counters.loop_overruns = LogHistogram(), 0
     return sum(e.counters.feedback for e in edges), sum(e.counters.commands_sent for e in edges)
 
 
@@ -144,20 +112,20 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
     channel = f"virtual:bench-rig-{uuid.uuid4().hex}"
     ids = tuple(range(1, limbs + 1))
     plant_bus = open_bus(channel)
-    buses = [TimedBus(open_bus(channel), n, 1.0 / rate_hz) for n in ids]
+    buses = [open_bus(channel) for _ in ids]
     edges: list[EdgeNode] = []
     warm = (0, 0)
     threads: list[threading.Thread] = []
     try:
         wait_ready(proc)
         plant = PlantNode(cfg, plant_bus, ids)
-        edges = [EdgeNode(_limb_cfg(cfg, n), bus, session, n) for n, bus in zip(ids, buses)]  # type: ignore[arg-type]
+        edges = [EdgeNode(_limb_cfg(cfg, n), bus, session, n) for n, bus in zip(ids, buses)]
         threads = [threading.Thread(target=e.run, name=f"edge{e.node_id}", daemon=True) for e in edges]
         for t in threads:
             t.start()
         if warmup_s > 0:    # start-up (connections, first setpoint, queued frames) is not steady-state timing
             plant.run(warmup_s)
-            warm = _reset(plant, buses, edges)
+            warm = _reset(plant, edges)
         cpu0, t0 = time.process_time(), time.monotonic()
         plant.run(duration_s)   # the schedule restarts from now; driver state carries on
         wall_s, cpu_s = time.monotonic() - t0, time.process_time() - cpu0
@@ -174,12 +142,13 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
         for b in buses:
             b.shutdown()
     resp = LogHistogram()
-    for b in buses:
-        resp.merge(b.response)
+    for e in edges:
+        resp.merge(e.counters.loop)
     lat = plant.lateness
+    late = sum(e.counters.loop_overruns for e in edges)
     return RigResult(limbs, wall_s, cpu_s, plant.stats.ticks, plant.stats.overruns, lat.percentile(50) * 1e6,
                      lat.percentile(99) * 1e6, lat.max * 1e6, sum(e.counters.feedback for e in edges) - warm[0],
-                     sum(e.counters.commands_sent for e in edges) - warm[1], sum(b.late for b in buses),
+                     sum(e.counters.commands_sent for e in edges) - warm[1], late,
                      resp.percentile(50) * 1e6 if resp.count else -1.0,
                      resp.percentile(99) * 1e6 if resp.count else -1.0, resp.max * 1e6 if resp.count else -1.0)
 

@@ -5,8 +5,13 @@ Per feedback sample (three CAN frames assembled): publish the state to Zenoh eve
 emulator), take setpoints that have arrived (downlink link emulator), compute the voltage and send VOLTAGE_CMD.
 With `inner="remote"` the voltages come from the controller over Zenoh and are tunnelled to CAN as received (held).
 Link emulation runs here for both directions, clocked by the driver's sample time (1 ms resolution), so lockstep
-runs are deterministic. If no setpoint arrives for `setpoint_timeout_s` the edge stops commanding, so the driver's
-watchdog puts it into its safe state; when setpoints come back the edge clears the fault.
+runs are deterministic. In lockstep the edge waits for the controller's answer to a state from the sample at which
+the uplink emulator releases it (the plant steps on while it is in flight, as in real time), and a setpoint enters
+the downlink emulator at that sample: an answer to state k takes effect no earlier than k's sample time + uplink +
+downlink delay, in simulated time (`sim_latency_us_*`), at no cost in wall time. If no setpoint arrives for
+`setpoint_timeout_s` the edge stops commanding, so the driver's watchdog puts it into its safe state; when setpoints
+come back the edge clears the fault. `on_can` handles one received frame; per answered sample the loop time (frame
+received -> VOLTAGE_CMD sent) is kept in a histogram (`loop_us_*`, `loop_overruns` = longer than one period).
 """
 from __future__ import annotations
 
@@ -42,6 +47,7 @@ log = logging.getLogger("sea_hil.edge")
 class EdgeCounters:
     feedback: int = 0
     rejected_frames: int = 0
+    rejected_samples: int = 0            # feedback whose sample time does not advance (stale, clock reset)
     states_sent: int = 0
     state_bytes: int = 0
     setpoints: int = 0
@@ -52,9 +58,29 @@ class EdgeCounters:
     controller_restarts: int = 0
     bus_errors: int = 0
     clear_errors_sent: int = 0
-    lockstep_resends: int = 0
+    lockstep_resends: int = 0            # re-publishes after the controller first answered
+    lockstep_startup_resends: int = 0    # re-publishes before its first ACK (controller starting)
     commands_sent: int = 0
-    latency: LogHistogram = field(default_factory=LogHistogram)
+    latency: LogHistogram = field(default_factory=LogHistogram)      # wall clock: state published -> applied
+    sim_latency: LogHistogram = field(default_factory=LogHistogram)  # sample time: state sampled -> applied
+    loop: LogHistogram = field(default_factory=LogHistogram)         # feedback received -> VOLTAGE_CMD sent
+    loop_overruns: int = 0                                           # loop time > one feedback period
+    uplink_out_of_order: int = 0                                     # lockstep: released after a newer state
+
+
+def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int, *,
+                    max_age_ns: int = 10**10) -> int:
+    """The monotonic time at which a frame stamped `frame_timestamp_s` (python-can: wall clock, set by the sender on
+    the virtual bus, by the kernel on SocketCAN) arrived, so queueing and wake-up count in the loop time; `mono_now_ns`
+    when the stamp is missing or implausible (in the future or older than `max_age_ns`)."""
+    age_ns = wall_now_ns - int(frame_timestamp_s * 1e9)
+    return mono_now_ns - age_ns if 0 <= age_ns <= max_age_ns else mono_now_ns
+
+
+def _percentiles_us(name: str, h: LogHistogram, keys: tuple[str, ...]) -> dict[str, float]:
+    """`{name}_us_{key}` in microseconds (-1 when empty) for keys of `LogHistogram.to_dict` (min, p50, p99, max)."""
+    d = h.to_dict()
+    return {f"{name}_us_{k}": float(d[k]) * 1e6 if d[k] is not None else -1.0 for k in keys}
 
 
 class EdgeNode:
@@ -89,7 +115,10 @@ class EdgeNode:
         self._t_us_full = 0
         self._sample_t_ns = 0
         self._state_seq = 0
-        self._sent_at: dict[int, int] = {}
+        self._sent_at: dict[int, int] = {}           # state seq -> wall time published
+        self._sampled_at: dict[int, int] = {}        # state seq -> sample time
+        self._in_flight: DelayQueue[tuple[int, bytes]] = DelayQueue()   # lockstep: states held by the uplink link
+        self._newest_released = 0
         self._last_setpoint_ns: int | None = None
         self._last_rx_ns = 0          # sample time of the newest accepted setpoint/voltage
         self._voltage: tuple[float, float] | None = None
@@ -110,20 +139,24 @@ class EdgeNode:
                 log.warning("CAN receive failed: %s", err)
                 self.stop_event.wait(0.05)
                 continue
-            if msg is None:
-                continue
-            try:
-                frame = self.codec.decode(msg)
-            except MalformedFrame as err:
-                self.counters.rejected_frames += 1
-                log.debug("ignored frame: %s", err)
-                continue
-            if isinstance(frame, Heartbeat):
-                self._driver_state = frame.state
-            elif isinstance(frame, FEEDBACK_PARTS):
-                fb = self.assembler.push(frame)
-                if fb is not None:
-                    self._on_feedback(fb)
+            if msg is not None:
+                self.on_can(msg, rx_monotonic_ns(msg.timestamp, time.monotonic_ns(), time.time_ns()))
+
+    def on_can(self, msg: can.Message, now_ns: int) -> None:
+        """Handle one received CAN frame (`now_ns`: its monotonic receive time, the start of the loop time of the
+        sample it completes). Malformed frames are counted (`rejected_frames`), logged and ignored."""
+        try:
+            frame = self.codec.decode(msg)
+        except MalformedFrame as err:
+            self.counters.rejected_frames += 1
+            log.debug("ignored frame: %s", err)
+            return
+        if isinstance(frame, Heartbeat):
+            self._driver_state = frame.state
+        elif isinstance(frame, FEEDBACK_PARTS):
+            fb = self.assembler.push(frame)
+            if fb is not None:
+                self._on_feedback(fb, now_ns)
 
     def _send(self, msg: can.Message) -> None:
         try:
@@ -132,19 +165,26 @@ class EdgeNode:
             self.counters.bus_errors += 1
             log.warning("%s", err)
 
-    def _on_feedback(self, fb: Feedback) -> None:
+    def _on_feedback(self, fb: Feedback, rx_ns: int) -> None:
         if self.lockstep and fb.seq == self._last_fb_seq and self._last_cmd is not None:
             self._send(self._last_cmd)      # the driver re-sent a sample we already answered
             return
+        t_us_full = unwrap_us(self._t_us_full, fb.t_us) if self.counters.feedback else fb.t_us
+        if self.counters.feedback and t_us_full <= self._t_us_full:   # sample time must advance
+            self.counters.rejected_samples += 1
+            log.debug("ignored feedback seq %d: sample time %d us not after %d us", fb.seq, t_us_full,
+                      self._t_us_full)
+            return
         self._last_fb_seq = fb.seq
         self.counters.feedback += 1
-        self._t_us_full = fb.t_us if self.counters.feedback == 1 else unwrap_us(self._t_us_full, fb.t_us)
+        self._t_us_full = t_us_full
         now = self._sample_t_ns = self._t_us_full * 1000
         k = round(now / self.period_ns)
         if k % self.outer_every == 0:
             self._publish_state(fb, now)
         self.uplink.poll(now)
         if self.lockstep:
+            self._await_released(now)
             self._wait_for_controller()
         self._take_downlink(now)
         u = self._command(fb, now)
@@ -153,6 +193,9 @@ class EdgeNode:
         self._last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
         self._send(self._last_cmd)
         self.counters.commands_sent += 1
+        loop_ns = time.monotonic_ns() - rx_ns
+        self.counters.loop.record(max(loop_ns, 0) * 1e-9)
+        self.counters.loop_overruns += loop_ns > self.period_ns
 
     def _command(self, fb: Feedback, now: int) -> tuple[float, float] | None:
         fresh = self._last_setpoint_ns is not None and now - self._last_setpoint_ns <= self.timeout_ns
@@ -175,11 +218,26 @@ class EdgeNode:
                                    fb.nut_vel_m_s))
         self._sent_at[self._state_seq] = t
         self._sent_at.pop(self._state_seq - 1000, None)
-        if self.uplink.put(data, sample_t_ns) is not None:
+        self._sampled_at[self._state_seq] = sample_t_ns
+        self._sampled_at.pop(self._state_seq - 1000, None)
+        at = self.uplink.put(data, sample_t_ns)
+        if at is not None:      # None: lost on the emulated link, never awaited
             self.counters.states_sent += 1
             self.counters.state_bytes += len(data)
             if self.lockstep:
-                self._awaiting[self._state_seq] = data
+                self._in_flight.push(at, (self._state_seq, data))
+
+    def _await_released(self, now: int) -> None:
+        """Lockstep: the states the uplink emulator has released by sample time `now` (published by `poll`) are
+        the ones the controller must answer before time advances; a state held back by the emulated delay is not
+        waited for (the plant runs on meanwhile, as in real time). A state released after a newer one is ignored
+        by the controller (as in real time), so it is not awaited but counted (`uplink_out_of_order`)."""
+        for seq, data in self._in_flight.pop_due(now):
+            if seq <= self._newest_released:
+                self.counters.uplink_out_of_order += 1
+                continue
+            self._newest_released = seq
+            self._awaiting[seq] = data
 
     def _wait_for_controller(self) -> None:
         """Lockstep: block until every state published this step is acknowledged (and its setpoint received)."""
@@ -195,9 +253,12 @@ class EdgeNode:
             if progressed:
                 last_progress = now
             elif now - last_progress > self.resend_ns:
-                for data in self._awaiting.values():
-                    self.uplink._pub.put(data)  # same seq: the controller answers duplicates idempotently
-                self.counters.lockstep_resends += 1
+                for data in self._awaiting.values():    # already through the emulator: straight to the wire
+                    self.uplink.republish(data)  # same seq: the controller answers duplicates idempotently
+                if self._acks:
+                    self.counters.lockstep_resends += 1
+                else:   # no ACK yet at all: the controller is still starting up
+                    self.counters.lockstep_startup_resends += 1
                 last_progress = now
             else:
                 try:
@@ -275,6 +336,9 @@ class EdgeNode:
             sent = self._sent_at.get(p.state_seq)   # type: ignore[attr-defined]
             if sent is not None:
                 self.counters.latency.record(max(t - sent, 1000) * 1e-9)
+            sampled = self._sampled_at.get(p.state_seq)   # type: ignore[attr-defined]
+            if sampled is not None:
+                self.counters.sim_latency.record((now - sampled) * 1e-9)
             self._last_setpoint_ns = now
             if isinstance(p, SetpointPayload):
                 self.inner.hold(p.deflection_m, p.sliding)
@@ -291,9 +355,11 @@ class EdgeNode:
         up, down = self.uplink.link.counters(), self.downlink.counters()
         out: dict[str, float] = {
             "node_id": self.node_id, "feedback_samples": c.feedback, "rejected_frames": c.rejected_frames,
+            "rejected_samples": c.rejected_samples,
             "uplink_msgs": c.states_sent, "uplink_bytes": c.state_bytes, "downlink_applied": c.setpoints,
             "voltage_msgs_applied": c.voltages, "stale_setpoints": c.stale_setpoints,
             "clear_errors_sent": c.clear_errors_sent, "lockstep_resends": c.lockstep_resends,
+            "lockstep_startup_resends": c.lockstep_startup_resends,
             "commands_sent": c.commands_sent, "payload_rejected": self.payloads.as_dict()["rejected_total"],
             "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
             "bus_errors": c.bus_errors,
@@ -306,6 +372,10 @@ class EdgeNode:
         for k in ("p50", "p90", "p99", "max", "min", "mean"):
             v = lat.get(k)
             out[f"latency_{k}_us"] = (v * 1e6) if v is not None else -1.0
+        out.update(_percentiles_us("sim_latency", c.sim_latency, ("min", "p50", "max")),
+                   **_percentiles_us("loop", c.loop, ("p50", "p99", "max")),
+                   loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
+                   uplink_pending=self.uplink.pending)
         return out
 
     def publish_stats(self, final: bool = False) -> None:

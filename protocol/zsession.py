@@ -172,6 +172,10 @@ class LinkedPublisher:
     def next_due_ns(self) -> int | None:
         return self._queue.next_due_ns()
 
+    def republish(self, data: bytes) -> None:
+        """Publish `data` again at once, bypassing the emulator (a re-send of a message it already delivered)."""
+        self._publish(data)
+
     @property
     def pending(self) -> int:
         return len(self._queue)

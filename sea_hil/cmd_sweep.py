@@ -25,9 +25,9 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--delay-ms", default="0,10", help="link delay values [ms] (default %(default)s)")
     p.add_argument("--jitter-ms", default="0", help="link jitter values [ms] (default %(default)s)")
     p.add_argument("--loss", default="0", help="link loss probabilities in [0, 1] (default %(default)s)")
-    p.add_argument("--link", choices=DIRECTIONS, default="downlink",
-                   help="which direction(s) the link condition impairs (default %(default)s: setpoints; uplink "
-                        "delay/jitter stalls lockstep at the edge, see docs/sweep.md)")
+    p.add_argument("--link", choices=DIRECTIONS, default="both",
+                   help="which direction(s) the link condition impairs (default %(default)s: states up and "
+                        "setpoints down, each with the full delay/jitter/loss)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="points run in parallel (default: CPUs)")
     p.add_argument("--cycles", type=int, default=1, help="walking cycles per point (default %(default)s)")
     p.add_argument("--seed", type=int, help="seed for every point's RNGs (same for all points: paired comparison)")

@@ -1,21 +1,29 @@
-"""Fuzzing the driver node's CAN frame handler (`PlantNode._on_message`) with 10,000 hypothesis-generated frames:
-malformed by construction (unknown command, wrong DLC, reserved bits, NaN/out-of-range values, bad enums,
-extended/remote/error/FD frames) mixed with arbitrary frames. The node never raises, each malformed frame is counted
-once in the driver's counters and heartbeat (BAD_FRAME flag), and a valid command afterwards is still obeyed."""
+"""Fuzzing the CAN frame handlers of the driver node (`PlantNode._on_message`) and the edge (`EdgeNode.on_can`)
+with hypothesis-generated frames: malformed by construction (unknown command, wrong DLC, reserved bits,
+NaN/out-of-range values, bad enums, extended/remote/error/FD frames) mixed with arbitrary frames and, for the edge,
+valid feedback samples with extreme values, out-of-order or partial. The node never raises, each malformed frame is
+counted once (driver: counters and heartbeat BAD_FRAME flag; edge: `rejected_frames`), and a valid command /
+feedback afterwards is still handled."""
 from __future__ import annotations
 
 import struct
 import uuid
 
+import time
+from collections.abc import Callable
+
 import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from controller.edge import EdgeNode
 from plant_emulator.node import PlantNode
-from protocol.can_codec import ClearErrors, DriverState, ErrorFlags, SeaCodec, VoltageCmd
+from protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Feedback, SeaCodec, VoltageCmd, load_database
 from protocol.canbus import open_bus
 from protocol.config import load_config
 from protocol.errors import MalformedFrame
+from protocol.payloads import SetpointPayload, TriggerReason, encode
+from protocol.zsession import make_config, open_session
 
 CASES = 10_000
 NODE = 1
@@ -42,12 +50,19 @@ def frames(draw: st.DrawFn) -> can.Message:
                        is_remote_frame=flag == "remote", is_error_frame=flag == "error", is_fd=flag == "fd")
 
 
+def _for_another_driver(msg: can.Message, cmd_ids: frozenset[int]) -> bool:
+    """A classic data frame with a DBC command id of node 2..63: ignored like drive firmware's id filter does."""
+    plain = not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd)
+    return plain and 2 <= msg.arbitration_id >> 5 <= 63 and msg.arbitration_id & 0x1F in cmd_ids
+
+
 def test_driver_frame_handler_survives_counts_and_still_obeys() -> None:
     cfg = load_config()
     bus = open_bus(f"virtual:fuzzcan-{uuid.uuid4().hex[:8]}")
     node = PlantNode(cfg, bus, (NODE,))
     drv = node.drivers[NODE]
     oracle = SeaCodec([NODE])
+    cmd_ids = frozenset(m.frame_id & 0x1F for m in load_database().messages)
     seen = {"n": 0, "malformed": 0, "since_clear": 0, "t": 0}
     try:
         @settings(max_examples=CASES, deadline=None, database=None, derandomize=True,
@@ -61,6 +76,9 @@ def test_driver_frame_handler_survives_counts_and_still_obeys() -> None:
             try:
                 frame = oracle.decode(msg)
             except MalformedFrame:
+                if _for_another_driver(msg, cmd_ids):   # neither a reject nor a flag
+                    assert drv.counters.rejected_frames == before
+                    return
                 seen["malformed"] += 1
                 seen["since_clear"] += 1
                 assert drv.counters.rejected_frames == before + 1 and ErrorFlags.BAD_FRAME in drv.flags
@@ -79,3 +97,82 @@ def test_driver_frame_handler_survives_counts_and_still_obeys() -> None:
         print(f"\ndriver: {seen['n']} frames, {seen['malformed']} malformed and counted")
     finally:
         bus.shutdown()
+
+
+EDGE_CASES = 15_000
+_VALUES = st.floats(-1e30, 1e30, allow_nan=False) | st.sampled_from([0.0, 1e-3, -0.5, 3.0, 1e6])
+_PAIRS = st.tuples(_VALUES, _VALUES)
+
+
+@st.composite
+def edge_input(draw: st.DrawFn, codec: SeaCodec, edge_t_us: Callable[[], int]) -> list[can.Message]:
+    """Mostly one `frames()` frame; otherwise a feedback sample (saturated into the DBC ranges, any seq; its time
+    any t_us or, mostly, up to 20 ms after the edge's newest sample) whose frames come shuffled, partial or with
+    one corrupted."""
+    if draw(st.integers(0, 7)) > 0:
+        return [draw(frames())]
+    t_us = draw(st.integers(0, 0xFFFF)) if draw(st.integers(0, 3)) == 0 else edge_t_us() + draw(st.integers(1, 20_000))
+    fb = Feedback(NODE, draw(st.integers(0, 255)), t_us & 0xFFFF, draw(_PAIRS), draw(_PAIRS), draw(_PAIRS),
+                  draw(_PAIRS))
+    msgs = draw(st.permutations(codec.encode_feedback(fb, saturate=True)))
+    msgs = msgs[:draw(st.sampled_from((1, 2, 3, 3, 3, 3)))]
+    if draw(st.integers(0, 2)) == 0:
+        i = draw(st.integers(0, len(msgs) - 1))
+        msgs[i] = can.Message(arbitration_id=msgs[i].arbitration_id, is_extended_id=False,
+                              data=draw(st.binary(max_size=8)))
+    return msgs
+
+
+def _fresh_setpoint(edge: EdgeNode) -> None:
+    seq = (edge.sp_seq.last or 0) + 1
+    assert edge.on_downlink(encode(SetpointPayload(seq, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME)))
+
+
+def test_edge_frame_handler_survives_counts_and_still_commands() -> None:
+    cfg = load_config()
+    channel = f"virtual:fuzzedge-{uuid.uuid4().hex[:8]}"
+    bus, peer = open_bus(channel), open_bus(channel)
+    session = open_session(make_config())
+    edge = EdgeNode(cfg, bus, session, NODE)
+    oracle = SeaCodec([NODE])
+    seen = {"frames": 0, "malformed": 0, "samples": 0}
+    try:
+        _fresh_setpoint(edge)
+
+        @settings(max_examples=EDGE_CASES, deadline=None, database=None, derandomize=True,
+                  suppress_health_check=[HealthCheck.too_slow])
+        @given(msgs=edge_input(oracle, lambda: edge._t_us_full))
+        def run(msgs: list[can.Message]) -> None:
+            for msg in msgs:
+                before, samples = edge.counters.rejected_frames, edge.counters.feedback
+                edge.on_can(msg, time.monotonic_ns())
+                seen["frames"] += 1
+                seen["samples"] += edge.counters.feedback - samples
+                try:
+                    oracle.decode(msg)
+                except MalformedFrame:
+                    seen["malformed"] += 1
+                    assert edge.counters.rejected_frames == before + 1
+                    continue
+                assert edge.counters.rejected_frames == before
+        run()
+        stats = edge.stats_dict()
+        assert seen["malformed"] >= 10_000 and stats["rejected_frames"] == seen["malformed"]
+        assert seen["samples"] > 100 and stats["feedback_samples"] == seen["samples"]
+        _fresh_setpoint(edge)
+        while peer.recv(0) is not None:     # forget what the fuzzing made the edge send
+            pass
+        last = edge.counters.feedback
+        t_us = (edge._t_us_full + 1000) & 0xFFFF   # the sample after the newest one seen
+        for msg in oracle.encode_feedback(Feedback(NODE, 200, t_us, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))):
+            edge.on_can(msg, time.monotonic_ns())
+        assert edge.counters.feedback == last + 1
+        cmds = [f for f in (oracle.decode(m) for m in iter(lambda: peer.recv(0), None)) if isinstance(f, VoltageCmd)]
+        assert [c.seq for c in cmds] == [200]
+        print(f"\nedge: {seen['frames']} frames, {seen['malformed']} malformed and counted, "
+              f"{seen['samples']} feedback samples handled, {stats['commands_sent']} commands")
+    finally:
+        edge.close()
+        session.close()
+        bus.shutdown()
+        peer.shutdown()

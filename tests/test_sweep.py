@@ -192,7 +192,7 @@ def test_two_point_lockstep_sweep_writes_csv_figure_and_md(tmp_path):
         assert float(r["max_err_rad"]) == max(summary["tracking"]["max_abs_error_rad"])
         assert float(r["latency_p99_us"]) > 0
     link = tomllib.loads((out / "points" / rows[1]["point"] / "config.toml").read_text())["link"]
-    assert (link["downlink"]["delay_s"], link["uplink"]["delay_s"]) == (0.005, 0.0)   # default --link downlink
+    assert (link["downlink"]["delay_s"], link["uplink"]["delay_s"]) == (0.005, 0.005)   # default --link both
     assert (out / "pareto.png").stat().st_size > 10_000 and "## Pareto front" in (out / "sweep.md").read_text()
     assert proc.stderr.count("ETA") == 2
 
