@@ -228,11 +228,11 @@ class EdgeNode:
 
     def _to_inbox(self, is_ack: bool) -> Callable[[zenoh.Sample], None]:
         put = self._inbox.put
-        return lambda s: put((is_ack, s.payload.to_bytes()))
+        return lambda s: put((is_ack, s.payload.to_bytes(), time.monotonic_ns()))
 
-    def _dispatch(self, item: tuple[bool, bytes]) -> bool:
-        is_ack, data = item
-        return self.on_ack(data) if is_ack else self.on_downlink(data)
+    def _dispatch(self, item: tuple[bool, bytes, int]) -> bool:
+        is_ack, data, rx_ns = item
+        return self.on_ack(data) if is_ack else self.on_downlink(data, rx_ns)
 
     def _drain_zenoh(self) -> bool:
         got = False
@@ -243,9 +243,11 @@ class EdgeNode:
                 return got
             got = self._dispatch(item) or got
 
-    def on_downlink(self, data: bytes) -> bool:
-        """Handle one setpoint/voltage payload from Zenoh: malformed (counted by reason) or wrong-type payloads and
-        stale/duplicated seqs (`stale_setpoints`) are dropped; True if it entered the downlink emulator."""
+    def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:
+        """Handle one setpoint/voltage payload from Zenoh (`rx_ns`: monotonic arrival time): malformed (counted by
+        reason) or wrong-type payloads and stale/duplicated seqs (`stale_setpoints`) are dropped; True if it entered
+        the downlink emulator. Closed-loop latency (`latency`) = arrival - publication of the state it answers, plus
+        the delay the downlink emulator adds."""
         p = self.payloads.try_decode(data)
         if p is None:
             return False
@@ -261,6 +263,9 @@ class EdgeNode:
         at = self.downlink.submit(self._sample_t_ns, len(data))
         if at is not None:
             self.pending_down.push(at, p)
+            sent = self._sent_at.get(p.state_seq)
+            if sent is not None and rx_ns is not None:
+                self.counters.latency.record((max(rx_ns - sent, 0) + max(at - self._sample_t_ns, 0)) * 1e-9)
         return True
 
     def _controller_restarted(self, seq: int) -> bool:
@@ -294,7 +299,7 @@ class EdgeNode:
             t = time.monotonic_ns()
             sent = self._sent_at.get(p.state_seq)   # type: ignore[attr-defined]
             if sent is not None:
-                self.counters.latency.record(max(t - sent, 1000) * 1e-9)
+                self.counters.apply_latency.record(max(t - sent, 1000) * 1e-9)
             sampled = self._sampled_at.get(p.state_seq)   # type: ignore[attr-defined]
             if sampled is not None:
                 self.counters.sim_latency.record((now - sampled) * 1e-9)
@@ -332,6 +337,7 @@ class EdgeNode:
             v = lat.get(k)
             out[f"latency_{k}_us"] = (v * 1e6) if v is not None else -1.0
         out.update(percentiles_us("sim_latency", c.sim_latency, ("min", "p50", "max")),
+                   **percentiles_us("apply_latency", c.apply_latency, ("p50", "p99", "max")),
                    **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
                    loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
                    uplink_pending=self.uplink.pending)

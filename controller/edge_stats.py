@@ -24,7 +24,8 @@ class EdgeCounters:
     lockstep_resends: int = 0            # re-publishes after the controller first answered
     lockstep_startup_resends: int = 0    # re-publishes before its first ACK (controller starting)
     commands_sent: int = 0
-    latency: LogHistogram = field(default_factory=LogHistogram)      # wall clock: state published -> applied
+    latency: LogHistogram = field(default_factory=LogHistogram)      # wall clock: state published -> answer arrived
+    apply_latency: LogHistogram = field(default_factory=LogHistogram)  # wall clock: state published -> answer applied
     sim_latency: LogHistogram = field(default_factory=LogHistogram)  # sample time: state sampled -> applied
     loop: LogHistogram = field(default_factory=LogHistogram)         # feedback received -> VOLTAGE_CMD sent
     loop_overruns: int = 0                                           # loop time > one feedback period
