@@ -4,6 +4,11 @@ Pure logic, no I/O: the node loop (`plant_emulator.node`) feeds it decoded frame
 INIT (powered, zero voltage) -> RUNNING on the first voltage command; RUNNING -> FAULT (WATCHDOG) when no command
 arrived for `watchdog_timeout_s`; any state -> ESTOP on an e-stop frame (latched). Only CLEAR_ERRORS leaves FAULT or
 ESTOP (back to INIT). In FAULT, ESTOP and INIT the motor voltage is zero.
+
+A voltage change takes effect when the frame arrives, as on a real drive: in real time the node sets
+`period_start_ns` (monotonic time of the sample the current period starts from, i.e. when its feedback was sent) and
+`step` integrates the period piecewise, the old voltage up to each change's arrival offset. With `period_start_ns`
+None (lockstep, unit tests) a change acts from the start of the period: the computation takes no simulated time.
 """
 from __future__ import annotations
 
@@ -43,6 +48,9 @@ class DriverCore:
     last_cmd_ns: int = 0
     seq: int = 0          # samples integrated so far
     counters: DriverCounters = field(default_factory=DriverCounters)
+    period_start_ns: int | None = None
+    _u_start: tuple[float, float] = (0.0, 0.0)                                  # voltage at the period start
+    _changes: list[tuple[int, tuple[float, float]]] = field(default_factory=list)  # (offset ns, voltage) this period
 
     @classmethod
     def create(cls, node_id: int, params: LimbParams, period_s: float, watchdog_s: float, substeps: int,
@@ -69,7 +77,7 @@ class DriverCore:
             u = (saturate(frame.voltage_v[0], limit), saturate(frame.voltage_v[1], limit))
             if u != tuple(frame.voltage_v):
                 self.flags |= ErrorFlags.SATURATED
-            self.voltage_v = u
+            self._set_voltage(u, now_ns)
             self.state = DriverState.RUNNING
             self.last_cmd_ns = now_ns
             self.counters.commands += 1
@@ -77,14 +85,14 @@ class DriverCore:
         if isinstance(frame, EStop):
             self.state = DriverState.ESTOP
             self.flags |= ErrorFlags.ESTOP
-            self.voltage_v = (0.0, 0.0)
+            self._set_voltage((0.0, 0.0), now_ns)
             return True
         if isinstance(frame, ClearErrors):
             if self.state in (DriverState.FAULT, DriverState.ESTOP):
                 self.state = DriverState.INIT
             self.flags = ErrorFlags(0)
             self.counters.rejected_frames = self.counters.overruns = 0  # DBC: counted since the last CLEAR_ERRORS
-            self.voltage_v = (0.0, 0.0)
+            self._set_voltage((0.0, 0.0), now_ns)
             return True
         if isinstance(frame, DeflectionSetpoint):
             # The inner loop runs on the edge in this firmware; the frame is defined for drives that host it.
@@ -101,14 +109,29 @@ class DriverCore:
         if self.state is DriverState.RUNNING and now_ns - self.last_cmd_ns > self.watchdog_ns:
             self.state = DriverState.FAULT
             self.flags |= ErrorFlags.WATCHDOG
-            self.voltage_v = (0.0, 0.0)
+            self._set_voltage((0.0, 0.0), now_ns)
             self.counters.watchdog_trips += 1
 
+    def _set_voltage(self, u: tuple[float, float], now_ns: int) -> None:
+        """The motor voltage becomes u at `now_ns` (its offset in the period; see the module docstring)."""
+        self.voltage_v = u
+        start = self.period_start_ns
+        offset = 0 if start is None else min(max(now_ns - start, 0), self.period_ns)
+        self._changes.append((offset, u))
+
     def step(self) -> Feedback:
-        """Integrate one period with the held voltage and return the feedback of the new sample."""
-        u = self.voltage_v if self.state is DriverState.RUNNING else (0.0, 0.0)
+        """Integrate one period (voltage held between the changes that arrived in it) and return the feedback of the
+        new sample. Without changes inside the period this is one `advance` over the whole period."""
         t_s = self.seq * self.period_ns * 1e-9
-        self.x = advance(t_s, self.x, u, self.period_ns * 1e-9, self.substeps, self.params, self.disturbance)
+        x, start, u = self.x, 0, self._u_start
+        for offset, new_u in (*self._changes, (self.period_ns, self.voltage_v)):
+            if offset > start:
+                n = max(1, -(-self.substeps * (offset - start) // self.period_ns))   # ceil: sub-steps no longer
+                x = advance(t_s + start * 1e-9, x, u, (offset - start) * 1e-9, n, self.params, self.disturbance)
+                start = offset
+            u = new_u
+        self.x = x
+        self._u_start, self._changes = self.voltage_v, []
         self.seq += 1
         return self.feedback()
 

@@ -1,10 +1,11 @@
 """The SEA driver node: owns a CAN bus, serves one or more limbs (node ids) with `DriverCore`, sends feedback on a
-drift-free schedule (absolute deadlines) and heartbeats. Malformed frames are rejected, counted and logged; well-formed ids of nodes it does not serve are
-ignored like drive firmware's acceptance filter does (`is_foreign`, counted in `TickStats.foreign_frames`).
+drift-free schedule (absolute deadlines) and heartbeats. Malformed frames are rejected, counted and logged;
+well-formed ids of nodes it does not serve are ignored like drive firmware's acceptance filter does (`is_foreign`,
+counted in `TickStats.foreign_frames`).
 
 Real-time mode: one tick per feedback period; waiting for the next deadline is done in `bus.recv(timeout)` so
-commands are handled as they arrive. Lateness of each tick is recorded; a tick later than one period is an overrun
-(the schedule skips ahead, never bunches up).
+commands are handled as they arrive and act from their arrival time within the period (`DriverCore`). Lateness of
+each tick is recorded; a tick later than one period is an overrun (the schedule skips ahead, never bunches up).
 Lockstep mode: the driver integrates sample k -> k+1 only once the voltage command answering feedback k (same 8-bit
 seq) has arrived for every node; the last feedback is re-sent every `resend_s` of wall time while waiting, so a peer
 that joins late or a lost frame does not stall the session.
@@ -126,6 +127,11 @@ class PlantNode:
         for m in msgs:
             self._send(m)
 
+    def _publish_sample(self, drv: DriverCore, feedback: Feedback) -> None:
+        """Real time: the new period starts when its sample's feedback leaves (commands act from their arrival)."""
+        drv.period_start_ns = time.monotonic_ns()
+        self._publish(drv, feedback)
+
     def _heartbeats(self) -> None:
         for drv in self.drivers.values():
             self._send(self.codec.encode(drv.heartbeat()))
@@ -154,7 +160,7 @@ class PlantNode:
         end = None if duration_s is None else start + int(duration_s * 1e9)
         for drv in self.drivers.values():
             drv.last_cmd_ns = start
-            self._publish(drv, drv.feedback())
+            self._publish_sample(drv, drv.feedback())
         k, next_heartbeat_k = 0, self.heartbeat_every
         while not self.stop_event.is_set():
             k += 1
@@ -171,7 +177,7 @@ class PlantNode:
                 if missed:
                     drv.note_overruns(missed)
                 drv.check_watchdog(now)
-                self._publish(drv, drv.step())
+                self._publish_sample(drv, drv.step())
             if k >= next_heartbeat_k:  # skipped ticks must not skip the heartbeat
                 self._heartbeats()
                 next_heartbeat_k = (k // self.heartbeat_every + 1) * self.heartbeat_every

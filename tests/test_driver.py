@@ -190,3 +190,50 @@ def test_clear_errors_resets_heartbeat_counters() -> None:
     core.handle(ClearErrors(NODE), 0)
     hb = core.heartbeat()
     assert (hb.rejected_frames, hb.overruns, hb.flags) == (0, 0, ErrorFlags(0))
+
+
+def test_real_time_command_acts_from_its_arrival_in_the_period() -> None:
+    """A real drive applies a voltage when the frame arrives: the period is integrated piecewise."""
+    cfg = load_config()
+    p = limb_params(cfg.plant)
+    core, ref = make_core(), make_core()
+    core.handle(cmd(1.0), 0)
+    ref.handle(cmd(1.0), 0)
+    core.step()
+    ref.step()
+    x = core.x
+    t0_ns = 7_000_000_000
+    core.period_start_ns = t0_ns
+    core.handle(cmd(-3.0, 2.0), t0_ns + PERIOD_NS // 4)   # arrives a quarter period in
+    fb = core.step()
+    t_s = PERIOD_NS * 1e-9
+    n1 = -(-cfg.sim.substeps // 4)                        # ceil(substeps / 4)
+    n2 = -(-cfg.sim.substeps * 3 // 4)
+    x = advance(t_s, x, (1.0, 0.0), t_s / 4, n1, p, _no_dist)
+    x = advance(t_s + t_s / 4, x, (-3.0, 2.0), t_s * 3 / 4, n2, p, _no_dist)
+    assert fb.theta_rad == pytest.approx((x[0], x[1]), abs=1e-12)
+    assert fb.omega_rad_s == pytest.approx((x[2], x[3]), abs=1e-10)
+    ref.handle(cmd(-3.0, 2.0), 0)                           # the same command from the period start differs
+    assert abs(ref.step().omega_rad_s[0] - fb.omega_rad_s[0]) > 1e-6
+    late = make_core()
+    late.period_start_ns = t0_ns
+    late.handle(cmd(5.0), t0_ns + 3 * PERIOD_NS)           # after the period: clamped to its end, acts next period
+    assert late.step().omega_rad_s == pytest.approx(make_core().step().omega_rad_s, abs=0.0)
+    assert late.voltage_v == (5.0, 0.0)
+
+
+def test_e_stop_acts_on_arrival_too() -> None:
+    cfg = load_config()
+    p = limb_params(cfg.plant)
+    core = make_core()
+    core.handle(cmd(4.0), 0)
+    core.step()
+    x = core.x
+    core.period_start_ns = 0
+    core.handle(EStop(NODE), PERIOD_NS // 2)
+    fb = core.step()
+    assert core.voltage_v == (0.0, 0.0) and core.state is DriverState.ESTOP
+    t_s, n = PERIOD_NS * 1e-9, -(-cfg.sim.substeps // 2)
+    x = advance(t_s, x, (4.0, 0.0), t_s / 2, n, p, _no_dist)      # 4 V until the e-stop arrived, then none
+    x = advance(t_s + t_s / 2, x, (0.0, 0.0), t_s / 2, n, p, _no_dist)
+    assert fb.omega_rad_s == pytest.approx((x[2], x[3]), abs=1e-10)
