@@ -10,7 +10,10 @@ the uplink emulator releases it (the plant steps on while it is in flight, as in
 the downlink emulator at that sample: an answer to state k takes effect no earlier than k's sample time + uplink +
 downlink delay, in simulated time (`sim_latency_us_*`), at no cost in wall time. If no setpoint arrives for
 `setpoint_timeout_s` the edge stops commanding, so the driver's watchdog puts it into its safe state; when setpoints
-come back the edge clears the fault. `on_can` handles one received frame; per answered sample the loop time (frame
+come back the edge clears the fault. In real time a setpoint (or tunnelled voltage) the downlink emulator releases at
+once is applied on arrival: the Zenoh callback recomputes the voltage from the newest feedback and sends an extra
+VOLTAGE_CMD (`arrival_commands`), instead of waiting up to a period for the next sample; a lock serialises it with
+the feedback path. `on_can` handles one received frame; per answered sample the loop time (frame
 received -> VOLTAGE_CMD sent) is kept in a histogram (`loop_us_*`, `loop_overruns` = longer than one period).
 """
 from __future__ import annotations
@@ -64,8 +67,9 @@ class EdgeNode:
         self.stats_pub = publisher(session, self.keys.stats, express=False)
         # one FIFO fed by callbacks (is_ack, payload): lockstep waits block on it instead of polling
         self._inbox: queue.SimpleQueue[tuple[bool, bytes]] = queue.SimpleQueue()
-        self.sp_sub = session.declare_subscriber(self.keys.setpoint, self._to_inbox(False))
-        self.v_sub = session.declare_subscriber(self.keys.voltage, self._to_inbox(False))
+        downlink_cb = self._to_inbox(False) if lockstep else self._on_arrival_sample
+        self.sp_sub = session.declare_subscriber(self.keys.setpoint, downlink_cb)
+        self.v_sub = session.declare_subscriber(self.keys.voltage, downlink_cb)
         self.ack_sub = session.declare_subscriber(self.keys.control, self._to_inbox(True))
         self.payloads = PayloadCounters()
         self.sp_seq = SequenceTracker()
@@ -87,6 +91,8 @@ class EdgeNode:
         self._acks: dict[int, AckPayload] = {}
         self._awaiting: dict[int, bytes] = {}
         self._seen_setpoints: set[int] = set()
+        self._lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
+        self._last_fb: Feedback | None = None
 
     # ---- CAN side -----------------------------------------------------------------------------------------------
     def run(self) -> None:
@@ -125,6 +131,10 @@ class EdgeNode:
             log.warning("%s", err)
 
     def _on_feedback(self, fb: Feedback, rx_ns: int) -> None:
+        with self._lock:
+            self._on_feedback_locked(fb, rx_ns)
+
+    def _on_feedback_locked(self, fb: Feedback, rx_ns: int) -> None:
         if self.lockstep and fb.seq == self._last_fb_seq and self._last_cmd is not None:
             self._send(self._last_cmd)      # the driver re-sent a sample we already answered
             return
@@ -135,6 +145,7 @@ class EdgeNode:
                       self._t_us_full)
             return
         self._last_fb_seq = fb.seq
+        self._last_fb = fb
         self.counters.feedback += 1
         self._t_us_full = t_us_full
         now = self._sample_t_ns = self._t_us_full * 1000
@@ -146,15 +157,21 @@ class EdgeNode:
             self._await_released(now)
             self._wait_for_controller()
         self._take_downlink(now)
-        u = self._command(fb, now)
-        if u is None:
+        if not self._send_command(fb, now):
             return
-        self._last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
-        self._send(self._last_cmd)
         self.counters.commands_sent += 1
         loop_ns = time.monotonic_ns() - rx_ns
         self.counters.loop.record(max(loop_ns, 0) * 1e-9)
         self.counters.loop_overruns += loop_ns > self.period_ns
+
+    def _send_command(self, fb: Feedback, now: int) -> bool:
+        """Compute and send the VOLTAGE_CMD answering feedback `fb` (False: not commanding)."""
+        u = self._command(fb, now)
+        if u is None:
+            return False
+        self._last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
+        self._send(self._last_cmd)
+        return True
 
     def _command(self, fb: Feedback, now: int) -> tuple[float, float] | None:
         fresh = self._last_setpoint_ns is not None and now - self._last_setpoint_ns <= self.timeout_ns
@@ -226,6 +243,18 @@ class EdgeNode:
                 except queue.Empty:
                     pass
 
+    def _on_arrival_sample(self, sample: zenoh.Sample) -> None:
+        self.on_arrival(sample.payload.to_bytes(), time.monotonic_ns())
+
+    def on_arrival(self, data: bytes, rx_ns: int) -> None:
+        """Real time: handle a setpoint/voltage payload when it arrives (`on_downlink`) and, if the downlink emulator
+        releases it at once, apply it and send the voltage it gives with the newest feedback."""
+        with self._lock:
+            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns) or self._last_fb is None:
+                return
+            if self._take_downlink(self._sample_t_ns) and self._send_command(self._last_fb, self._sample_t_ns):
+                self.counters.arrival_commands += 1
+
     def _to_inbox(self, is_ack: bool) -> Callable[[zenoh.Sample], None]:
         put = self._inbox.put
         return lambda s: put((is_ack, s.payload.to_bytes(), time.monotonic_ns()))
@@ -293,9 +322,12 @@ class EdgeNode:
         self._acks.pop(p.state_seq - 1000, None)
         return True
 
-    def _take_downlink(self, now: int) -> None:
+    def _take_downlink(self, now: int) -> bool:
+        """Apply the setpoints/voltages the downlink emulator releases by sample time `now`; True if any."""
         self._drain_zenoh()
+        applied = False
         for p in self.pending_down.pop_due(now):
+            applied = True
             t = time.monotonic_ns()
             sent = self._sent_at.get(p.state_seq)   # type: ignore[attr-defined]
             if sent is not None:
@@ -311,6 +343,7 @@ class EdgeNode:
             else:
                 self._voltage = p.voltage_v
                 self.counters.voltages += 1
+        return applied
 
     # ---- stats --------------------------------------------------------------------------------------------------
     def stats_dict(self) -> dict[str, float]:
@@ -324,7 +357,7 @@ class EdgeNode:
             "voltage_msgs_applied": c.voltages, "stale_setpoints": c.stale_setpoints,
             "clear_errors_sent": c.clear_errors_sent, "lockstep_resends": c.lockstep_resends,
             "lockstep_startup_resends": c.lockstep_startup_resends,
-            "commands_sent": c.commands_sent, "payload_rejected": self.payloads.as_dict()["rejected_total"],
+            "commands_sent": c.commands_sent, "arrival_commands": c.arrival_commands, "payload_rejected": self.payloads.as_dict()["rejected_total"],
             "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
             "bus_errors": c.bus_errors,
             "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": self.inner.saturated_steps,

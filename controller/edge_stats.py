@@ -23,7 +23,8 @@ class EdgeCounters:
     clear_errors_sent: int = 0
     lockstep_resends: int = 0            # re-publishes after the controller first answered
     lockstep_startup_resends: int = 0    # re-publishes before its first ACK (controller starting)
-    commands_sent: int = 0
+    commands_sent: int = 0               # VOLTAGE_CMDs answering feedback samples
+    arrival_commands: int = 0            # real time: extra VOLTAGE_CMDs sent when a setpoint arrived
     latency: LogHistogram = field(default_factory=LogHistogram)      # wall clock: state published -> answer arrived
     apply_latency: LogHistogram = field(default_factory=LogHistogram)  # wall clock: state published -> answer applied
     sim_latency: LogHistogram = field(default_factory=LogHistogram)  # sample time: state sampled -> applied
