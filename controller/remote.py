@@ -5,6 +5,10 @@ the 10 ms state and publishes voltages every sample (to be tunnelled to CAN by t
 Per handled state it publishes one JSON tracking record on the `event` key (desired vs measured, for recording and
 reports; not a control transmission) and, in lockstep, an ACK on the `control` key. A heartbeat event is sent when
 no event fired for `trigger.max_inter_event_s`, so the edge keeps commanding (its setpoint timeout is twice that).
+
+Time: t = 0 is the start of the measured cycles. With `trajectory.lead_in_s` > 0 the first handled state is at
+t = -lead_in_s and the desired motion until t = 0 is the `LeadIn` from that measured state onto the trajectory's start
+(tracking records carry negative `t_s` then; the session summary reports the lead-in apart).
 """
 from __future__ import annotations
 
@@ -20,7 +24,7 @@ import zenoh
 from controller.inner import InnerLoop
 from controller.outer import OuterController
 from controller.smc import JointState
-from controller.trajectory import make_trajectory
+from controller.trajectory import LeadIn, make_trajectory
 from protocol.config import SeaHilConfig
 from protocol.errors import MalformedPayload
 from protocol.keys import Keys
@@ -42,6 +46,8 @@ class RemoteController:
         self.outer = OuterController(cfg, self.params, mode)
         self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad))
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
+        self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
+        self._lead_in: LeadIn | None = None
         # lockstep must see every state: FIFO fed by a callback (woken on arrival, no polling); real time: newest
         # only (ring of depth 1, never a backlog)
         self._states: queue.SimpleQueue[bytes] = queue.SimpleQueue()
@@ -108,7 +114,9 @@ class RemoteController:
             return
         self._last_state_wall_ns = now_ns
         if self.t0_ns is None:
-            self.t0_ns = p.sample_t_ns
+            self.t0_ns = p.sample_t_ns + self.lead_in_ns
+            if self.lead_in_ns:
+                self._lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9)
         t_ns = p.sample_t_ns - self.t0_ns
         self._last_t_ns = t_ns
         if t_ns > self.duration_ns:
@@ -137,7 +145,7 @@ class RemoteController:
 
     def _answer(self, p: StatePayload, t_ns: int) -> tuple[list[tuple[zenoh.Publisher, bytes]], Any, Any]:
         """Outer (and, remote placement, inner) control for one new state: the messages to publish."""
-        ds = self.traj.sample(t_ns * 1e-9)
+        ds = self._lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self._lead_in else self.traj.sample(t_ns * 1e-9)
         js = JointState(p.theta_rad, p.omega_rad_s)
         sp = self.outer.step(t_ns, p.seq, js, ds)
         answer: list[tuple[zenoh.Publisher, bytes]] = []

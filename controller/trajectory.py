@@ -3,7 +3,9 @@
 `GaitTrajectory`: a smooth periodic hip/knee swing built from two Fourier harmonics (the paper's reference [13]
 profile is not available; see docs/deviations.md). `CsvTrajectory`: samples `t, theta1, theta2` (rad) from a CSV file
 interpolated by a cubic spline (periodic if the first and last rows coincide, else not-a-knot); derivatives are the
-spline's analytic derivatives.
+spline's analytic derivatives. `LeadIn`: the quintic that takes a limb from the state it was measured in (a robot
+boots at rest) onto a trajectory's start (position, velocity and acceleration continuous), run before the measured
+cycles of a networked session (`trajectory.lead_in_s`, docs/deviations.md).
 """
 from __future__ import annotations
 
@@ -69,6 +71,44 @@ class CsvTrajectory:
             t_s = min(max(t_s, self._t0), self._t1)
         q, qd, qdd = self._spline(t_s), self._d1(t_s), self._d2(t_s)
         return DesiredSample((float(q[0]), float(q[1])), (float(qd[0]), float(qd[1])), (float(qdd[0]), float(qdd[1])))
+
+
+def quintic(q0: float, v0: float, a0: float, q1: float, v1: float, a1: float, duration_s: float
+            ) -> tuple[float, float, float, float, float, float]:
+    """Coefficients c0..c5 of q(tau) = sum c_i tau^i on [0, T] with q, q', q'' = (q0, v0, a0) at 0 and (q1, v1, a1)
+    at T."""
+    T = duration_s
+    h = q1 - q0 - v0 * T - 0.5 * a0 * T * T
+    dv = v1 - v0 - a0 * T
+    da = a1 - a0
+    c3 = (10.0 * h - 4.0 * dv * T + 0.5 * da * T * T) / T ** 3
+    c4 = (-15.0 * h + 7.0 * dv * T - da * T * T) / T ** 4
+    c5 = (6.0 * h - 3.0 * dv * T + 0.5 * da * T * T) / T ** 5
+    return q0, v0, 0.5 * a0, c3, c4, c5
+
+
+class LeadIn:
+    """Desired motion for t in [-duration_s, 0): from `start` (measured theta, omega; zero acceleration) to
+    `target` = the trajectory's sample at t = 0."""
+
+    def __init__(self, theta_rad: tuple[float, float], omega_rad_s: tuple[float, float], target: DesiredSample,
+                 duration_s: float) -> None:
+        if not duration_s > 0:
+            raise TrajectoryError(f"lead-in duration must be > 0 s, got {duration_s}")
+        self.duration_s = duration_s
+        self._c = [quintic(theta_rad[j], omega_rad_s[j], 0.0, target.theta_rad[j], target.omega_rad_s[j],
+                           target.alpha_rad_s2[j], duration_s) for j in (0, 1)]
+
+    def sample(self, t_s: float) -> DesiredSample:
+        """The lead-in at time t_s in [-duration_s, 0] (clamped)."""
+        tau = min(max(t_s + self.duration_s, 0.0), self.duration_s)
+        out = []
+        for c in self._c:
+            q = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
+            qd = c[1] + tau * (2 * c[2] + tau * (3 * c[3] + tau * (4 * c[4] + tau * 5 * c[5])))
+            qdd = 2 * c[2] + tau * (6 * c[3] + tau * (12 * c[4] + tau * 20 * c[5]))
+            out.append((q, qd, qdd))
+        return DesiredSample((out[0][0], out[1][0]), (out[0][1], out[1][1]), (out[0][2], out[1][2]))
 
 
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:

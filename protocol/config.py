@@ -62,6 +62,8 @@ class TrajectoryConfig(_Frozen):
     kind: Literal["gait", "csv"] = "gait"
     period_s: float = Field(10.0, gt=0)
     csv_path: str = ""
+    lead_in_s: float = Field(0.5, ge=0, description="networked session: quintic from the measured start state onto "
+                             "the trajectory before the measured cycles; 0 = start the cycles at once")
 
 
 class ControllerConfig(_Frozen):

@@ -62,6 +62,16 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
     return files
 
 
+def _lead_in_rows(summary: dict[str, Any]) -> list[str]:
+    lead = summary.get("lead_in") or {}
+    if not lead.get("duration_s"):
+        return []
+    err = lead["tracking"]["max_abs_error_rad"]
+    return [f"| lead-in (before the cycles, not counted above): duration [s] / downlink / uplink messages | "
+            f"{lead['duration_s']:.2f} / {lead['downlink_msgs']} / {lead['uplink_msgs']} |",
+            f"| lead-in max abs tracking error hip / knee [rad] | {err[0]:.5f} / {err[1]:.5f} |"]
+
+
 def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     tx = summary["transmissions"]
     lat = summary["latency_us"]
@@ -79,6 +89,7 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
              f"{summary['inter_event_s']['median']:.3f} / {summary['inter_event_s']['max']:.3f} |",
              f"| max abs voltage [V] | {summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f} |",
              f"| closed-loop latency p50 / p99 / max [us] | {lat['p50']:.0f} / {lat['p99']:.0f} / {lat['max']:.0f} |",
+             *_lead_in_rows(summary),
              "", "Figures: tracking.png (paper Fig. 2/3), inter_event.png (Fig. 4), latency.png, bandwidth.png, "
              "bus_load.png", ""]
     return "\n".join(lines)

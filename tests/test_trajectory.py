@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.trajectory import CsvTrajectory, GaitTrajectory, make_trajectory
+from controller.trajectory import CsvTrajectory, GaitTrajectory, LeadIn, make_trajectory
 from protocol.config import TrajectoryConfig
 from protocol.errors import TrajectoryError
 
@@ -124,3 +124,28 @@ def test_good_rows_fixture_is_accepted(tmp_path: Path) -> None:
     """The bad cases above differ from an accepted file only in the broken part."""
     tr = CsvTrajectory(_write(tmp_path / "ok.csv", "t,theta1,theta2\n" + GOOD_ROWS))
     assert tr.sample(1.0).theta_rad == pytest.approx((0.1, 0.1))
+
+
+def test_lead_in_joins_rest_to_the_trajectory_start_smoothly() -> None:
+    target = GaitTrajectory(10.0).sample(0.0)
+    start_theta, start_omega = (0.04, 0.30), (0.0, 0.01)
+    lead = LeadIn(start_theta, start_omega, target, 0.5)
+    first, last = lead.sample(-0.5), lead.sample(0.0)
+    assert first.theta_rad == pytest.approx(start_theta, abs=1e-12)
+    assert first.omega_rad_s == pytest.approx(start_omega, abs=1e-12)
+    assert first.alpha_rad_s2 == pytest.approx((0.0, 0.0), abs=1e-9)
+    for got, want in ((last.theta_rad, target.theta_rad), (last.omega_rad_s, target.omega_rad_s),
+                      (last.alpha_rad_s2, target.alpha_rad_s2)):
+        assert got == pytest.approx(want, abs=1e-9)
+    h = 1e-6                      # derivatives are the polynomial's own
+    for t in (-0.4, -0.25, -0.1):
+        a, b, m = lead.sample(t - h), lead.sample(t + h), lead.sample(t)
+        for j in (0, 1):
+            assert (b.theta_rad[j] - a.theta_rad[j]) / (2 * h) == pytest.approx(m.omega_rad_s[j], abs=1e-6)
+            assert (b.omega_rad_s[j] - a.omega_rad_s[j]) / (2 * h) == pytest.approx(m.alpha_rad_s2[j], abs=1e-5)
+    assert lead.sample(-3.0) == first and lead.sample(1.0) == last   # clamped outside [-T, 0]
+
+
+def test_lead_in_needs_a_positive_duration() -> None:
+    with pytest.raises(TrajectoryError, match="lead-in"):
+        LeadIn((0.0, 0.0), (0.0, 0.0), GaitTrajectory(10.0).sample(0.0), 0.0)

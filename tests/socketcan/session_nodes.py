@@ -45,7 +45,8 @@ def write_gait_slice_config(directory: Path, duration_s: float) -> Path:
     csv_path = directory / "gait-slice.csv"
     csv_path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     toml_path = directory / "session.toml"
-    toml_path.write_text(f'[trajectory]\nkind = "csv"\ncsv_path = "{csv_path}"\n', encoding="utf-8")
+    # no lead-in: the slice is short and the guest slow; every handled state is in the measured cycle
+    toml_path.write_text(f'[trajectory]\nkind = "csv"\ncsv_path = "{csv_path}"\nlead_in_s = 0.0\n', encoding="utf-8")
     return toml_path
 
 
