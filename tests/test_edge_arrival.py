@@ -1,0 +1,103 @@
+"""The edge applies a setpoint on arrival in real time (`EdgeNode.on_arrival`): the voltage it gives with the newest
+feedback goes out at once, not at the next feedback sample; lockstep keeps applying at the sample."""
+from __future__ import annotations
+
+import uuid
+from collections.abc import Iterator
+
+import can
+import pytest
+
+from controller.edge import EdgeNode
+from plant_emulator.driver import DriverCore
+from plant_emulator.disturbance import make_disturbance
+from protocol.can_codec import SeaCodec, VoltageCmd
+from protocol.canbus import open_bus
+from protocol.config import load_config
+from protocol.mechanics import limb_params
+from protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
+from protocol.zsession import make_config, open_session
+
+NODE = 1
+
+
+@pytest.fixture
+def rig() -> Iterator[tuple[EdgeNode, can.BusABC, DriverCore]]:
+    cfg = load_config()
+    channel = f"virtual:arrival-{uuid.uuid4().hex[:8]}"
+    session = open_session(make_config())
+    edge_bus, peer = open_bus(channel), open_bus(channel)
+    edge = EdgeNode(cfg, edge_bus, session, NODE)
+    drv = DriverCore.create(NODE, limb_params(cfg.plant), 1e-3, 0.1, cfg.sim.substeps,
+                            tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance))
+    try:
+        yield edge, peer, drv
+    finally:
+        edge.close()
+        session.close()
+        edge_bus.shutdown()
+        peer.shutdown()
+
+
+def _feed(edge: EdgeNode, drv: DriverCore, codec: SeaCodec) -> None:
+    for msg in codec.encode_feedback(drv.step(), saturate=True):
+        edge.on_can(msg, 0)
+
+
+def _commands(peer: can.BusABC, codec: SeaCodec) -> list[VoltageCmd]:
+    out = []
+    while (msg := peer.recv(timeout=0)) is not None:
+        frame = codec.decode(msg)
+        if isinstance(frame, VoltageCmd):
+            out.append(frame)
+    return out
+
+
+def _setpoint(seq: int, state_seq: int, deflection_m: tuple[float, float]) -> bytes:
+    return encode(SetpointPayload(seq, 0, state_seq, deflection_m, (0.1, -0.1), TriggerReason.ERROR_BOUND))
+
+
+def test_setpoint_is_applied_on_arrival_with_the_newest_feedback(rig) -> None:
+    edge, peer, drv = rig
+    codec = SeaCodec([NODE])
+    for _ in range(10):                       # sample 10: the edge publishes state 1
+        _feed(edge, drv, codec)
+    edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)
+    first = _commands(peer, codec)
+    assert len(first) == 1 and edge.counters.arrival_commands == 1   # sent at once, before the next sample
+    assert first[0].seq == edge._last_fb.seq                         # computed from the newest feedback
+    edge.on_arrival(_setpoint(2, 1, (-2e-4, 3e-4)), rx_ns=2)
+    second = _commands(peer, codec)
+    assert len(second) == 1 and second[0].voltage_v != first[0].voltage_v   # the new v_x changed the voltage
+    edge.on_arrival(_setpoint(2, 1, (5e-4, 5e-4)), rx_ns=3)                # stale seq: dropped, nothing sent
+    assert _commands(peer, codec) == [] and edge.counters.stale_setpoints == 1
+    assert edge.stats_dict()["arrival_commands"] == 2 and edge.counters.setpoints == 2
+
+
+def test_arrival_before_any_feedback_or_after_stop_sends_nothing(rig) -> None:
+    edge, peer, drv = rig
+    codec = SeaCodec([NODE])
+    edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)   # no feedback yet: held, applied at the first sample
+    assert _commands(peer, codec) == [] and edge.counters.arrival_commands == 0
+    _feed(edge, drv, codec)
+    assert len(_commands(peer, codec)) == 1 and edge.counters.setpoints == 1
+    edge.stop_event.set()
+    edge.on_arrival(_setpoint(2, 1, (1e-4, 1e-4)), rx_ns=2)
+    assert _commands(peer, codec) == [] and edge.counters.arrival_commands == 0
+
+
+def test_delayed_setpoint_waits_for_its_sample(rig) -> None:
+    edge, peer, drv = rig
+    codec = SeaCodec([NODE])
+    cfg = load_config(overrides={"link": {"downlink": {"delay_s": 0.003}}})
+    edge.downlink = type(edge.downlink)(cfg.link.downlink, "t/down")
+    for _ in range(10):
+        _feed(edge, drv, codec)
+    _commands(peer, codec)
+    edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)
+    assert _commands(peer, codec) == [] and edge.counters.setpoints == 0    # the emulated link still holds it
+    for _ in range(3):
+        _feed(edge, drv, codec)
+    assert edge.counters.setpoints == 1 and edge.counters.arrival_commands == 0
+    cmds = _commands(peer, codec)     # no setpoint yet -> no command; then the sample that released it answers
+    assert [c.seq for c in cmds] == [edge._last_fb.seq] == [13]
