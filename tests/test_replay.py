@@ -100,10 +100,12 @@ def test_controller_accepts_a_restarted_edge_after_silence_and_continues_the_tra
     for s in range(1, 201):
         ctrl.handle(state(s, s * 10 * MS), now_ns=s * 10 * MS)
     gap_ns = ctrl.restart_gap_ns
+    stopped_at = ctrl._last_t_ns        # 1990 ms after the first state, minus the lead-in
+    assert stopped_at == 1990 * MS - ctrl.lead_in_ns
     ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS)              # within the gap: a replay, ignored
     assert ctrl.states == 200 and ctrl.edge_restarts == 0
     ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS + gap_ns + 1)  # new edge: sample time restarts near 0
     assert ctrl.states == 201 and ctrl.edge_restarts == 1
-    assert ctrl._last_t_ns == 1990 * MS                            # trajectory time continues where it stopped
+    assert ctrl._last_t_ns == stopped_at                           # trajectory time continues where it stopped
     ctrl.handle(state(2, 17 * MS), now_ns=2100 * MS + gap_ns)
-    assert ctrl.states == 202 and ctrl._last_t_ns == 2000 * MS
+    assert ctrl.states == 202 and ctrl._last_t_ns == stopped_at + 10 * MS
