@@ -2,13 +2,20 @@
 
 `rk4_core` takes the disturbance torques at t, t + h/2 and t + h as values, so that it is plain float code which the
 offline simulation also compiles with numba (sea_hil/closed_loop.py); `rk4_step` and `advance` sample a disturbance
-callable and delegate to it.
+callable and delegate to it. `advance` (the plant emulator's per-sample integration) runs its sub-steps in a kernel
+compiled from the same source with numba (`protocol.jit`) once `prepare_advance` has loaded it (a node calls that
+before its loop, so no period pays for numba's import or cache load); before that, with `jit=False` or without numba
+it runs the same body as plain Python. Both give the same floats bit for bit (no fast-math, same operation order);
+they differ only off the model's domain, where plain Python's `math` raises `ValueError` and the kernel gives NaN.
 """
 from __future__ import annotations
 
-from typing import Callable
+from typing import Any, Callable
+
+import numpy as np
 
 from plant_emulator.dynamics import State, f
+from protocol.jit import compiled, loaded
 from protocol.mechanics import LimbParams
 
 Disturbance = Callable[[float], tuple[float, float]]
@@ -55,10 +62,44 @@ def substep_times(t: float, dt: float, substeps: int) -> list[tuple[float, float
     return [(t + i * h, t + i * h + hh, t + i * h + h) for i in range(substeps)]
 
 
+def make_advance_kernel(fingerprint: str = "") -> Callable[..., State]:
+    """The sub-step loop of `advance` as a kernel factory (`protocol.jit.compiled`); `fingerprint` keys numba's cache.
+    `dist_values` holds d(t_i), d(t_i + h/2), d(t_i + h) of every sub-step i, flat (6 floats per sub-step)."""
+
+    def advance_kernel(t, x, u, dt, substeps, p, dist_values):  # type: ignore[no-untyped-def]
+        fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
+        h = dt / substeps
+        for i in range(substeps):
+            j = 6 * i
+            x = rk4_core(t + i * h, x, u, h, p, (dist_values[j], dist_values[j + 1]),
+                         (dist_values[j + 2], dist_values[j + 3]), (dist_values[j + 4], dist_values[j + 5]))
+        return x
+
+    return advance_kernel
+
+
+def prepare_advance(p: LimbParams, jit: bool = True) -> bool:
+    """Load (or compile) `advance`'s numba kernel now (~0.5 s from numba's disk cache, seconds when it compiles) and
+    switch `advance` to it; False when numba is not installed (or `jit` is False): `advance` stays plain Python."""
+    kernel = compiled(make_advance_kernel) if jit else None
+    if kernel is not None:
+        kernel(0.0, (0.0,) * 8, (0.0, 0.0), 1e-3, 1, p, np.zeros(6))
+    return kernel is not None
+
+
 def advance(t: float, x: State, u: tuple[float, float], dt: float, substeps: int, p: LimbParams,
-            dist: Disturbance = _no_disturbance) -> State:
-    """Advance x over dt seconds with `substeps` RK4 steps, input u held."""
+            dist: Disturbance = _no_disturbance, *, jit: bool = True) -> State:
+    """Advance x over dt seconds with `substeps` RK4 steps, input u held (in the prepared kernel when there is one,
+    which gets d(t) sampled here exactly where `rk4_step` samples it: d(t_i), d(t_i + h/2), d(t_i + h) per sub-step)."""
     h = dt / substeps
+    kernel = loaded(make_advance_kernel) if jit else None
+    if kernel is None:
+        for i in range(substeps):
+            x = rk4_step(t + i * h, x, u, h, p, dist)
+        return x
+    hh = 0.5 * h
+    values: list[float] = []
     for i in range(substeps):
-        x = rk4_step(t + i * h, x, u, h, p, dist)
-    return x
+        ti = t + i * h
+        values += (*dist(ti), *dist(ti + hh), *dist(ti + h))
+    return kernel(t, x, u, dt, substeps, p, np.array(values))   # an array: one signature for any sub-step count

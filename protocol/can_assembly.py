@@ -41,8 +41,11 @@ class FeedbackAssembler:
         if not isinstance(part, FEEDBACK_PARTS):
             raise TypeError(f"FeedbackAssembler.push needs a feedback frame, got {type(part).__name__}")
         node, seq = part.node_id, part.seq
-        pending = self._pending.setdefault(node, OrderedDict())
-        closed = self._closed.setdefault(node, deque(maxlen=2 * self._max_pending))
+        pending = self._pending.get(node)
+        if pending is None:   # first frame of this node (no throw-away containers per frame)
+            pending = self._pending[node] = OrderedDict()
+            self._closed[node] = deque(maxlen=2 * self._max_pending)
+        closed = self._closed[node]
         parts = pending.get(seq, {})
         if seq in closed or type(part) in parts:
             self.stale += 1

@@ -45,6 +45,11 @@ class _Sig:
     is_int: bool
     choices: frozenset[int] | None
 
+    @property
+    def clampable(self) -> bool:
+        """`saturate` clamps it: not a rolling counter, not an enum."""
+        return self.name not in ROLLING and self.choices is None
+
 
 @dataclass(frozen=True)
 class _Layout:
@@ -54,6 +59,9 @@ class _Layout:
     dlc: int
     used_mask: int
     sigs: tuple[_Sig, ...]
+    # per signal (sig, name, min, max, is_int, clampable, min - tol, max + tol, plain): the hot paths' precomputed
+    # view of `sigs`; `plain` = no enum, so a finite in-range value needs no further check
+    plan: tuple[tuple[Any, ...], ...] = ()
 
 
 def _layout(db: Any, cls: type) -> _Layout:
@@ -66,7 +74,9 @@ def _layout(db: Any, cls: type) -> _Layout:
         is_int = s.scale == 1 and s.offset == 0 and not s.is_float
         choices = frozenset(int(k) for k in s.choices) if s.choices else None
         sigs.append(_Sig(s.name, s.minimum, s.maximum, abs(s.scale) * 1e-6, is_int, choices))
-    return _Layout(cls, msg, msg.frame_id & CMD_MASK, msg.length, used, tuple(sigs))
+    plan = tuple((s, s.name, s.minimum, s.maximum, s.is_int, s.clampable, s.minimum - s.tol, s.maximum + s.tol,
+                  s.choices is None) for s in sigs)
+    return _Layout(cls, msg, msg.frame_id & CMD_MASK, msg.length, used, tuple(sigs), plan)
 
 
 class SeaCodec:
@@ -88,10 +98,14 @@ class SeaCodec:
             node_id = check_node_id(node_id)
         try:
             values = obj.to_signals()
-            if saturate:
-                _clamp(lay, values)
-            for s in lay.sigs:
-                _check_encodable(s, values[s.name])
+            for s, name, lo, hi, is_int, clampable, _, _, _ in lay.plan:
+                v = values[name]
+                t = type(v)
+                if (t is int or t is float and not is_int) and lo <= v <= hi:
+                    continue    # the common case: a finite number of the right kind in range, nothing to do
+                if saturate and clampable:
+                    v = _clamped(s, v, values)
+                _check_encodable(s, v)
             data = lay.message.encode(values, strict=True)  # cantools range checks (strict), no name lookup
         except (EncodeError, TypeError, ValueError, OverflowError, KeyError) as err:
             raise MalformedFrame(f"cannot encode {lay.message.name} for node {node_id}: {err}") from None
@@ -127,7 +141,13 @@ class SeaCodec:
             raw = lay.message.decode(data, decode_choices=False, allow_excess=False)
         except (DecodeError, ValueError) as err:
             raise MalformedFrame(f"{lay.message.name} node {node_id}: {err}") from None
-        values = {s.name: _checked(lay.message.name, s, raw[s.name]) for s in lay.sigs}
+        values = {}
+        for s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain in lay.plan:
+            v = raw[name]
+            if plain and lo_tol <= v <= hi_tol:   # finite (NaN and inf fail the comparison) and in range
+                values[name] = int(v) if is_int else min(max(float(v), lo), hi)
+            else:
+                values[name] = _checked(lay.message.name, s, v)
         return lay.cls.from_signals(node_id, values)
 
     def saturate(self, obj: Any) -> tuple[Any, bool]:
@@ -152,13 +172,20 @@ def _clamp(lay: _Layout, values: dict[str, Any]) -> bool:
     """Clamp `values` in place to the DBC ranges (not seq/t_us, enums, non-numbers, NaN); True if any changed."""
     changed = False
     for s in lay.sigs:
-        v = values[s.name]
-        if s.name in ROLLING or s.choices is not None or not _is_real(v) or math.isnan(v):
-            continue
-        c = min(max(v, s.minimum), s.maximum)
-        if c != v:
-            values[s.name], changed = (int(c) if s.is_int else float(c)), True
+        if s.clampable:
+            v = values[s.name]
+            changed = _clamped(s, v, values) is not v or changed
     return changed
+
+
+def _clamped(s: _Sig, v: Any, values: dict[str, Any]) -> Any:
+    """v clamped to the range of signal s (stored in `values` if it changed); non-numbers and NaN unchanged."""
+    if not _is_real(v) or math.isnan(v):
+        return v
+    c = min(max(v, s.minimum), s.maximum)
+    if c != v:
+        v = values[s.name] = int(c) if s.is_int else float(c)
+    return v
 
 
 def _is_real(v: Any) -> bool:
