@@ -15,7 +15,6 @@ from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
-from scipy.interpolate import CubicSpline
 
 from protocol.config import TrajectoryConfig
 from protocol.errors import TrajectoryError
@@ -55,6 +54,8 @@ class GaitTrajectory:
 
 class CsvTrajectory:
     def __init__(self, path: str | Path) -> None:
+        from scipy.interpolate import CubicSpline   # 0.35 s to import: only when a CSV trajectory is used
+
         t, q = _read_csv(Path(path))
         periodic = bool(np.allclose(q[0], q[-1]))
         self._spline = CubicSpline(t, q, axis=0, bc_type="periodic" if periodic else "not-a-knot")

@@ -58,6 +58,28 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     endpoint = opts.listen[0] if opts.listen else f"tcp/127.0.0.1:{free_tcp_port()}"
     spec = opts.can or cfg.can.interface
     session = open_session(make_config(listen=[endpoint, *opts.listen[1:]]))
+    t0 = time.monotonic()
+    # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
+    proc = subprocess.Popen(_controller_cmd(opts, cfg_path, endpoint), stdin=subprocess.DEVNULL)
+    try:
+        _host_nodes(cfg, opts, spec, session, proc, t0, log)
+    finally:
+        end_process(proc)
+        session.close()
+    wall_s = time.monotonic() - t0
+    data = read_session(opts.out / "session.mcap")
+    summary = session_summary(data, opts.controller)
+    summary["wall_s"] = wall_s
+    summary["lockstep"] = opts.lockstep
+    summary["inner"] = opts.inner
+    write_summary(opts.out / "summary.json", summary)
+    write_report_figures(data, opts.out)
+    return summary
+
+
+def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, proc: subprocess.Popen[bytes],
+                t0: float, log: Callable[[str], None]) -> None:
+    """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record)   # decode + JSON + MCAP off this GIL
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
@@ -71,19 +93,19 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     recorder.start()
     for t in threads:
         t.start()
-    t0 = time.monotonic()
-    proc = subprocess.Popen(_controller_cmd(opts, cfg_path, endpoint), stdin=subprocess.DEVNULL)
     period_s = cfg.trajectory.period_s
     budget_s = 60.0 + 3.0 * period_s * opts.cycles
     try:
-        last = 0.0
-        while proc.poll() is None:
-            time.sleep(0.2)
+        while True:
+            try:
+                proc.wait(timeout=1.0)      # returns as soon as the controller has finished
+                break
+            except subprocess.TimeoutExpired:
+                pass
             now = time.monotonic() - t0
             if now > budget_s:
                 raise SeaHilError(f"session did not finish within {budget_s:.0f} s")
-            if opts.progress and now - last >= 1.0:
-                last = now
+            if opts.progress:
                 c = edge.counters
                 lat = c.latency.to_dict()
                 sim_s = edge._sample_t_ns * 1e-9
@@ -105,18 +127,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
         rec.close(final_stats={"plant_overruns": plant.stats.overruns, "plant_ticks": plant.stats.ticks,
                                **recorder.counters()})
         edge.close()
-        session.close()
         for b in buses:
             b.shutdown()
-    wall_s = time.monotonic() - t0
-    data = read_session(opts.out / "session.mcap")
-    summary = session_summary(data, opts.controller)
-    summary["wall_s"] = wall_s
-    summary["lockstep"] = opts.lockstep
-    summary["inner"] = opts.inner
-    write_summary(opts.out / "summary.json", summary)
-    write_report_figures(data, opts.out)
-    return summary
 
 
 def print_summary(summary: dict[str, Any]) -> None:
