@@ -13,7 +13,8 @@ downlink delay, in simulated time (`sim_latency_us_*`), at no cost in wall time.
 come back the edge clears the fault. In real time a setpoint (or tunnelled voltage) the downlink emulator releases at
 once is applied on arrival: the Zenoh callback recomputes the voltage from the newest feedback and sends an extra
 VOLTAGE_CMD (`arrival_commands`), instead of waiting up to a period for the next sample; a lock serialises it with
-the feedback path. `on_can` handles one received frame; per answered sample the loop time (frame
+the feedback path. The lockstep waits and the callback-fed inbox are in `controller/edge_lockstep.py`. `on_can`
+handles one received frame; per answered sample the loop time (frame
 received -> VOLTAGE_CMD sent) is kept in a histogram (`loop_us_*`, `loop_overruns` = longer than one period).
 """
 from __future__ import annotations
@@ -23,11 +24,11 @@ import logging
 import queue
 import threading
 import time
-from collections.abc import Callable
 
 import can
 import zenoh
 
+from controller.edge_lockstep import LockstepPlane
 from controller.edge_stats import EdgeCounters, percentiles_us, rx_monotonic_ns
 from controller.inner import InnerLoop
 from protocol.can_codec import (ClearErrors, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
@@ -45,7 +46,7 @@ from protocol.zsession import LinkedPublisher, publisher
 log = logging.getLogger("sea_hil.edge")
 
 
-class EdgeNode:
+class EdgeNode(LockstepPlane):
     def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, session: zenoh.Session, node_id: int, *,
                  inner: str = "edge", lockstep: bool = False, resend_s: float = 0.1) -> None:
         if inner not in ("edge", "remote"):
@@ -66,7 +67,7 @@ class EdgeNode:
         self.pending_down: DelayQueue[object] = DelayQueue()
         self.stats_pub = publisher(session, self.keys.stats, express=False)
         # one FIFO fed by callbacks (is_ack, payload): lockstep waits block on it instead of polling
-        self._inbox: queue.SimpleQueue[tuple[bool, bytes]] = queue.SimpleQueue()
+        self._inbox: queue.SimpleQueue[tuple[bool, bytes, int]] = queue.SimpleQueue()
         downlink_cb = self._to_inbox(False) if lockstep else self._on_arrival_sample
         self.sp_sub = session.declare_subscriber(self.keys.setpoint, downlink_cb)
         self.v_sub = session.declare_subscriber(self.keys.voltage, downlink_cb)
@@ -203,46 +204,6 @@ class EdgeNode:
             if self.lockstep:
                 self._in_flight.push(at, (self._state_seq, data))
 
-    def _await_released(self, now: int) -> None:
-        """Lockstep: the states the uplink emulator has released by sample time `now` (published by `poll`) are
-        the ones the controller must answer before time advances; a state held back by the emulated delay is not
-        waited for (the plant runs on meanwhile, as in real time). A state released after a newer one is ignored
-        by the controller (as in real time), so it is not awaited but counted (`uplink_out_of_order`)."""
-        for seq, data in self._in_flight.pop_due(now):
-            if seq <= self._newest_released:
-                self.counters.uplink_out_of_order += 1
-                continue
-            self._newest_released = seq
-            self._awaiting[seq] = data
-
-    def _wait_for_controller(self) -> None:
-        """Lockstep: block until every state published this step is acknowledged (and its setpoint received)."""
-        last_progress = time.monotonic_ns()
-        while self._awaiting and not self.stop_event.is_set():
-            progressed = self._drain_zenoh()
-            for seq in list(self._awaiting):
-                ack = self._acks.get(seq)
-                if ack is not None and (not ack.sent or ack.setpoint_seq in self._seen_setpoints):
-                    del self._awaiting[seq]
-                    progressed = True
-            now = time.monotonic_ns()
-            if progressed:
-                last_progress = now
-            elif now - last_progress > self.resend_ns:
-                for data in self._awaiting.values():    # already through the emulator: straight to the wire
-                    self.uplink.republish(data)  # same seq: the controller answers duplicates idempotently
-                if self._acks:
-                    self.counters.lockstep_resends += 1
-                else:   # no ACK yet at all: the controller is still starting up
-                    self.counters.lockstep_startup_resends += 1
-                last_progress = now
-            else:
-                try:
-                    if self._dispatch(self._inbox.get(timeout=(self.resend_ns - (now - last_progress)) * 1e-9)):
-                        last_progress = time.monotonic_ns()
-                except queue.Empty:
-                    pass
-
     def _on_arrival_sample(self, sample: zenoh.Sample) -> None:
         self.on_arrival(sample.payload.to_bytes(), time.monotonic_ns())
 
@@ -254,23 +215,6 @@ class EdgeNode:
                 return
             if self._take_downlink(self._sample_t_ns) and self._send_command(self._last_fb, self._sample_t_ns):
                 self.counters.arrival_commands += 1
-
-    def _to_inbox(self, is_ack: bool) -> Callable[[zenoh.Sample], None]:
-        put = self._inbox.put
-        return lambda s: put((is_ack, s.payload.to_bytes(), time.monotonic_ns()))
-
-    def _dispatch(self, item: tuple[bool, bytes, int]) -> bool:
-        is_ack, data, rx_ns = item
-        return self.on_ack(data) if is_ack else self.on_downlink(data, rx_ns)
-
-    def _drain_zenoh(self) -> bool:
-        got = False
-        while True:
-            try:
-                item = self._inbox.get_nowait()
-            except queue.Empty:
-                return got
-            got = self._dispatch(item) or got
 
     def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:
         """Handle one setpoint/voltage payload from Zenoh (`rx_ns`: monotonic arrival time): malformed (counted by
@@ -308,18 +252,6 @@ class EdgeNode:
         self._seen_setpoints.clear()
         self.counters.controller_restarts += 1
         log.warning("setpoint stream restarted at seq %d (controller restart)", seq)
-        return True
-
-    def on_ack(self, data: bytes) -> bool:
-        """Handle one payload from the control key (lockstep ACKs); anything else is counted and dropped."""
-        p = self.payloads.try_decode(data)
-        if p is None:
-            return False
-        if not isinstance(p, AckPayload):
-            self.counters.unexpected_payloads += 1
-            return False
-        self._acks[p.state_seq] = p
-        self._acks.pop(p.state_seq - 1000, None)
         return True
 
     def _take_downlink(self, now: int) -> bool:
