@@ -14,8 +14,8 @@ come back the edge clears the fault. In real time a setpoint (or tunnelled volta
 once is applied on arrival: the Zenoh callback recomputes the voltage from the newest feedback and sends an extra
 VOLTAGE_CMD (`arrival_commands`), instead of waiting up to a period for the next sample; a lock serialises it with
 the feedback path. The lockstep waits and the callback-fed inbox are in `controller/edge_lockstep.py`. `on_can`
-handles one received frame; per answered sample the loop time (frame
-received -> VOLTAGE_CMD sent) is kept in a histogram (`loop_us_*`, `loop_overruns` = longer than one period).
+handles one received frame; per answered sample the loop time (frame received -> VOLTAGE_CMD sent) is kept in a
+histogram (`loop_us_*`, `loop_overruns` = longer than one period).
 """
 from __future__ import annotations
 
