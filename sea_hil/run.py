@@ -81,7 +81,8 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
                 t0: float, log: Callable[[str], None]) -> None:
     """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
-    rec = RecorderProcess(opts.out / "session.mcap", cfg.record)   # decode + JSON + MCAP off this GIL
+    # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
+    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})

@@ -2,6 +2,9 @@
 counters (rejects, frames missed by seq gaps) both paths put into the final stats."""
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
 import threading
 import time
 import uuid
@@ -181,3 +184,19 @@ def _wait(cond: Callable[[], bool], timeout_s: float) -> bool:
             return False
         tick.wait(0.002)
     return True
+
+
+@pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling policies")
+def test_idle_child_runs_on_idle_cpu_time_only(tmp_path: Path) -> None:
+    """Real-time sessions ask for SCHED_IDLE (the child's decoding must not take a core from the 1 kHz nodes)."""
+    code = ("import os; from protocol.recorder_process import _idle_policy; _idle_policy(); "
+            "print(os.sched_getscheduler(0) == os.SCHED_IDLE)")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
+    assert out.stdout.strip() == "True"
+    rec = RecorderProcess(tmp_path / "idle.mcap", load_config().record, idle=True)
+    try:
+        assert rec._proc.args[-1] == "1"                     # the flag reaches the child
+        rec.record("/stats", 1, 1, {"final": True})
+    finally:
+        rec.close()
+    assert read_session(tmp_path / "idle.mcap").complete
