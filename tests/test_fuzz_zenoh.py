@@ -14,8 +14,12 @@ from hypothesis import strategies as st
 
 from controller.edge import EdgeNode
 from controller.remote import RemoteController
+from plant_emulator.disturbance import make_disturbance
+from plant_emulator.driver import DriverCore
+from protocol.can_codec import SeaCodec, VoltageCmd
 from protocol.canbus import open_bus
 from protocol.config import load_config
+from protocol.mechanics import limb_params
 from protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
                                SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)
 from protocol.zsession import make_config, open_session
@@ -110,6 +114,39 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
     finally:
         edge.close()
         bus.shutdown()
+
+
+def test_edge_applies_only_valid_setpoints_on_arrival(session: object) -> None:
+    """The real-time path (`on_arrival`, Zenoh callback): after a feedback sample, every accepted setpoint or voltage
+    is answered by exactly one VOLTAGE_CMD within the DBC range, and nothing else sends a frame."""
+    cfg = load_config()
+    channel = f"virtual:fuzz-{uuid.uuid4().hex[:8]}"
+    bus, peer = open_bus(channel), open_bus(channel)
+    edge = EdgeNode(cfg, bus, session, 1)  # type: ignore[arg-type]
+    codec = SeaCodec([1])
+    drv = DriverCore.create(1, limb_params(cfg.plant), 1e-3, 0.1, cfg.sim.substeps,
+                            tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance))
+    try:
+        for msg in codec.encode_feedback(drv.step(), saturate=True):
+            edge.on_can(msg, 0)
+
+        @settings(max_examples=2000, deadline=None, database=None, derandomize=True,
+                  suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
+        @given(data=payloads())
+        def run(data: bytes) -> None:
+            applied = edge.counters.setpoints + edge.counters.voltages
+            edge.on_arrival(data, rx_ns=1)
+            sent = []
+            while (msg := peer.recv(timeout=0)) is not None:
+                sent.append(codec.decode(msg))       # raises if the edge ever sent a frame outside the DBC
+            newly = edge.counters.setpoints + edge.counters.voltages - applied
+            assert len(sent) == newly and all(isinstance(f, VoltageCmd) for f in sent)
+        run()
+        assert edge.counters.arrival_commands == edge.counters.setpoints + edge.counters.voltages > 0
+    finally:
+        edge.close()
+        bus.shutdown()
+        peer.shutdown()
 
 
 def test_controller_state_handler_survives_and_counts(session: object) -> None:
