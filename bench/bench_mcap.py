@@ -3,7 +3,7 @@
 Run: python bench/bench_mcap.py [--runs 3] [--session FILE.mcap] [--json OUT]
 The message mix is a real session's: `--session` (a `sea-hil run` recording) or, by default, a fresh
 `sea-hil run --controller et --cycles 1` (real time). Throughput: every message of that session is replayed into a
-new `protocol.recording.SessionRecorder` (config compression/chunking, queue large enough that nothing drops) as fast
+new `sea_hil.recorder.writer.SessionRecorder` (config compression/chunking, queue large enough that nothing drops) as fast
 as possible: `submit` on this thread (validate + JSON encode), the writer thread compressing and writing; the time
 runs from the first submit until `close()` returned. Baseline: the session's own message rate (what a live
 recorder must sustain). File size per minute = size of the recorded session file / its time span x 60.
@@ -19,8 +19,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import bench_args, emit, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
-from protocol.config import load_config  # noqa: E402
-from protocol.recording import RecordedMessage, SessionRecorder, read_session  # noqa: E402
+from sea_hil.config import load_config  # noqa: E402
+from sea_hil.recorder.writer import RecordedMessage, SessionRecorder, read_session  # noqa: E402
 
 
 def replay(messages: list[tuple[str, RecordedMessage]], out: Path) -> tuple[float, int, int]:

@@ -17,9 +17,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 
 from benchlib import bench_args, emit, record  # noqa: E402
 from limbrig import RigResult, run_rig  # noqa: E402
-from protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
-from protocol.config import load_config  # noqa: E402
-from protocol.stats import can_frame_bits  # noqa: E402
+from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
+from sea_hil.config import load_config  # noqa: E402
+from sea_hil.stats.session import can_frame_bits  # noqa: E402
 
 MAX_MISS = 0.001
 GOAL_LIMBS = 4

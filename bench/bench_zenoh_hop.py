@@ -5,7 +5,7 @@ This process listens on a free loopback TCP port; an echo child process (this sc
 One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
              53-byte pong of opaque bytes (the sizes of StatePayload and SetpointPayload);
-  project    the real path: encode(StatePayload) + `protocol.zsession.publisher` (express, REAL_TIME, DROP) here;
+  project    the real path: encode(StatePayload) + `sea_hil.protocol.zsession.publisher` (express, REAL_TIME, DROP) here;
              the echo receives like `controller/remote.py` (`LatestSubscriber`, newest-only slot), decodes,
              encodes a SetpointPayload and publishes it; this side receives with blocking recv() and decodes;
   blocking   the project's payloads and publishers, but the echo uses a FIFO with blocking recv().
@@ -24,10 +24,10 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 import zenoh  # noqa: E402
 
 from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-from protocol.payloads import (PayloadCounters, SetpointPayload, StatePayload, TriggerReason,  # noqa: E402
+from sea_hil.protocol.payloads import (PayloadCounters, SetpointPayload, StatePayload, TriggerReason,  # noqa: E402
                                encode)
-from protocol.errors import SeaHilError  # noqa: E402
-from protocol.zsession import LatestSubscriber, free_tcp_port, make_config, open_session, publisher  # noqa: E402
+from sea_hil.errors import SeaHilError  # noqa: E402
+from sea_hil.protocol.zsession import LatestSubscriber, free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")
 PING, PONG = "bench/hop/ping", "bench/hop/pong"

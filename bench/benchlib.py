@@ -28,8 +28,8 @@ from typing import Any
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-from protocol.errors import SeaHilError  # noqa: E402
-from sea_hil.processes import end_process  # noqa: E402
+from sea_hil.errors import SeaHilError  # noqa: E402
+from sea_hil.session.processes import end_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 

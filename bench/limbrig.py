@@ -1,4 +1,4 @@
-"""A real-time rig of N limbs in one process, as `sea_hil/run.py` composes them: one `PlantNode` serving node ids
+"""A real-time rig of N limbs in one process, as `sea_hil/session/run.py` composes them: one `PlantNode` serving node ids
 1..N on one python-can `virtual` bus, and one `EdgeNode` (inner loop at the feedback rate) per limb, each on its own
 bus handle and its own Zenoh limb key. The remote side is a setpoint echo child process (this file with
 `--feeder ENDPOINT`) that answers every state of every limb with a setpoint holding the measured spring deflection
@@ -26,13 +26,13 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 import zenoh  # noqa: E402
 
 from benchlib import stop_process, wait_ready  # noqa: E402
-from controller.edge import EdgeNode  # noqa: E402
-from plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from protocol.canbus import open_bus  # noqa: E402
-from protocol.config import SeaHilConfig, load_config  # noqa: E402
-from protocol.histogram import LogHistogram  # noqa: E402
-from protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
-from protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
+from sea_hil.controller.edge import EdgeNode  # noqa: E402
+from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
+from sea_hil.protocol.canbus import open_bus  # noqa: E402
+from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
+from sea_hil.stats.histogram import LogHistogram  # noqa: E402
+from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 PREFIX = "sea"
 

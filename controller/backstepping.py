@@ -10,7 +10,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from protocol.mechanics import LimbParams, fx_gx, sea_geometry
+from sea_hil.mechanics import LimbParams, fx_gx, sea_geometry
 
 Measurement = tuple[float, float, float, float, float, float, float, float]
 """(theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2) as sent by the driver."""

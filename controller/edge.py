@@ -28,20 +28,20 @@ import time
 import can
 import zenoh
 
-from controller.edge_lockstep import LockstepPlane
-from controller.edge_stats import EdgeCounters, percentiles_us, rx_monotonic_ns
-from controller.inner import InnerLoop
-from protocol.can_codec import (ClearErrors, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
+from sea_hil.controller.edge_lockstep import LockstepPlane
+from sea_hil.controller.edge_stats import EdgeCounters, percentiles_us, rx_monotonic_ns
+from sea_hil.controller.inner import InnerLoop
+from sea_hil.protocol.can_codec import (ClearErrors, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
                                 VoltageCmd, unwrap_us, FEEDBACK_PARTS)
-from protocol.canbus import send_with_retry
-from protocol.config import SeaHilConfig
-from protocol.errors import BusError, MalformedFrame
-from protocol.keys import Keys
-from protocol.link import DelayQueue, LinkEmulator
-from protocol.mechanics import limb_params
-from protocol.payloads import (AckPayload, PayloadCounters, SequenceTracker, SeqVerdict, SetpointPayload,
+from sea_hil.protocol.canbus import send_with_retry
+from sea_hil.config import SeaHilConfig
+from sea_hil.errors import BusError, MalformedFrame
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.link import DelayQueue, LinkEmulator
+from sea_hil.mechanics import limb_params
+from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SequenceTracker, SeqVerdict, SetpointPayload,
                                StatePayload, VoltagePayload, encode)
-from protocol.zsession import LinkedPublisher, publisher
+from sea_hil.protocol.zsession import LinkedPublisher, publisher
 
 log = logging.getLogger("sea_hil.edge")
 

@@ -1,4 +1,4 @@
-"""The edge's lockstep control plane (`LockstepPlane`, a mixin of `controller.edge.EdgeNode`): which released states
+"""The edge's lockstep control plane (`LockstepPlane`, a mixin of `sea_hil.controller.edge.EdgeNode`): which released states
 the controller must answer before simulated time advances, the wait for their ACKs and setpoints (re-publishing a
 state every `resend_ns` of wall time while waiting), and the callback-fed inbox (setpoints, voltages and ACKs in
 lockstep; ACKs only in real time) that the wait blocks on instead of polling. It uses the node's `uplink`,
@@ -13,7 +13,7 @@ from typing import Any
 
 import zenoh
 
-from protocol.payloads import AckPayload
+from sea_hil.protocol.payloads import AckPayload
 
 
 class LockstepPlane:

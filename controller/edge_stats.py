@@ -3,7 +3,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from protocol.histogram import LogHistogram
+from sea_hil.stats.histogram import LogHistogram
 
 
 @dataclass

@@ -2,9 +2,9 @@
 measurement into saturated SEA voltages with the backstepping law."""
 from __future__ import annotations
 
-from controller.backstepping import InnerGains, Measurement, backstepping_voltage, cross_term_weight
-from protocol.config import SeaHilConfig
-from protocol.mechanics import LimbParams
+from sea_hil.controller.backstepping import InnerGains, Measurement, backstepping_voltage, cross_term_weight
+from sea_hil.config import SeaHilConfig
+from sea_hil.mechanics import LimbParams
 
 
 def _sat(v: float, lim: float) -> float:
@@ -15,7 +15,7 @@ def limited_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, flo
                     gains: InnerGains, limit_v: float) -> tuple[float, float, bool]:
     """(u1, u2, saturated): backstepping voltages clipped to +-limit_v; a NaN (degenerate state) commands nothing.
 
-    Plain float code: the offline simulation also compiles it with numba (sea_hil/closed_loop.py)."""
+    Plain float code: the offline simulation also compiles it with numba (sea_hil/offline/closed_loop.py)."""
     u1, u2 = backstepping_voltage(m, vx, s, p, gains)
     if u1 != u1 or u2 != u2:
         return 0.0, 0.0, False

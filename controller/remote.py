@@ -21,17 +21,17 @@ from typing import Any
 
 import zenoh
 
-from controller.inner import InnerLoop
-from controller.outer import OuterController
-from controller.smc import JointState
-from controller.trajectory import LeadIn, make_trajectory
-from protocol.config import SeaHilConfig
-from protocol.errors import MalformedPayload
-from protocol.keys import Keys
-from protocol.mechanics import limb_params
-from protocol.payloads import (AckPayload, PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload,
+from sea_hil.controller.inner import InnerLoop
+from sea_hil.controller.outer import OuterController
+from sea_hil.controller.smc import JointState
+from sea_hil.controller.trajectory import LeadIn, make_trajectory
+from sea_hil.config import SeaHilConfig
+from sea_hil.errors import MalformedPayload
+from sea_hil.protocol.keys import Keys
+from sea_hil.mechanics import limb_params
+from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload,
                                StatePayload, VoltagePayload, encode)
-from protocol.zsession import LatestSubscriber, publisher
+from sea_hil.protocol.zsession import LatestSubscriber, publisher
 
 log = logging.getLogger("sea_hil.controller")
 

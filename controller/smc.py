@@ -1,4 +1,4 @@
-"""Sliding surface and SMC law, paper Eq. 12-13, on the nominal model (protocol.mechanics).
+"""Sliding surface and SMC law, paper Eq. 12-13, on the nominal model (sea_hil.mechanics).
 
 The law returns v_x, the desired spring deflection of each SEA (metres). Pure functions of plain floats.
 """
@@ -6,8 +6,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from controller.trajectory import DesiredSample
-from protocol.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry
+from sea_hil.controller.trajectory import DesiredSample
+from sea_hil.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry
 
 
 @dataclass(frozen=True, slots=True)

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from protocol.config import TrajectoryConfig
-from protocol.errors import TrajectoryError
+from sea_hil.config import TrajectoryConfig
+from sea_hil.errors import TrajectoryError
 
 # (offset, [(amplitude, harmonic, phase)]) per joint, angles in rad
 _HIP = (0.05, ((0.35, 1, 0.0), (0.05, 2, 0.0)))

@@ -9,7 +9,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from protocol.payloads import TriggerReason
+from sea_hil.protocol.payloads import TriggerReason
 
 
 def error_threshold(eta: float, lipschitz_l: float, c: float) -> float:

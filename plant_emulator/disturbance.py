@@ -5,7 +5,7 @@ import math
 import random
 from typing import Callable
 
-from protocol.config import DisturbanceConfig
+from sea_hil.config import DisturbanceConfig
 
 
 def make_disturbance(cfg: DisturbanceConfig) -> Callable[[float], tuple[float, float]]:

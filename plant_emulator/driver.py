@@ -1,6 +1,6 @@
 """Emulated SEA driver firmware for one limb (one CAN node): state machine, watchdog, e-stop, plant integration.
 
-Pure logic, no I/O: the node loop (`plant_emulator.node`) feeds it decoded frames and ticks. States:
+Pure logic, no I/O: the node loop (`sea_hil.plant_emulator.node`) feeds it decoded frames and ticks. States:
 INIT (powered, zero voltage) -> RUNNING on the first voltage command; RUNNING -> FAULT (WATCHDOG) when no command
 arrived for `watchdog_timeout_s`; any state -> ESTOP on an e-stop frame (latched). Only CLEAR_ERRORS leaves FAULT or
 ESTOP (back to INIT). In FAULT, ESTOP and INIT the motor voltage is zero.
@@ -14,11 +14,11 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from plant_emulator.dynamics import State, deflections, initial_state, saturate
-from plant_emulator.integrator import Disturbance, advance
-from protocol.can_frames import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
+from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, saturate
+from sea_hil.plant_emulator.integrator import Disturbance, advance
+from sea_hil.protocol.can_frames import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
                                  VoltageCmd)
-from protocol.mechanics import LimbParams
+from sea_hil.mechanics import LimbParams
 
 U16 = 0xFFFF
 

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import math
 
-from protocol.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry, solve_m
+from sea_hil.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry, solve_m
 
 State = tuple[float, float, float, float, float, float, float, float]
 

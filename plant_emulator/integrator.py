@@ -1,9 +1,9 @@
 """Fixed-step RK4 with sub-steps; the control input is held (zero-order hold) over a step.
 
 `rk4_core` takes the disturbance torques at t, t + h/2 and t + h as values, so that it is plain float code which the
-offline simulation also compiles with numba (sea_hil/closed_loop.py); `rk4_step` and `advance` sample a disturbance
+offline simulation also compiles with numba (sea_hil/offline/closed_loop.py); `rk4_step` and `advance` sample a disturbance
 callable and delegate to it. `advance` (the plant emulator's per-sample integration) runs its sub-steps in a kernel
-compiled from the same source with numba (`protocol.jit`) once `prepare_advance` has loaded it (a node calls that
+compiled from the same source with numba (`sea_hil.jit`) once `prepare_advance` has loaded it (a node calls that
 before its loop, so no period pays for numba's import or cache load); before that, with `jit=False` or without numba
 it runs the same body as plain Python. Both give the same floats bit for bit (no fast-math, same operation order);
 they differ only off the model's domain, where plain Python's `math` raises `ValueError` and the kernel gives NaN.
@@ -14,9 +14,9 @@ from typing import Any, Callable
 
 import numpy as np
 
-from plant_emulator.dynamics import State, f
-from protocol.jit import compiled, loaded
-from protocol.mechanics import LimbParams
+from sea_hil.plant_emulator.dynamics import State, f
+from sea_hil.jit import compiled, loaded
+from sea_hil.mechanics import LimbParams
 
 Disturbance = Callable[[float], tuple[float, float]]
 
@@ -63,7 +63,7 @@ def substep_times(t: float, dt: float, substeps: int) -> list[tuple[float, float
 
 
 def make_advance_kernel(fingerprint: str = "") -> Callable[..., State]:
-    """The sub-step loop of `advance` as a kernel factory (`protocol.jit.compiled`); `fingerprint` keys numba's cache.
+    """The sub-step loop of `advance` as a kernel factory (`sea_hil.jit.compiled`); `fingerprint` keys numba's cache.
     `dist_values` holds d(t_i), d(t_i + h/2), d(t_i + h) of every sub-step i, flat (6 floats per sub-step)."""
 
     def advance_kernel(t, x, u, dt, substeps, p, dist_values):  # type: ignore[no-untyped-def]

@@ -20,16 +20,16 @@ from typing import Callable, Container
 
 import can
 
-from plant_emulator.disturbance import make_disturbance
-from plant_emulator.driver import DriverCore
-from plant_emulator.integrator import prepare_advance
-from protocol.can_codec import SeaCodec, load_database
-from protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback, VoltageCmd
-from protocol.canbus import send_with_retry
-from protocol.config import SeaHilConfig
-from protocol.errors import BusError, MalformedFrame
-from protocol.histogram import LogHistogram
-from protocol.mechanics import limb_params
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.plant_emulator.integrator import prepare_advance
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback, VoltageCmd
+from sea_hil.protocol.canbus import send_with_retry
+from sea_hil.config import SeaHilConfig
+from sea_hil.errors import BusError, MalformedFrame
+from sea_hil.stats.histogram import LogHistogram
+from sea_hil.mechanics import limb_params
 
 log = logging.getLogger("sea_hil.plant")
 

@@ -1,3 +1,3 @@
-"""Everything that crosses or observes the wire: DBC, codecs, Zenoh keys and payloads, bridge, link
-emulation, statistics, MCAP recording, and the shared configuration and limb mechanics that give the wire
-quantities (angles, spring deflections, voltages) their physical meaning."""
+"""The wire, imported as `sea_hil.protocol`: CAN (DBC `sea.dbc`, frames, codec, feedback assembly, bus), Zenoh
+(keys, payloads, session, security) and link emulation. Nothing here knows a node; the plant, the controller, the
+recorder and the session build on it."""

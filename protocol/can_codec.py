@@ -3,7 +3,7 @@
 `can_id = node_id << 5 | cmd_id`; the DBC holds the node-1 ids and is loaded with frame-id mask 0x1F, so one
 definition serves every node. Encoding is strict (out-of-range, NaN, wrong type -> `MalformedFrame`; callers
 saturate first, see `SeaCodec.saturate`); decoding checks id, DLC, reserved bits, ranges and enum values.
-The frame types (`protocol.can_frames`) and feedback assembly (`protocol.can_assembly`) are re-exported here.
+The frame types (`sea_hil.protocol.can_frames`) and feedback assembly (`sea_hil.protocol.can_assembly`) are re-exported here.
 """
 from __future__ import annotations
 
@@ -17,12 +17,12 @@ import can
 import cantools
 from cantools.database import DecodeError, EncodeError
 
-from protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
-from protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
+from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
+from sea_hil.protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
                                  SEQ_MODULUS, T_US_MODULUS, ClearErrors, DeflectionSetpoint, DriverState, ErrorFlags,
                                  EStop, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Frame,
                                  Heartbeat, Pair, VoltageCmd, can_id_of, check_node_id)
-from protocol.errors import ConfigError, MalformedFrame
+from sea_hil.errors import ConfigError, MalformedFrame
 
 __all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",
            "T_US_MODULUS", "ClearErrors", "DeflectionSetpoint", "DriverState", "ErrorFlags", "EStop", "Feedback",
@@ -32,7 +32,7 @@ __all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX
 
 def load_database() -> cantools.database.can.Database:
     """Parse the packaged DBC (frame ids masked to the command bits)."""
-    text = resources.files("protocol").joinpath("sea.dbc").read_text(encoding="utf-8")
+    text = resources.files("sea_hil.protocol").joinpath("sea.dbc").read_text(encoding="utf-8")
     return cantools.database.load_string(text, database_format="dbc", frame_id_mask=CMD_MASK, strict=True)
 
 

@@ -1,7 +1,7 @@
 """The sea-hil CAN frame types (one frozen dataclass per DBC message), ids and rolling-counter constants.
 
 `can_id = node_id << 5 | cmd_id`. Each frame class names its DBC message (`DBC`) and maps its fields to DBC signals
-(`FIELDS`); encoding/decoding lives in `protocol.can_codec`, pairing the feedback frames in `protocol.can_assembly`.
+(`FIELDS`); encoding/decoding lives in `sea_hil.protocol.can_codec`, pairing the feedback frames in `sea_hil.protocol.can_assembly`.
 """
 from __future__ import annotations
 
@@ -10,7 +10,7 @@ from dataclasses import dataclass
 from enum import IntEnum, IntFlag
 from typing import Any, ClassVar, Union
 
-from protocol.errors import MalformedFrame
+from sea_hil.errors import MalformedFrame
 
 NODE_ID_MIN, NODE_ID_MAX = 1, 63
 CMD_BITS = 5

@@ -18,7 +18,7 @@ from typing import Any, Callable
 import can
 from can.interfaces.virtual import VirtualBus, channels_lock
 
-from protocol.errors import BusError, ConfigError
+from sea_hil.errors import BusError, ConfigError
 
 INTERFACES = ("socketcan", "virtual", "udp_multicast")
 _IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")  # Linux IFNAMSIZ (16) minus the NUL

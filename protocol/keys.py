@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from protocol.errors import ConfigError
+from sea_hil.errors import ConfigError
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
 _FORBIDDEN = frozenset("*$#?")
@@ -69,7 +69,7 @@ class Keys:
 
     @classmethod
     def from_config(cls, zenoh_cfg: object) -> Keys:
-        """From a `protocol.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
+        """From a `sea_hil.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
         return cls.make(getattr(zenoh_cfg, "prefix"), getattr(zenoh_cfg, "limb"))
 
     def all(self) -> dict[str, str]:

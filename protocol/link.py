@@ -25,8 +25,8 @@ from typing import Generic, TypeVar
 
 from pydantic import ValidationError
 
-from protocol.config import LinkConfig, LinkDirectionConfig
-from protocol.errors import ConfigError
+from sea_hil.config import LinkConfig, LinkDirectionConfig
+from sea_hil.errors import ConfigError
 
 T = TypeVar("T")
 NS_PER_S = 1_000_000_000

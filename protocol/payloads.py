@@ -20,7 +20,7 @@ from dataclasses import dataclass
 from enum import IntEnum, StrEnum
 from typing import ClassVar, Union
 
-from protocol.errors import MalformedPayload
+from sea_hil.errors import MalformedPayload
 
 MAGIC = b"SH"
 VERSION = 1

@@ -1,7 +1,7 @@
 """The secure Zenoh profile as zenoh config settings: mutual TLS and access control by certificate CN.
 
-Pure mapping from `[zenoh.tls]` / `[zenoh.acl]` (protocol/config.py) to `{json5 path: value}` pairs that
-`protocol.zsession` inserts into a `zenoh.Config`; `check_tls_files` is the only I/O. The ACL is default-deny:
+Pure mapping from `[zenoh.tls]` / `[zenoh.acl]` (sea_hil/config.py) to `{json5 path: value}` pairs that
+`sea_hil.protocol.zsession` inserts into a `zenoh.Config`; `check_tls_files` is the only I/O. The ACL is default-deny:
 
 | who (subject)                 | may send to this node (ingress)                         | may receive (egress) |
 |-------------------------------|---------------------------------------------------------|----------------------|
@@ -18,9 +18,9 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from protocol.config import ZenohAclConfig, ZenohConfig, ZenohTlsConfig
-from protocol.errors import ConfigError
-from protocol.keys import Keys, any_limb, everything
+from sea_hil.config import ZenohAclConfig, ZenohConfig, ZenohTlsConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.keys import Keys, any_limb, everything
 
 TLS_FILES = ("root_ca_certificate", "certificate", "private_key")
 SUBJECT_ANY, SUBJECT_CONTROLLER, SUBJECT_EDGE = "tls-peers", "controller", "edge"

@@ -2,7 +2,7 @@
 
 Sessions never rely on multicast scouting: one side listens on e.g. `tcp/127.0.0.1:<port>`, the other connects.
 With `[zenoh.tls]` / `[zenoh.acl]` enabled (the secure profile, docs/security.md) `session_config` adds mutual TLS
-and access control from `protocol.zsecurity`.
+and access control from `sea_hil.protocol.zsecurity`.
 """
 from __future__ import annotations
 
@@ -15,11 +15,11 @@ from typing import Any, Protocol
 
 import zenoh
 
-from protocol.config import ZenohConfig
-from protocol.errors import ConfigError
-from protocol.link import DelayQueue, LinkEmulator
-from protocol.payloads import estimate_wire_bytes
-from protocol.zsecurity import check_tls_files, security_settings
+from sea_hil.config import ZenohConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.link import DelayQueue, LinkEmulator
+from sea_hil.protocol.payloads import estimate_wire_bytes
+from sea_hil.protocol.zsecurity import check_tls_files, security_settings
 
 _ENDPOINT = re.compile(r"^[a-z0-9\-]+/\S+$")
 _MODES = ("peer", "client", "router")
@@ -43,7 +43,7 @@ def make_config(*, listen: list[str] | tuple[str, ...] = (), connect: list[str] 
                 mode: str = "peer", settings: Mapping[str, Any] | None = None) -> zenoh.Config:
     """A zenoh config with multicast scouting off and only the given endpoints (`<proto>/<address>`).
 
-    `settings` are extra `{json5 path: value}` entries (e.g. `protocol.zsecurity.security_settings`).
+    `settings` are extra `{json5 path: value}` entries (e.g. `sea_hil.protocol.zsecurity.security_settings`).
     """
     if mode not in _MODES:
         raise ConfigError(f"zenoh mode {mode!r} must be one of {', '.join(_MODES)}")

@@ -1,2 +1,8 @@
-"""Composition root of sea-hil: the `sea-hil` CLI and the wiring that needs plant_emulator, controller and
-protocol together (offline simulation, multi-process sessions). Nothing in the three layers imports this."""
+"""sea-hil: networked HIL emulator for event-triggered SMC of a 2-DOF SEA lower limb.
+
+One import package. The user's folders are installed inside it: `protocol/` is `sea_hil.protocol` (the wire),
+`plant_emulator/` is `sea_hil.plant_emulator` (the emulated drive), `controller/` is `sea_hil.controller` (edge and
+remote controller). Shared below them: `sea_hil.errors`, `sea_hil.config`, `sea_hil.mechanics`, `sea_hil.jit`,
+`sea_hil.stats`. Above them: `sea_hil.recorder` (MCAP), `sea_hil.session` (multi-process sessions),
+`sea_hil.offline` (offline closed loop), `sea_hil.sweep`, `sea_hil.report`, `sea_hil.commands` and `sea_hil.cli`.
+"""

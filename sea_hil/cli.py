@@ -1,6 +1,6 @@
 """The `sea-hil` console script: one entry point, one subcommand per node or job.
 
-Each subcommand lives in its own module `sea_hil/cmd_<name>.py` exposing `register(subparsers)`; the module is
+Each subcommand lives in its own module `sea_hil/commands/<name>.py` exposing `register(subparsers)`; the module is
 imported only when listed here. Errors derived from SeaHilError print one line and exit 2 (no traceback).
 """
 from __future__ import annotations
@@ -11,7 +11,7 @@ import logging
 import sys
 from typing import NoReturn
 
-from protocol.errors import SeaHilError
+from sea_hil.errors import SeaHilError
 
 COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep", "certs")
 
@@ -30,9 +30,9 @@ def build_parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     for name in COMMANDS:
         try:
-            module = importlib.import_module(f"sea_hil.cmd_{name}")
+            module = importlib.import_module(f"sea_hil.commands.{name}")
         except ModuleNotFoundError as err:
-            if err.name != f"sea_hil.cmd_{name}":
+            if err.name != f"sea_hil.commands.{name}":
                 raise
             continue
         module.register(sub)

@@ -1,9 +1,78 @@
-"""Re-export of `protocol.jit` (it lives in `protocol` because the plant's integrator uses it too, and
-plant_emulator never imports sea_hil)."""
+"""Optional numba compilation of plain-float hot-path code, from its own source (never a second copy).
+
+`compiled(factory)` takes a kernel factory `factory(fingerprint: str) -> function` and returns
+`numba.njit(cache=True)(factory(fingerprint))`, or None when numba is not installed (the caller then runs
+`factory("")`, the same body, as plain Python). Every project function the kernel calls, directly or through other
+project functions (found from the global names their code uses), is registered with numba's `register_jitable`: the
+compiled kernel runs the very functions the live nodes run. Numba's disk cache only watches the kernel's own file, so
+the factory must make the kernel a closure that references `fingerprint`, a hash of the source of every module
+involved: numba keys its cache on closure contents, so an edit in any callee invalidates the cached machine code.
+"""
 from __future__ import annotations
 
-import importlib.util  # noqa: F401  (part of the interface: tests stub importlib.util.find_spec through it)
+import functools
+import hashlib
+import importlib.util
+import inspect
+import logging
+import sys
+import types
+from typing import Any, Callable
 
-from protocol.jit import PROJECT_PACKAGES, compiled, loaded, project_callees, source_fingerprint
+log = logging.getLogger(__name__)
 
-__all__ = ["PROJECT_PACKAGES", "compiled", "loaded", "project_callees", "source_fingerprint"]
+PROJECT_PACKAGES = ("sea_hil",)
+
+
+def _is_project_function(obj: object) -> bool:
+    return isinstance(obj, types.FunctionType) and obj.__module__.split(".")[0] in PROJECT_PACKAGES
+
+
+def project_callees(fn: types.FunctionType) -> list[types.FunctionType]:
+    """Project functions that fn calls (transitively), in discovery order, fn itself excluded."""
+    seen: dict[int, types.FunctionType] = {}
+    stack = [fn]
+    while stack:
+        cur = stack.pop()
+        for name in cur.__code__.co_names:
+            obj = cur.__globals__.get(name)
+            if _is_project_function(obj) and id(obj) not in seen and obj is not fn:
+                seen[id(obj)] = obj  # type: ignore[assignment]
+                stack.append(obj)  # type: ignore[arg-type]
+    return list(seen.values())
+
+
+def source_fingerprint(functions: list[types.FunctionType]) -> str:
+    """sha256 over the source files of the modules defining `functions` (module constants included)."""
+    digest = hashlib.sha256()
+    for module_name in sorted({f.__module__ for f in functions}):
+        digest.update(module_name.encode())
+        digest.update(inspect.getsource(sys.modules[module_name]).encode())
+    return digest.hexdigest()
+
+
+@functools.cache
+def compiled(factory: Callable[[str], Callable[..., Any]]) -> Any | None:
+    """The numba dispatcher of factory's kernel (compiled lazily on first call, cached on disk), or None."""
+    if importlib.util.find_spec("numba") is None:
+        log.info("numba is not installed: %s runs as plain Python", factory.__qualname__)
+        return None
+    import numba
+    from numba.extending import register_jitable
+
+    probe = factory("")
+    callees = project_callees(probe)
+    for fn in callees:
+        register_jitable(fn)
+    fingerprint = source_fingerprint([factory, *callees])  # type: ignore[list-item]
+    return numba.njit(cache=True)(factory(fingerprint))
+
+
+def loaded(factory: Callable[[str], Callable[..., Any]]) -> Any | None:
+    """`compiled(factory)` if a kernel of factory already ran in this process (so calling it costs no import, no
+    compilation and no cache load), else None: lets a hot loop use a kernel its owner prepared before the loop
+    started and fall back to plain Python otherwise, never stalling on a first call."""
+    if "numba" not in sys.modules:
+        return None
+    kernel = compiled(factory)
+    return kernel if kernel is not None and kernel.overloads else None

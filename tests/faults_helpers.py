@@ -14,16 +14,16 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
-from controller.edge import EdgeNode
-from plant_emulator.node import PlantNode
-from protocol.can_codec import DriverState
-from protocol.canbus import open_bus
-from protocol.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
-from protocol.link import LinkCounters, LinkEmulator
-from protocol.recorder_node import RecorderNode
-from protocol.recording import SessionRecorder
-from protocol.zsession import free_tcp_port, make_config, open_session
-from sea_hil.processes import end_process as _end_process
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import DriverState
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
+from sea_hil.protocol.link import LinkCounters, LinkEmulator
+from sea_hil.recorder.node import RecorderNode
+from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.session.processes import end_process as _end_process
 
 REPO = Path(__file__).resolve().parents[1]
 NODE = 1
@@ -43,7 +43,7 @@ def wait_for(cond: Callable[[], bool], timeout_s: float, poll_s: float = 0.002) 
 
 
 def end_process(proc: subprocess.Popen[bytes] | subprocess.Popen[str]) -> None:
-    """`sea_hil.processes.end_process` with this module's stop timeout; safe to call twice."""
+    """`sea_hil.session.processes.end_process` with this module's stop timeout; safe to call twice."""
     _end_process(proc, STOP_TIMEOUT_S)
 
 
@@ -156,8 +156,8 @@ def _edge_kill_main(group: str) -> dict[str, float]:
     """Plant, controller and edge as separate `sea-hil` processes; SIGKILL the edge, then restart it. Times from
     the kill to the driver's FAULT heartbeat and from the restart to its RUNNING heartbeat."""
     import signal
-    from protocol.can_codec import Heartbeat, SeaCodec
-    from protocol.errors import MalformedFrame
+    from sea_hil.protocol.can_codec import Heartbeat, SeaCodec
+    from sea_hil.errors import MalformedFrame
     spec = f"udp_multicast:{group}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     codec, bus = SeaCodec([NODE]), open_bus(spec)

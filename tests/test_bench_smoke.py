@@ -69,7 +69,7 @@ def test_scale_quick(tmp_path):
 
 @pytest.mark.slow
 def test_mcap_quick_on_a_small_session(tmp_path):
-    from protocol.recording import SessionRecorder
+    from sea_hil.recorder.writer import SessionRecorder
     src = tmp_path / "small.mcap"
     with SessionRecorder(src) as rec:
         for i in range(300):

@@ -1,4 +1,4 @@
-"""Feedback assembly (three frames per sample) and rolling time/sequence arithmetic (protocol.can_assembly)."""
+"""Feedback assembly (three frames per sample) and rolling time/sequence arithmetic (sea_hil.protocol.can_assembly)."""
 from __future__ import annotations
 
 import itertools
@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
-from protocol.can_codec import SeaCodec
-from protocol.can_frames import T_US_MODULUS, EStop, Feedback
-from protocol.errors import MalformedFrame
+from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import T_US_MODULUS, EStop, Feedback
+from sea_hil.errors import MalformedFrame
 
 
 @pytest.fixture(scope="module")

@@ -71,7 +71,7 @@ BAD_ARGS = [
 @pytest.mark.parametrize("argv", BAD_ARGS, ids=lambda a: "-".join(a[:3]))
 def test_bad_cli_values_are_one_clear_line(argv: list[str], tmp_path: Path,
                                            capsys: pytest.CaptureFixture[str]) -> None:
-    from protocol.zsession import free_tcp_port
+    from sea_hil.protocol.zsession import free_tcp_port
     args = [a.format(tmp=tmp_path, port=free_tcp_port()) for a in argv]
     assert main(args) == 2
     one_error_line(capsys.readouterr().err, argv[0])

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import yaml
 
-from protocol.config import load_config
+from sea_hil.config import load_config
 from sea_hil.cli import build_parser
 
 ROOT = Path(__file__).resolve().parents[1]

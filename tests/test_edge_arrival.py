@@ -8,15 +8,15 @@ from collections.abc import Iterator
 import can
 import pytest
 
-from controller.edge import EdgeNode
-from plant_emulator.driver import DriverCore
-from plant_emulator.disturbance import make_disturbance
-from protocol.can_codec import SeaCodec, VoltageCmd
-from protocol.canbus import open_bus
-from protocol.config import load_config
-from protocol.mechanics import limb_params
-from protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
-from protocol.zsession import make_config, open_session
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import load_config
+from sea_hil.mechanics import limb_params
+from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
+from sea_hil.protocol.zsession import make_config, open_session
 
 NODE = 1
 

@@ -16,14 +16,14 @@ import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from controller.edge import EdgeNode
-from plant_emulator.node import PlantNode
-from protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Feedback, SeaCodec, VoltageCmd, load_database
-from protocol.canbus import open_bus
-from protocol.config import load_config
-from protocol.errors import MalformedFrame
-from protocol.payloads import SetpointPayload, TriggerReason, encode
-from protocol.zsession import make_config, open_session
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Feedback, SeaCodec, VoltageCmd, load_database
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import load_config
+from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
+from sea_hil.protocol.zsession import make_config, open_session
 
 CASES = 10_000
 NODE = 1

@@ -12,17 +12,17 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from controller.edge import EdgeNode
-from controller.remote import RemoteController
-from plant_emulator.disturbance import make_disturbance
-from plant_emulator.driver import DriverCore
-from protocol.can_codec import SeaCodec, VoltageCmd
-from protocol.canbus import open_bus
-from protocol.config import load_config
-from protocol.mechanics import limb_params
-from protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.controller.remote import RemoteController
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import load_config
+from sea_hil.mechanics import limb_params
+from sea_hil.protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
                                SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)
-from protocol.zsession import make_config, open_session
+from sea_hil.protocol.zsession import make_config, open_session
 
 CASES = 10_000
 FUZZ = settings(max_examples=CASES, deadline=None, database=None, derandomize=True,

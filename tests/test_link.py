@@ -10,9 +10,9 @@ import statistics
 
 import pytest
 
-from protocol.config import LinkConfig, LinkDirectionConfig
-from protocol.errors import ConfigError
-from protocol.link import DelayQueue, LinkEmulator, link_pair, parse_link_spec
+from sea_hil.config import LinkConfig, LinkDirectionConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.link import DelayQueue, LinkEmulator, link_pair, parse_link_spec
 
 N = 20_000
 Z = 4.0

@@ -7,9 +7,9 @@ from pathlib import Path
 
 import pytest
 
-from protocol.config import load_config
-from sea_hil.run import RunOptions, run_session
-from sea_hil.session_summary import TIMING_FIELDS
+from sea_hil.config import load_config
+from sea_hil.session.run import RunOptions, run_session
+from sea_hil.report.session_summary import TIMING_FIELDS
 
 pytestmark = pytest.mark.slow
 DELAY_S = 0.02

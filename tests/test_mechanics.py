@@ -6,9 +6,9 @@ import math
 import numpy as np
 import pytest
 
-from controller.trajectory import GaitTrajectory
-from protocol.config import load_config
-from protocol.mechanics import (LimbParams, fx_gx, limb_params, mass_matrix, n_terms, sea_geometry, sea_lengths,
+from sea_hil.controller.trajectory import GaitTrajectory
+from sea_hil.config import load_config
+from sea_hil.mechanics import (LimbParams, fx_gx, limb_params, mass_matrix, n_terms, sea_geometry, sea_lengths,
                                 sea_lengths_expanded, solve_m)
 
 GRID = np.linspace(-1.5, 1.5, 31)

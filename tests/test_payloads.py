@@ -7,9 +7,9 @@ import struct
 import pytest
 from hypothesis import given, strategies as st
 
-from protocol.errors import ConfigError, MalformedPayload
-from protocol.keys import Keys, any_limb
-from protocol.payloads import (AckPayload, HEADER_SIZE, MAGIC, PAYLOAD_SIZE, MsgType, PayloadCounters, PayloadRejected,
+from sea_hil.errors import ConfigError, MalformedPayload
+from sea_hil.protocol.keys import Keys, any_limb
+from sea_hil.protocol.payloads import (AckPayload, HEADER_SIZE, MAGIC, PAYLOAD_SIZE, MsgType, PayloadCounters, PayloadRejected,
                                RejectReason, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
                                TriggerReason, VoltagePayload, decode, encode, estimate_wire_bytes)
 

@@ -18,15 +18,15 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from plant_emulator.dynamics import initial_state
-from plant_emulator.integrator import advance
-from plant_emulator.node import PlantNode
-from protocol.can_codec import (ClearErrors, DriverState, ErrorFlags, Feedback, FeedbackAngle, FeedbackAssembler,
+from sea_hil.plant_emulator.dynamics import initial_state
+from sea_hil.plant_emulator.integrator import advance
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import (ClearErrors, DriverState, ErrorFlags, Feedback, FeedbackAngle, FeedbackAssembler,
                                 FEEDBACK_PARTS, Heartbeat, SeaCodec, VoltageCmd, load_database)
-from protocol.canbus import open_bus
-from protocol.config import SeaHilConfig, load_config
-from protocol.errors import MalformedFrame
-from protocol.mechanics import limb_params
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.errors import MalformedFrame
+from sea_hil.mechanics import limb_params
 
 NODE = 1
 THETA_LSB_RAD = 1e-4

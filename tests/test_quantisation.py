@@ -12,10 +12,10 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from protocol.can_codec import load_database
-from protocol.config import load_config
-from sea_hil.closed_loop import simulate
-from sea_hil.wire_quantiser import WireQuantiser, dbc_resolutions, quantised
+from sea_hil.protocol.can_codec import load_database
+from sea_hil.config import load_config
+from sea_hil.offline.closed_loop import simulate
+from sea_hil.offline.wire_quantiser import WireQuantiser, dbc_resolutions, quantised
 
 TOLERANCE = 0.01
 ET_SPREAD = 0.05  # ET moves by ~2 % under a 1e-12 rad perturbation (docs/can-protocol.md)

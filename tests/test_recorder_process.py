@@ -14,14 +14,14 @@ from pathlib import Path
 import can
 import pytest
 
-from protocol.can_codec import Feedback, SeaCodec, VoltageCmd
-from protocol.canbus import open_bus
-from protocol.config import load_config
-from protocol.errors import RecordingError
-from protocol.recorder_node import RecorderNode
-from protocol.recorder_process import RecorderProcess
-from protocol.recording import META_FINAL, SessionRecorder, read_session
-from protocol.recording_can import CanTap, RawFrame, SeqGapCounter, can_records
+from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import load_config
+from sea_hil.errors import RecordingError
+from sea_hil.recorder.node import RecorderNode
+from sea_hil.recorder.process import RecorderProcess
+from sea_hil.recorder.writer import META_FINAL, SessionRecorder, read_session
+from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
 
 CFG = load_config().record
 CAN_TOPICS = ("/can/raw", "/can/feedback", "/can/command")
@@ -189,7 +189,7 @@ def _wait(cond: Callable[[], bool], timeout_s: float) -> bool:
 @pytest.mark.skipif(not hasattr(os, "SCHED_IDLE"), reason="Linux scheduling policies")
 def test_idle_child_runs_on_idle_cpu_time_only(tmp_path: Path) -> None:
     """Real-time sessions ask for SCHED_IDLE (the child's decoding must not take a core from the 1 kHz nodes)."""
-    code = ("import os; from protocol.recorder_process import _idle_policy; _idle_policy(); "
+    code = ("import os; from sea_hil.recorder.process import _idle_policy; _idle_policy(); "
             "print(os.sched_getscheduler(0) == os.SCHED_IDLE)")
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60, check=True)
     assert out.stdout.strip() == "True"

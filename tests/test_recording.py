@@ -14,11 +14,11 @@ import jsonschema
 import pytest
 from mcap.reader import make_reader
 
-from protocol.config import load_config
-from protocol.errors import RecordingError
-from protocol.recording import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, SessionRecorder,
+from sea_hil.config import load_config
+from sea_hil.errors import RecordingError
+from sea_hil.recorder.writer import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, SessionRecorder,
                                 install_finalizer, read_session)
-from protocol.schemas import TOPICS, schema_for
+from sea_hil.recorder.schemas import TOPICS, schema_for
 
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20.0
@@ -139,7 +139,7 @@ def test_truncated_file_yields_a_prefix_of_messages(tmp_path: Path) -> None:
 
 CHILD = r"""
 import signal, sys, threading
-from protocol.recording import SessionRecorder, install_finalizer
+from sea_hil.recorder.writer import SessionRecorder, install_finalizer
 path, mode = sys.argv[1], sys.argv[2]
 rec = SessionRecorder(path, compression="zstd", chunk_size_bytes=512)
 rec.write_session_header(None, seed=1)

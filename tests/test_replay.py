@@ -7,12 +7,12 @@ from collections.abc import Iterator
 
 import pytest
 
-from controller.edge import EdgeNode
-from controller.remote import RemoteController
-from protocol.canbus import open_bus
-from protocol.config import load_config
-from protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
-from protocol.zsession import make_config, open_session
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.controller.remote import RemoteController
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import load_config
+from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
+from sea_hil.protocol.zsession import make_config, open_session
 
 MS = 1_000_000
 

@@ -20,15 +20,15 @@ from typing import Any, TypeVar
 import pytest
 import zenoh
 
-from protocol.can_codec import FeedbackAssembler, FEEDBACK_PARTS, SeaCodec, VoltageCmd
-from protocol.canbus import open_bus
-from protocol.config import ZenohConfig, load_config
-from protocol.errors import ConfigError
-from protocol.keys import Keys
-from protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
-from protocol.zsecurity import acl_document, security_settings
-from protocol.zsession import free_tcp_port, make_config, open_session, session_config
-from sea_hil.cmd_certs import CertSet, make_certs, node_cn, register
+from sea_hil.protocol.can_codec import FeedbackAssembler, FEEDBACK_PARTS, SeaCodec, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.config import ZenohConfig, load_config
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
+from sea_hil.protocol.zsecurity import acl_document, security_settings
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, session_config
+from sea_hil.commands.certs import CertSet, make_certs, node_cn, register
 
 DEADLINE_S = 20.0
 KEYS = Keys.make("sea", "limb1")
@@ -236,8 +236,8 @@ class _CanWatch:
 
 def _start_limb(stack: ExitStack, cfg: Any) -> tuple[Any, zenoh.Session, _CanWatch]:
     """Plant (emulated driver) + EdgeNode (remote inner loop: voltages go straight to CAN) on a virtual bus."""
-    from controller.edge import EdgeNode
-    from plant_emulator.node import PlantNode
+    from sea_hil.controller.edge import EdgeNode
+    from sea_hil.plant_emulator.node import PlantNode
     buses = [open_bus(cfg.can.interface) for _ in range(3)]
     for b in buses:
         stack.callback(b.shutdown)

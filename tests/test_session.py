@@ -9,11 +9,11 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
-from protocol.config import load_config
-from protocol.recording import read_session
-from sea_hil.report import run_report
-from sea_hil.run import RunOptions, run_session
-from sea_hil.session_summary import TIMING_FIELDS
+from sea_hil.config import load_config
+from sea_hil.recorder.writer import read_session
+from sea_hil.report.writer import run_report
+from sea_hil.session.run import RunOptions, run_session
+from sea_hil.report.session_summary import TIMING_FIELDS
 
 pytestmark = pytest.mark.slow
 SHORT = {"trajectory": {"period_s": 2.0}}

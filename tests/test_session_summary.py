@@ -2,8 +2,8 @@
 (t < 0) and states outside both (before the controller's first, after its last handled state)."""
 from __future__ import annotations
 
-from protocol.recording_reader import RecordedMessage, SessionData
-from sea_hil.session_summary import session_summary
+from sea_hil.recorder.reader import RecordedMessage, SessionData
+from sea_hil.report.session_summary import session_summary
 
 MS = 1_000_000
 T0_SAMPLE_NS = 5_000 * MS        # sample time of the controller's t = 0 (the driver booted 5 s earlier)

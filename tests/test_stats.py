@@ -7,9 +7,9 @@ import math
 import numpy as np
 import pytest
 
-from protocol.errors import MalformedFrame, MalformedPayload
-from protocol.histogram import LogHistogram
-from protocol.stats import (BusLoad, InterEventStats, SeqStats, SessionStats, SlidingRate, StreamStats,
+from sea_hil.errors import MalformedFrame, MalformedPayload
+from sea_hil.stats.histogram import LogHistogram
+from sea_hil.stats.session import (BusLoad, InterEventStats, SeqStats, SessionStats, SlidingRate, StreamStats,
                             TrackingStats, can_frame_bits)
 
 S = 1_000_000_000

@@ -15,12 +15,12 @@ from pathlib import Path
 import pytest
 from hypothesis import given, strategies as st
 
-from protocol.errors import ConfigError
+from sea_hil.errors import ConfigError
 from sea_hil.cli import main
-from sea_hil.sweep import SweepOptions, point_config, progress_line, run_sweep
-from sea_hil.sweep_grid import (CSV_COLUMNS, GridPoint, LinkCondition, csv_row, expand_grid, parse_axis,
+from sea_hil.sweep.runner import SweepOptions, point_config, progress_line, run_sweep
+from sea_hil.sweep.grid import (CSV_COLUMNS, GridPoint, LinkCondition, csv_row, expand_grid, parse_axis,
                                 pareto_front, point_command, point_overrides)
-from sea_hil.sweep_output import fronts_by_link, write_outputs
+from sea_hil.sweep.output import fronts_by_link, write_outputs
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN_SUMMARY = {"transmissions": {"downlink_msgs": 304, "downlink_bytes": 16112, "uplink_msgs": 1001},
@@ -148,7 +148,7 @@ def test_failing_point_is_a_row_not_a_crash(tmp_path, monkeypatch):
             return [python, "-c", "import sys; print('sea-hil run: error: boom'); sys.exit(3)"]
         code = f"import json, pathlib; pathlib.Path({str(out)!r}, 'summary.json').write_text(json.dumps({RUN_SUMMARY!r}))"
         return [python, "-c", code]
-    monkeypatch.setattr("sea_hil.sweep.point_command", fake)
+    monkeypatch.setattr("sea_hil.sweep.runner.point_command", fake)
     lines: list[str] = []
     points = expand_grid((0.5,), (0.2,), (0.0,), (0.0,), (0.0,))
     rows, interrupted = run_sweep(points, SweepOptions(out=tmp_path, jobs=2), lines.append)

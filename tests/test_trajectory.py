@@ -7,9 +7,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from controller.trajectory import CsvTrajectory, GaitTrajectory, LeadIn, make_trajectory
-from protocol.config import TrajectoryConfig
-from protocol.errors import TrajectoryError
+from sea_hil.controller.trajectory import CsvTrajectory, GaitTrajectory, LeadIn, make_trajectory
+from sea_hil.config import TrajectoryConfig
+from sea_hil.errors import TrajectoryError
 
 
 def _fd(fn, t: float, h: float) -> tuple[float, float]:

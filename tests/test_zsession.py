@@ -7,12 +7,12 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
-from protocol.config import LinkDirectionConfig, ZenohConfig
-from protocol.errors import ConfigError
-from protocol.keys import Keys
-from protocol.link import LinkEmulator
-from protocol.payloads import StatePayload, decode, encode
-from protocol.zsession import (LatestSubscriber, LinkedPublisher, free_tcp_port, make_config, open_session,
+from sea_hil.config import LinkDirectionConfig, ZenohConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.link import LinkEmulator
+from sea_hil.protocol.payloads import StatePayload, decode, encode
+from sea_hil.protocol.zsession import (LatestSubscriber, LinkedPublisher, free_tcp_port, make_config, open_session,
                                publisher)
 
 DEADLINE_S = 10.0

@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from sea_hil.processes import end_process
+from sea_hil.session.processes import end_process
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE_STEP_S = 0.005        # CSV resolution of the gait slice (spline-interpolated by the controller)
@@ -34,8 +34,8 @@ def sea_hil_cmd(*args: str, netns: str | None = None) -> list[str]:
 
 def write_gait_slice_config(directory: Path, duration_s: float) -> Path:
     """Write ``gait-slice.csv`` (the default gait's first ``duration_s``) and ``session.toml`` using it; -> TOML."""
-    from controller.trajectory import GaitTrajectory
-    from protocol.config import load_config
+    from sea_hil.controller.trajectory import GaitTrajectory
+    from sea_hil.config import load_config
     gait = GaitTrajectory(load_config().trajectory.period_s)
     rows = ["t,theta1,theta2"]
     for i in range(int(round(duration_s / SAMPLE_STEP_S)) + 1):
@@ -158,7 +158,7 @@ class NodeSessionResult:
     plant's closing report line (ticks, overruns)."""
 
     summary: dict[str, Any]
-    data: Any   # protocol.recording.SessionData
+    data: Any   # sea_hil.recorder.writer.SessionData
     plant_report: str
 
 
@@ -188,9 +188,9 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
         for name in ("edge", "plant", "record"):
             assert nodes.stop(name) == 0, f"{name} did not exit cleanly:\n{nodes.outputs()}"
         plant_lines = nodes.output("plant").strip().splitlines()
-    from protocol.recording import read_session
-    from sea_hil.session_summary import session_summary
-    from sea_hil.summary import write_summary
+    from sea_hil.recorder.writer import read_session
+    from sea_hil.report.session_summary import session_summary
+    from sea_hil.report.summary import write_summary
     data = read_session(mcap)
     summary = session_summary(data, s.controller)
     write_summary(out / "summary.json", summary)

@@ -10,10 +10,10 @@ from collections.abc import Callable
 
 import can
 
-from plant_emulator.node import PlantNode
-from protocol.can_codec import ErrorFlags, FeedbackAngle, Heartbeat, SeaCodec
-from protocol.config import load_config
-from protocol.errors import MalformedFrame
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import ErrorFlags, FeedbackAngle, Heartbeat, SeaCodec
+from sea_hil.config import load_config
+from sea_hil.errors import MalformedFrame
 from socketcan_helpers import PROCESS_TIMEOUT_S
 
 NODE = 1

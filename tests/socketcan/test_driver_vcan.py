@@ -15,8 +15,8 @@ from pathlib import Path
 
 import can
 
-from protocol.can_codec import DriverState, FeedbackAngle, Heartbeat, SeaCodec, VoltageCmd
-from protocol.errors import MalformedFrame
+from sea_hil.protocol.can_codec import DriverState, FeedbackAngle, Heartbeat, SeaCodec, VoltageCmd
+from sea_hil.errors import MalformedFrame
 
 NODE = 1
 REPO = Path(__file__).resolve().parents[2]

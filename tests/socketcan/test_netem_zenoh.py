@@ -36,8 +36,8 @@ def delayed_namespaces(veth_namespaces: tuple[str, str]) -> tuple[str, str]:
 
 
 def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces: tuple[str, str]) -> None:
-    from protocol.zsession import free_tcp_port
-    from sea_hil.report import state_to_setpoint_latency_us
+    from sea_hil.protocol.zsession import free_tcp_port
+    from sea_hil.report.writer import state_to_setpoint_latency_us
     bus_ns, ctl_ns = delayed_namespaces
     session = NodeSession(config=write_gait_slice_config(tmp_path, DURATION_S),
                           client_config=write_client_config(tmp_path), can="socketcan:vcan0",

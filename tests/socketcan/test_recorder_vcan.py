@@ -15,11 +15,11 @@ from pathlib import Path
 import can
 import pytest
 
-from protocol.can_codec import SeaCodec, VoltageCmd
-from protocol.canbus import send_with_retry
-from protocol.config import load_config
-from protocol.recorder_node import RX_BUFFER_BYTES, RecorderNode
-from protocol.recording import SessionRecorder
+from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
+from sea_hil.protocol.canbus import send_with_retry
+from sea_hil.config import load_config
+from sea_hil.recorder.node import RX_BUFFER_BYTES, RecorderNode
+from sea_hil.recorder.writer import SessionRecorder
 
 NODES = tuple(range(1, 17))
 ROUNDS = 50                 # < 256: one id's run of drops cannot alias the 8-bit seq

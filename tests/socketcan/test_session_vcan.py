@@ -25,7 +25,7 @@ VIRTUAL_RUN_TIMEOUT_S = 400.0
 
 def voltage_cmd_id(node_id: int) -> int:
     """CAN id of node ``node_id``'s VOLTAGE_CMD, from the DBC."""
-    from protocol.can_codec import SeaCodec, VoltageCmd
+    from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
     return int(SeaCodec().encode(VoltageCmd(node_id, (0.0, 0.0), 0)).arbitration_id)
 
 
@@ -41,7 +41,7 @@ def virtual_bus_summary(config: Path, out: Path) -> dict:
 
 def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_channel: str,
                                                            start_candump: Callable[..., CanDump]) -> None:
-    from protocol.zsession import free_tcp_port
+    from sea_hil.protocol.zsession import free_tcp_port
     config = write_gait_slice_config(tmp_path, DURATION_S)
     cmd_id = voltage_cmd_id(1)
     dump = start_candump("-n", "5", filters=f"{cmd_id:03X}:7FF")

@@ -1,0 +1,52 @@
+"""Options shared by several subcommands, and turning them into a frozen config."""
+from __future__ import annotations
+
+import argparse
+from typing import Any
+
+from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.protocol.link import parse_link_spec
+
+
+def add_config_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--config", metavar="FILE", help="TOML file overlaid on the embedded defaults")
+    p.add_argument("--seed", type=int, help="seed for every RNG (link emulation, disturbance noise)")
+
+
+def add_zenoh_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--connect", action="append", default=[], metavar="ENDPOINT",
+                   help="Zenoh endpoint to connect to, e.g. tcp/10.0.0.2:7447 (repeatable)")
+    p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
+                   help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
+    p.add_argument("--limb", help="limb name in the Zenoh keys (default from config: limb1)")
+
+
+def add_link_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--uplink", metavar="SPEC", help="link emulation edge->controller, e.g. 'delay=20ms,jitter=5ms,"
+                                                    "loss=1%%,ge=0.01/0.3/0.8,rate=1Mbps'")
+    p.add_argument("--downlink", metavar="SPEC", help="link emulation controller->edge (same syntax)")
+
+
+def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
+    ov: dict[str, Any] = dict(overrides or {})
+    if getattr(args, "seed", None) is not None:
+        ov.setdefault("link", {})["seed"] = args.seed
+        ov.setdefault("disturbance", {})["seed"] = args.seed
+    if getattr(args, "trajectory", None):
+        ov.setdefault("trajectory", {}).update({"kind": "csv", "csv_path": args.trajectory})
+    for direction in ("uplink", "downlink"):
+        spec = getattr(args, direction, None)
+        if spec:
+            ov.setdefault("link", {})[direction] = parse_link_spec(spec)
+    z: dict[str, Any] = {}
+    if getattr(args, "connect", None):
+        z["connect"] = list(args.connect)
+    if getattr(args, "listen", None):
+        z["listen"] = list(args.listen)
+    if getattr(args, "limb", None):
+        z["limb"] = args.limb
+    if z:
+        ov["zenoh"] = {**ov.get("zenoh", {}), **z}
+    if getattr(args, "can", None):
+        ov.setdefault("can", {})["interface"] = args.can
+    return load_config(getattr(args, "config", None), ov)

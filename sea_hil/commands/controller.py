@@ -1,0 +1,38 @@
+"""`sea-hil controller`: the remote ET/TT SMC node on its own."""
+from __future__ import annotations
+
+import argparse
+import signal
+
+from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("controller", help="remote controller node (ET/TT SMC over Zenoh)",
+                       description="Subscribe to the limb state, run the outer SMC and publish setpoints only on "
+                                   "events (TT: every sample). Exits after --cycles walking cycles.")
+    p.add_argument("--controller", choices=("tt", "et"), default="et")
+    p.add_argument("--cycles", type=int, default=1)
+    p.add_argument("--inner", choices=("edge", "remote"), default="edge")
+    p.add_argument("--lockstep", action="store_true")
+    p.add_argument("--timeout", type=float, default=None, help="give up after this many seconds without finishing")
+    add_zenoh_args(p)
+    add_config_args(p)
+    p.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from sea_hil.controller.remote import RemoteController
+    from sea_hil.protocol.zsession import open_session
+    cfg = config_from_args(args)
+    session = open_session(cfg.zenoh)
+    node = RemoteController(cfg, session, args.controller, inner=args.inner, lockstep=args.lockstep,
+                            cycles=args.cycles)
+    signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())
+    try:
+        done = node.run(args.timeout)
+    finally:
+        node.publish_stats(final=True)
+        node.close()
+        session.close()
+    return 0 if done else 3

@@ -1,0 +1,45 @@
+"""`sea-hil edge`: the CAN<->Zenoh bridge with the inner loop, on its own."""
+from __future__ import annotations
+
+import argparse
+import signal
+
+from sea_hil.commands.common import add_config_args, add_link_args, add_zenoh_args, config_from_args
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("edge", help="edge node: CAN<->Zenoh bridge running the backstepping inner loop")
+    p.add_argument("--can", metavar="SPEC", help="socketcan:vcan0 | virtual:NAME | udp_multicast:GROUP")
+    p.add_argument("--node", type=int, default=1, help="driver node id")
+    p.add_argument("--inner", choices=("edge", "remote"), default="edge")
+    p.add_argument("--lockstep", action="store_true")
+    add_zenoh_args(p)
+    add_link_args(p)
+    add_config_args(p)
+    p.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from sea_hil.controller.edge import EdgeNode
+    from sea_hil.protocol.canbus import open_bus
+    from sea_hil.protocol.zsession import open_session
+    cfg = config_from_args(args)
+    session = open_session(cfg.zenoh)
+    bus = None
+    try:
+        bus = open_bus(cfg.can.interface)
+        node = EdgeNode(cfg, bus, session, args.node, inner=args.inner, lockstep=args.lockstep)
+    except BaseException:
+        if bus is not None:
+            bus.shutdown()
+        session.close()
+        raise
+    signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())
+    try:
+        node.run()
+    finally:
+        node.publish_stats(final=True)
+        node.close()
+        session.close()
+        bus.shutdown()
+    return 0

@@ -1,0 +1,46 @@
+"""`sea-hil record`: the recorder node on its own (Zenoh, and CAN if --can is given)."""
+from __future__ import annotations
+
+import argparse
+import signal
+import threading
+from pathlib import Path
+
+from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("record", help="record every Zenoh message (and CAN frame) of a session to MCAP")
+    p.add_argument("--out", type=Path, required=True, metavar="FILE.mcap")
+    p.add_argument("--can", metavar="SPEC", help="also record this CAN bus")
+    p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (default: SIGINT/SIGTERM)")
+    add_zenoh_args(p)
+    add_config_args(p)
+    p.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    import sys
+    from sea_hil.protocol.canbus import open_bus
+    from sea_hil.recorder.node import RecorderNode
+    from sea_hil.recorder.writer import SessionRecorder
+    from sea_hil.protocol.zsession import open_session
+    cfg = config_from_args(args)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+    session = open_session(cfg.zenoh)
+    bus = open_bus(args.can) if args.can else None
+    rec = SessionRecorder.from_config(args.out, cfg.record)
+    rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
+    node = RecorderNode(rec, session, cfg.zenoh.prefix, bus)
+    node.start()
+    try:
+        stop.wait(args.duration)
+    finally:
+        node.stop()
+        rec.close(final_stats=node.counters())
+        session.close()
+        if bus is not None:
+            bus.shutdown()
+    return 0

@@ -1,0 +1,38 @@
+"""`sea-hil simulate`: offline closed loop (no network)."""
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+from sea_hil.commands.common import add_config_args, config_from_args
+
+
+def register(sub: argparse._SubParsersAction) -> None:
+    p = sub.add_parser("simulate", help="offline closed-loop simulation (no network); paper Fig. 2-4",
+                       description="Run the plant model with TT or ET SMC in one process and write "
+                                   "DIR/summary.json plus figures.")
+    p.add_argument("--controller", choices=("tt", "et"), default="et", help="time- or event-triggered SMC")
+    p.add_argument("--compare", action="store_true", help="run both and write DIR/compare.md (TT vs ET vs paper)")
+    p.add_argument("--trajectory", metavar="CSV", help="desired trajectory CSV with columns t, theta1, theta2 (rad)")
+    p.add_argument("--cycles", type=int, help="walking cycles to simulate (default from config: 1)")
+    p.add_argument("--quantise", action="store_true",
+                   help="round measurements and voltages to their CAN frame resolutions (docs/can-protocol.md)")
+    p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
+    add_config_args(p)
+    p.set_defaults(func=_main)
+
+
+def _main(args: argparse.Namespace) -> int:
+    from sea_hil.offline.simulate import run_compare, run_simulation
+    from sea_hil.errors import ConfigError
+    if args.cycles is not None and args.cycles < 1:
+        raise ConfigError("--cycles must be >= 1")
+    cfg = config_from_args(args)
+    if args.compare:
+        _, _, table = run_compare(cfg, args.out, args.cycles, quantise=args.quantise)
+        print(table)
+    else:
+        summary = run_simulation(cfg, args.controller, args.out, args.cycles, quantise=args.quantise)
+        print(json.dumps(summary, indent=2, sort_keys=True))
+    return 0

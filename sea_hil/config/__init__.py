@@ -1,0 +1,20 @@
+"""Frozen configuration objects loaded from TOML.
+
+One `SeaHilConfig` is built per process from the embedded default (`sea_hil/config/default_config.toml`) overlaid with
+an optional user file; unknown keys and wrong types are errors (`ConfigError`, one line). Nothing here is global:
+callers pass the config object down.
+"""
+from __future__ import annotations
+
+from sea_hil.config.base import Pair
+from sea_hil.config.comms import (CanConfig, LinkConfig, LinkDirectionConfig, RecordConfig, ZenohAclConfig, ZenohConfig,
+                                  ZenohTlsConfig)
+from sea_hil.config.loader import config_from_dict, config_to_toml, default_toml_text, load_config
+from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
+                                  TriggerConfig)
+from sea_hil.config.root import SeaHilConfig
+
+__all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "LinkConfig", "LinkDirectionConfig", "Pair",
+           "PlantConfig", "RecordConfig", "SeaHilConfig", "SimConfig", "TrajectoryConfig", "TriggerConfig",
+           "ZenohAclConfig", "ZenohConfig", "ZenohTlsConfig", "config_from_dict", "config_to_toml",
+           "default_toml_text", "load_config"]

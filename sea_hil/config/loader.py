@@ -1,0 +1,87 @@
+"""Loading a `SeaHilConfig`: embedded default TOML, a user file, overrides; and back to TOML."""
+from __future__ import annotations
+
+import tomllib
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+from pydantic import ValidationError
+
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.errors import ConfigError
+
+
+def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
+    out = dict(base)
+    for key, val in over.items():
+        if isinstance(val, dict) and isinstance(out.get(key), dict):
+            out[key] = _merge(out[key], val)
+        else:
+            out[key] = val
+    return out
+
+
+def default_toml_text() -> str:
+    return resources.files("sea_hil.config").joinpath("default_config.toml").read_text(encoding="utf-8")
+
+
+def _one_line(err: ValidationError) -> str:
+    parts = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"])
+        parts.append(f"{loc}: {e['msg']}")
+    return "; ".join(parts)
+
+
+def config_from_dict(data: dict[str, Any]) -> SeaHilConfig:
+    try:
+        return SeaHilConfig.model_validate(data)
+    except ValidationError as err:
+        raise ConfigError(f"invalid config: {_one_line(err)}") from None
+
+
+def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
+    """Embedded defaults, overlaid with the TOML file at `path` (if any), then `overrides` (nested dict)."""
+    data = tomllib.loads(default_toml_text())
+    if path is not None:
+        p = Path(path)
+        try:
+            user = tomllib.loads(p.read_text(encoding="utf-8"))
+        except FileNotFoundError:
+            raise ConfigError(f"config file not found: {p}") from None
+        except tomllib.TOMLDecodeError as err:
+            raise ConfigError(f"config file {p} is not valid TOML: {err}") from None
+        except (OSError, UnicodeDecodeError) as err:
+            raise ConfigError(f"cannot read config file {p}: {err}") from None
+        data = _merge(data, user)
+    if overrides:
+        data = _merge(data, overrides)
+    return config_from_dict(data)
+
+
+def config_to_toml(cfg: SeaHilConfig) -> str:
+    """Serialise a config back to TOML (used to attach the effective config to recordings)."""
+    lines: list[str] = []
+
+    def fmt(v: Any) -> str:
+        if isinstance(v, bool):
+            return "true" if v else "false"
+        if isinstance(v, str):
+            return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+        if isinstance(v, (list, tuple)):
+            return "[" + ", ".join(fmt(x) for x in v) + "]"
+        return repr(v)
+
+    def emit(prefix: str, d: dict[str, Any]) -> None:
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict)}
+        tables = {k: v for k, v in d.items() if isinstance(v, dict)}
+        if scalars:
+            lines.append(f"[{prefix}]")
+            lines.extend(f"{k} = {fmt(v)}" for k, v in scalars.items())
+            lines.append("")
+        for k, v in tables.items():
+            emit(f"{prefix}.{k}" if prefix else k, v)
+
+    emit("", cfg.model_dump(mode="python"))
+    return "\n".join(lines)

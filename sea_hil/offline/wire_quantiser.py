@@ -1,0 +1,51 @@
+"""What the CAN wire does to the inner loop's numbers: DBC scaling, rounding and range limits, nothing else.
+
+`dbc_resolutions()` reads the resolution (scale) of each feedback and voltage signal from protocol/sea.dbc and
+`quantised` rounds a value to it, which is what a cantools encode/decode round trip does to an in-range value; the
+offline closed loop uses them (`sea-hil simulate --quantise`) to show what quantisation alone costs in tracking error
+(docs/can-protocol.md). `WireQuantiser` is the real round trip through the codec, used to check `quantised`.
+"""
+from __future__ import annotations
+
+from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd, load_database
+
+Measurement = tuple[float, float, float, float, float, float, float, float]
+Resolutions = tuple[float, float, float, float, float]
+EXACT: Resolutions = (0.0, 0.0, 0.0, 0.0, 0.0)
+_NODE = 1
+_SIGNALS = (("FEEDBACK_ANGLE", "theta1"), ("FEEDBACK_JOINT1", "omega1"), ("FEEDBACK_JOINT1", "delta1"),
+            ("FEEDBACK_JOINT1", "nut_vel1"), ("VOLTAGE_CMD", "voltage1"))
+
+
+def dbc_resolutions() -> Resolutions:
+    """(theta rad, omega rad/s, delta m, nut velocity m/s, voltage V) per LSB, from the DBC; joint 2 signals share
+    joint 1's scale (checked by tests/test_quantisation.py)."""
+    db = load_database()
+    res = tuple(float(db.get_message_by_name(msg).get_signal_by_name(sig).scale) for msg, sig in _SIGNALS)
+    return res  # type: ignore[return-value]
+
+
+def quantised(value: float, lsb: float) -> float:
+    """`value` rounded to the nearest multiple of `lsb` (a DBC raw integer times its scale); lsb <= 0: unchanged."""
+    if lsb <= 0.0:
+        return value
+    return round(value / lsb) * lsb
+
+
+class WireQuantiser:
+    """Round trips through the DBC codec (saturate -> strict encode -> decode), as the driver and edge do; the
+    measurement order is (theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2)."""
+
+    def __init__(self) -> None:
+        self.codec = SeaCodec([_NODE])
+
+    def measurement(self, meas: Measurement) -> Measurement:
+        fb = Feedback(_NODE, 0, 0, (meas[0], meas[1]), (meas[2], meas[3]), (meas[4], meas[5]), (meas[6], meas[7]))
+        sent, _ = self.codec.saturate(fb)
+        got = Feedback.from_parts(*(self.codec.decode(m) for m in self.codec.encode_feedback(sent)))
+        return (*got.theta_rad, *got.omega_rad_s, *got.delta_m, *got.nut_vel_m_s)
+
+    def voltage(self, voltage_v: tuple[float, float]) -> tuple[float, float]:
+        sent, _ = self.codec.saturate(VoltageCmd(_NODE, (float(voltage_v[0]), float(voltage_v[1])), 0))
+        got = self.codec.decode(self.codec.encode(sent))
+        return got.voltage_v

@@ -1,0 +1,178 @@
+"""The recorder node: every Zenoh message under `<prefix>/**` and every CAN frame on the bus into one MCAP file.
+
+Binary payloads are decoded (rejects counted, raw size kept); JSON stats/tracking messages are flattened into
+their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/feedback` / `/can/command`
+(`sea_hil.recorder.can_tap`). With an in-process `SessionRecorder` the node decodes and the recorder's writer thread
+writes (bounded queue: a recorder that falls behind drops and counts); with a `RecorderProcess` the node only
+forwards raw frames and the child process decodes and writes.
+
+On SocketCAN the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
+large receive buffer (`enlarge_rx_buffer`) and the frames that were missed anyway are counted from seq gaps
+(`can_frames_missed`, `sea_hil.recorder.can_tap.SeqGapCounter`).
+"""
+from __future__ import annotations
+
+import json
+import logging
+import socket
+import threading
+import time
+from typing import Any
+
+import can
+import zenoh
+
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.keys import everything
+from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload)
+from sea_hil.recorder.process import RecorderProcess
+from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.recorder.can_tap import CanTap, RawFrame
+
+log = logging.getLogger("sea_hil.record")
+SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it
+RX_BUFFER_BYTES = 8 << 20   # the kernel doubles it: ~21k queued frames at ~770 B each, ~5 s of one 1 kHz limb
+
+
+def enlarge_rx_buffer(bus: can.BusABC, size_bytes: int = RX_BUFFER_BYTES) -> int | None:
+    """Raise the receive buffer of a SocketCAN bus's socket (SO_RCVBUFFORCE as root, else SO_RCVBUF, which the
+    kernel caps at net.core.rmem_max); -> the size the kernel granted, None for buses without a socket."""
+    sock = getattr(bus, "socket", None)
+    if not isinstance(sock, socket.socket):
+        return None
+    try:
+        sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, size_bytes)
+    except OSError:   # no CAP_NET_ADMIN: the capped request
+        try:
+            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size_bytes)
+        except OSError as err:
+            log.warning("cannot enlarge the CAN receive buffer: %s", err)
+    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
+    if granted < size_bytes:
+        log.warning("CAN receive buffer is %d bytes (asked for %d; raise net.core.rmem_max): frames may be "
+                    "dropped by the kernel, counted as can_frames_missed", granted, size_bytes)
+    return granted
+
+
+def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str, dict[str, Any]] | None:
+    """(topic, flat payload) for one Zenoh message, or None if it is not recordable."""
+    channel = key.rsplit("/", 1)[-1]
+    if channel in ("event", "stats"):
+        try:
+            obj = json.loads(data)
+        except (ValueError, UnicodeDecodeError):
+            payloads.rejected["json"] += 1
+            return None
+        if not isinstance(obj, dict):
+            return None
+        if channel == "stats":
+            return "/stats", {k: v for k, v in obj.items() if isinstance(v, (int, float, bool))}
+        flat = {k: v for k, v in obj.items() if isinstance(v, (int, float, str, bool)) or v is None}
+        flat["key"] = key
+        return "/tracking", flat
+    p = payloads.try_decode(data)
+    if p is None:
+        return None
+    base: dict[str, Any] = {"key": key, "seq": p.seq, "sent_t_ns": p.t_ns, "payload_bytes": len(data)}
+    if isinstance(p, StatePayload):
+        return "/zenoh/state", {**base, "sample_t_ns": p.sample_t_ns, "theta1_rad": p.theta_rad[0],
+                                "theta2_rad": p.theta_rad[1], "omega1_rad_s": p.omega_rad_s[0],
+                                "omega2_rad_s": p.omega_rad_s[1], "delta1_m": p.delta_m[0], "delta2_m": p.delta_m[1]}
+    if isinstance(p, SetpointPayload):
+        return "/zenoh/setpoint", {**base, "state_seq": p.state_seq, "delta1_ref_m": p.deflection_m[0],
+                                   "delta2_ref_m": p.deflection_m[1], "s1": p.sliding[0], "s2": p.sliding[1],
+                                   "reason": p.reason.name}
+    if isinstance(p, VoltagePayload):
+        return "/zenoh/voltage", {**base, "state_seq": p.state_seq, "u1_v": p.voltage_v[0], "u2_v": p.voltage_v[1]}
+    if isinstance(p, AckPayload):
+        return None   # lockstep control plane
+    return None
+
+
+class RecorderNode:
+    def __init__(self, recorder: SessionRecorder | RecorderProcess, session: zenoh.Session | None, prefix: str,
+                 bus: can.BusABC | None = None, *, tap_batch_s: float = 0.0,
+                 rx_buffer_bytes: int = RX_BUFFER_BYTES) -> None:
+        self.rec = recorder
+        self.tap_batch_s = tap_batch_s
+        self.payloads = PayloadCounters()
+        self.tap = CanTap(SeaCodec())
+        self.stop_event = threading.Event()
+        self.can_forwarded = 0   # frames shipped raw to a RecorderProcess (which counts and decodes them)
+        self.can_tap_unfinished = False   # stop() gave up on a CAN backlog (frames not seen, not counted)
+        self.zenoh_msgs = 0
+        self.rx_buffer_bytes = enlarge_rx_buffer(bus, rx_buffer_bytes) if bus is not None else None
+        self._sub = session.declare_subscriber(everything(prefix), zenoh.handlers.FifoChannel(65536)) \
+            if session is not None else None
+        self._bus = bus
+        self._threads = [threading.Thread(target=self._zenoh_loop, name="rec-zenoh", daemon=True)]
+        if bus is not None:
+            self._threads.append(threading.Thread(target=self._can_loop, name="rec-can", daemon=True))
+
+    def start(self) -> None:
+        for t in self._threads:
+            t.start()
+
+    def _zenoh_loop(self) -> None:
+        while self._sub is not None:
+            s = self._sub.try_recv()
+            if s is None:
+                if self.stop_event.wait(max(0.001, self.tap_batch_s)):   # idle: wait, then drain the batch
+                    return
+                continue
+            now = time.time_ns()
+            out = zenoh_record(str(s.key_expr), s.payload.to_bytes(), self.payloads)
+            if out is not None:
+                self.zenoh_msgs += 1
+                sent = out[1].get("sent_t_ns", now)
+                self.rec.submit(out[0], now, sent if isinstance(sent, int) else now, out[1])
+
+    def _can_loop(self) -> None:
+        """Wait for a frame, take everything queued, then (`tap_batch_s` > 0) pause: the tap wakes once per batch
+        rather than once per frame, leaving the CPU to the nodes; frames keep their bus timestamps. On stop, what
+        is still queued is recorded before the loop ends."""
+        assert self._bus is not None
+        while not self.stop_event.is_set():
+            msg = self._bus.recv(timeout=0.05)
+            if msg is None:
+                if isinstance(self.rec, RecorderProcess):
+                    self.rec.flush()   # idle bus: deliver what is batched
+                continue
+            while msg is not None:
+                self.on_can(msg)
+                msg = self._bus.recv(timeout=0)
+            if self.tap_batch_s > 0:
+                self.stop_event.wait(self.tap_batch_s)
+        while (msg := self._bus.recv(timeout=0)) is not None:   # stopping: record what is still queued
+            self.on_can(msg)
+
+    def on_can(self, msg: can.Message) -> None:
+        """Record one frame, logged at its bus timestamp (receive time when the bus gives none)."""
+        t_ns = round(msg.timestamp * 1e9) if msg.timestamp > 0 else time.time_ns()
+        frame = RawFrame.of(t_ns, msg)
+        if isinstance(self.rec, RecorderProcess):
+            self.can_forwarded += 1
+            self.rec.submit_can(frame)    # decoded (rejects and gaps counted) by the recorder process
+            return
+        for topic, payload in self.tap.records(frame):
+            self.rec.submit(topic, frame.t_ns, frame.t_ns, payload)
+
+    def stop(self, timeout_s: float = 10.0) -> None:
+        """Stop the taps; the CAN tap first records what is still queued on its socket (up to `timeout_s`)."""
+        self.stop_event.set()
+        for t in self._threads:
+            t.join(timeout=timeout_s)
+        self.can_tap_unfinished = any(t.is_alive() for t in self._threads if t.name == "rec-can")
+        if self.can_tap_unfinished:
+            log.warning("CAN tap still draining its backlog after %.0f s: the rest is not recorded", timeout_s)
+        if self._sub is not None:
+            self._sub.undeclare()
+
+    def counters(self) -> dict[str, Any]:
+        """Final-stats counters; with a `RecorderProcess` its child's CAN counts replace these in the file."""
+        can_counts = self.tap.counters()
+        if self.can_forwarded:
+            can_counts["can_frames"] = self.can_forwarded
+        rx = {} if self.rx_buffer_bytes is None else {"can_rx_buffer_bytes": self.rx_buffer_bytes}
+        return {**can_counts, **rx, "can_tap_unfinished": int(self.can_tap_unfinished), "zenoh_msgs": self.zenoh_msgs,
+                **{f"payload_{k}": v for k, v in self.payloads.as_dict().items() if not isinstance(v, dict)}}

@@ -1,0 +1,97 @@
+"""Reading a session MCAP file back: every message per topic, schemas, metadata, attachments; truncation-tolerant."""
+from __future__ import annotations
+
+import json
+import os
+from dataclasses import dataclass, field
+from typing import Any, NamedTuple
+
+from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
+from mcap.stream_reader import StreamReader, breakup_chunk
+from mcap.writer import MCAP0_MAGIC
+
+from sea_hil.errors import RecordingError
+
+
+class RecordedMessage(NamedTuple):
+    log_time_ns: int
+    publish_time_ns: int
+    payload: dict[str, Any]
+
+
+@dataclass
+class SessionData:
+    """Everything read back from a session file. `complete` (footer and closing magic read) is False for a
+    truncated (recovered) file; `tail_error` then says why reading stopped, `chunks` counts complete chunks."""
+    messages: dict[str, list[RecordedMessage]] = field(default_factory=dict)
+    schemas: dict[str, dict[str, Any]] = field(default_factory=dict)
+    encodings: dict[str, tuple[str, str]] = field(default_factory=dict)  # topic -> (schema enc, message enc)
+    metadata: dict[str, dict[str, str]] = field(default_factory=dict)
+    attachments: dict[str, bytes] = field(default_factory=dict)
+    complete: bool = False
+    chunks: int = 0
+    undecodable: int = 0
+    tail_error: str | None = None
+
+    @property
+    def message_count(self) -> int:
+        return sum(len(v) for v in self.messages.values())
+
+
+def read_session(path: str | os.PathLike[str]) -> SessionData:
+    """Read all messages (per topic, log_time order), schemas, metadata and attachments. Works on truncated files
+    (no summary/footer after SIGKILL): every complete chunk is read, the incomplete tail is ignored."""
+    out = SessionData()
+    schemas: dict[int, Schema] = {}
+    channels: dict[int, Channel] = {}
+    footer_seen: list[bool] = []
+
+    def on_record(rec: Any) -> None:
+        if isinstance(rec, Schema):
+            schemas[rec.id] = rec
+        elif isinstance(rec, Channel):
+            channels[rec.id] = rec
+            sch = schemas.get(rec.schema_id)
+            out.encodings[rec.topic] = (sch.encoding if sch else "", rec.message_encoding)
+            out.messages.setdefault(rec.topic, [])
+            if sch is not None and sch.encoding == "jsonschema":
+                out.schemas[rec.topic] = json.loads(sch.data)
+        elif isinstance(rec, Message):
+            ch = channels.get(rec.channel_id)
+            try:
+                payload = json.loads(rec.data)
+            except (ValueError, UnicodeDecodeError):
+                payload = None
+            if ch is None or not isinstance(payload, dict):
+                out.undecodable += 1
+                return
+            out.messages[ch.topic].append(RecordedMessage(rec.log_time, rec.publish_time, payload))
+        elif isinstance(rec, Metadata):
+            out.metadata[rec.name] = dict(rec.metadata)
+        elif isinstance(rec, Attachment):
+            out.attachments[rec.name] = bytes(rec.data)
+        elif isinstance(rec, Footer):
+            footer_seen.append(True)
+
+    try:
+        with open(path, "rb") as f:
+            if f.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
+                raise RecordingError(f"{path} is not an MCAP file (bad magic)")
+            f.seek(0)
+            try:
+                for rec in StreamReader(f, emit_chunks=True).records:
+                    if isinstance(rec, Chunk):
+                        inner = breakup_chunk(rec, validate_crc=True)  # all-or-nothing per chunk
+                        out.chunks += 1
+                        for r in inner:
+                            on_record(r)
+                    else:
+                        on_record(rec)
+            except Exception as err:  # noqa: BLE001 - any failure past the last good record is the torn tail
+                out.tail_error = f"{type(err).__name__}: {err}"
+    except OSError as err:
+        raise RecordingError(f"cannot read recording {path}: {err}") from None
+    out.complete = bool(footer_seen) and out.tail_error is None
+    for msgs in out.messages.values():
+        msgs.sort(key=lambda m: m.log_time_ns)
+    return out

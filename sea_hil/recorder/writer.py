@@ -1,0 +1,231 @@
+"""MCAP session recording: a thread-safe JSON/jsonschema writer with a bounded queue and a signal-safe finaliser.
+
+Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader` (both
+re-exported here). See docs/recording.md for channels, metadata names, drop policy and recovery.
+"""
+from __future__ import annotations
+
+import atexit
+import contextlib
+import json
+import os
+import queue
+import signal
+import threading
+import time
+from collections.abc import Callable, Iterator, Mapping
+from typing import Any
+
+from mcap.writer import CompressionType, Writer
+
+from sea_hil.config import RecordConfig, SeaHilConfig
+from sea_hil.errors import RecordingError
+from sea_hil.recorder.meta import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, encode_payload,
+                                     session_metadata, write_session_header)
+from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
+from sea_hil.recorder.schemas import TOPICS, schema_bytes, schema_name, validate_payload
+
+__all__ = ["CONFIG_ATTACHMENT", "META_CONFIG", "META_FINAL", "META_SESSION", "RecordedMessage", "SessionData",
+           "SessionRecorder", "encode_payload", "install_finalizer", "read_session", "session_metadata",
+           "write_session_header"]
+_COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
+_STOP = object()
+
+
+class _Sink:
+    """Unbuffered file output: every record the MCAP writer emits reaches the OS at once (survives SIGKILL)."""
+
+    def __init__(self, path: str | os.PathLike[str]) -> None:
+        self._f = open(path, "wb", buffering=0)
+        self.bytes_written = 0
+
+    def write(self, data: bytes) -> int:
+        view = memoryview(data)
+        while view:
+            n = self._f.write(view)
+            view = view[n:]
+        self.bytes_written += len(data)
+        return len(data)
+
+    def tell(self) -> int:
+        return self.bytes_written
+
+    def flush(self) -> None:
+        pass
+
+    def close(self) -> None:
+        self._f.close()
+
+
+
+class SessionRecorder:
+    """Writes one MCAP session. `record` writes synchronously; `submit` enqueues (bounded, drops when full) for
+    the writer thread. Both are thread-safe. `writer_gate` (tests only) holds the writer thread before each item."""
+
+    def __init__(self, path: str | os.PathLike[str], *, compression: str = "zstd", chunk_size_bytes: int = 1 << 20,
+                 queue_limit: int = 100_000, flush_period_s: float | None = None,
+                 writer_gate: threading.Event | None = None) -> None:
+        if compression not in _COMPRESSION:
+            raise RecordingError(f"compression must be one of {sorted(_COMPRESSION)}, got {compression!r}")
+        try:
+            self._sink = _Sink(path)
+        except OSError as err:
+            raise RecordingError(f"cannot create recording {path}: {err}") from None
+        self.path = os.fspath(path)
+        self._writer = Writer(self._sink, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
+        self._writer.start(profile="", library="sea-hil")
+        self._channels: dict[str, int] = {}
+        for topic in TOPICS:
+            sid = self._writer.register_schema(schema_name(topic), "jsonschema", schema_bytes(topic))
+            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+        self._lock = threading.Lock()
+        self._count_lock = threading.Lock()
+        self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_limit)
+        self._gate = writer_gate
+        self._flush_period_ns = None if flush_period_s is None else int(flush_period_s * 1e9)
+        self._last_flush_ns = time.monotonic_ns()
+        self.written = self.dropped = self.chunks_written = self.write_errors = 0
+        self.per_topic: dict[str, int] = dict.fromkeys(TOPICS, 0)
+        self.last_error: str | None = None
+        self.closed_by = "close"
+        self._closed = self._closing = False
+        self._close_lock = threading.Lock()
+        self._writing_thread: int | None = None
+        self.deferred_signal: int | None = None
+        self._thread = threading.Thread(target=self._run, name="mcap-writer", daemon=True)
+        self._thread.start()
+
+    @classmethod
+    def from_config(cls, path: str | os.PathLike[str], cfg: RecordConfig, **kw: Any) -> SessionRecorder:
+        return cls(path, compression=cfg.compression, chunk_size_bytes=cfg.chunk_size_bytes,
+                   queue_limit=cfg.queue_limit, flush_period_s=cfg.flush_period_s or None, **kw)
+
+    # -- metadata and attachments (synchronous) ----------------------------------------------------------------
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
+        """One MCAP metadata record; non-string values are JSON-encoded."""
+        clean = {str(k): v if isinstance(v, str) else json.dumps(v) for k, v in data.items()}
+        with self._locked():
+            self._writer.add_metadata(name, clean)
+
+    def add_attachment(self, name: str, data: bytes, media_type: str = "text/plain",
+                       t_ns: int | None = None) -> None:
+        t = time.monotonic_ns() if t_ns is None else t_ns
+        with self._locked():
+            self._writer.add_attachment(create_time=t, log_time=t, name=name, media_type=media_type, data=data)
+
+    def write_session_header(self, config: SeaHilConfig | None = None, *, seed: int | None = None,
+                             argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None:
+        """Metadata `sea-hil.session` (+ `extra`), `sea-hil.config` and attachment `config.toml`."""
+        write_session_header(self, config, seed=seed, argv=argv, extra=extra)
+
+    # -- messages ------------------------------------------------------------------------------------------------
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> None:
+        """Validate and write one message now (`RecordingError` on bad input or after close)."""
+        validate_payload(topic, payload)
+        self._write(topic, log_time_ns, publish_time_ns, encode_payload(payload))
+
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> bool:
+        """Validate, encode and enqueue; returns False (and counts `dropped`) when the queue is full."""
+        validate_payload(topic, payload)
+        if self._closing:
+            raise RecordingError("recorder is closed")
+        try:
+            self._queue.put_nowait((topic, log_time_ns, publish_time_ns, encode_payload(payload)))
+            return True
+        except queue.Full:
+            with self._count_lock:
+                self.dropped += 1
+            return False
+
+    @contextlib.contextmanager
+    def _locked(self) -> Iterator[None]:
+        with self._lock:
+            if self._closed:
+                raise RecordingError("recorder is closed")
+            yield
+
+    def _write(self, topic: str, log_time_ns: int, publish_time_ns: int, data: bytes) -> None:
+        with self._locked():
+            self._writing_thread = threading.get_ident()
+            try:
+                before = self._sink.bytes_written
+                self._writer.add_message(self._channels[topic], log_time_ns, data, publish_time_ns)
+                self.written += 1
+                self.per_topic[topic] += 1
+                now = time.monotonic_ns()
+                if self._flush_period_ns is not None and now - self._last_flush_ns >= self._flush_period_ns:
+                    self._writer.flush()
+                if self._sink.bytes_written != before:
+                    self.chunks_written += 1
+                    self._last_flush_ns = now
+            finally:
+                self._writing_thread = None
+        if self.deferred_signal is not None and threading.current_thread() is threading.main_thread():
+            raise SystemExit(128 + self.deferred_signal)
+
+    def _run(self) -> None:
+        while True:
+            if self._gate is not None:
+                self._gate.wait()
+            item = self._queue.get()
+            if item is _STOP:
+                return
+            try:
+                self._write(*item)
+            except Exception as err:  # noqa: BLE001 - the writer thread must survive (counted, reported)
+                self.write_errors += 1
+                self.last_error = f"{type(err).__name__}: {err}"
+
+    def counters(self) -> dict[str, int]:
+        return {"written": self.written, "dropped": self.dropped, "chunks_written": self.chunks_written,
+                "write_errors": self.write_errors, "queued": self._queue.qsize()}
+
+    def close(self, final_stats: Mapping[str, Any] | None = None) -> None:
+        """Drain the queue, write `sea-hil.final` metadata (counters + `final_stats`), summary and index. Idempotent."""
+        with self._close_lock:
+            if self._closing:
+                return
+            self._closing = True
+        self._queue.put(_STOP)
+        self._thread.join()
+        while not self._queue.empty():  # raced in after the stop marker: never written
+            self._queue.get_nowait()
+            self.dropped += 1
+        final = {**self.counters(), "closed_by": self.closed_by, "last_error": self.last_error or "",
+                 **{f"messages.{t}": n for t, n in self.per_topic.items()}, **(final_stats or {})}
+        with self._lock:
+            self._closed = True
+            try:
+                self._writer.add_metadata(META_FINAL, {k: v if isinstance(v, str) else json.dumps(v)
+                                                       for k, v in final.items()})
+                self._writer.finish()
+            finally:
+                self._sink.close()
+
+    def __enter__(self) -> SessionRecorder:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def install_finalizer(recorder: SessionRecorder,
+                      signals: tuple[int, ...] = (signal.SIGINT, signal.SIGTERM)) -> Callable[[], None]:
+    """Make SIGINT/SIGTERM end the process with SystemExit(128+signum) after the recording is finalised (via
+    atexit and any enclosing `with`). Call from the main thread; returns a function restoring the old handlers."""
+    def handler(signum: int, _frame: object) -> None:
+        recorder.closed_by = signal.Signals(signum).name
+        if recorder._writing_thread == threading.get_ident():
+            recorder.deferred_signal = signum  # inside a write: raise once the writer state is consistent
+            return
+        raise SystemExit(128 + signum)
+
+    previous = {s: signal.signal(s, handler) for s in signals}
+    atexit.register(recorder.close)
+
+    def uninstall() -> None:
+        for s, h in previous.items():
+            signal.signal(s, h)
+        atexit.unregister(recorder.close)
+    return uninstall
+

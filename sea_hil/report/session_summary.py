@@ -1,0 +1,112 @@
+"""summary.json of a networked session, computed from its MCAP recording only, so `sea-hil report` on the same
+file reproduces `sea-hil run`'s numbers exactly.
+
+Phases, by the controller's time t of the state a message carries or answers (t = 0: start of the measured cycles):
+`transmissions`, `tracking`, events and inter-event times cover the cycles (0 <= t <= the last handled state), as in
+`sea-hil simulate`; `lead_in` the same counts and tracking for the lead-in (t < 0, `trajectory.lead_in_s`);
+`uplink_outside_msgs` counts states published before the controller handled its first one or after its last
+(start-up and shut-down of the nodes)."""
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from sea_hil.recorder.writer import SessionData
+from sea_hil.report.summary import inter_event_block, tracking_block
+
+
+def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
+    seen: set[Any] = set()
+    out = []
+    for m in msgs:
+        k = (m.payload.get("key"), m.payload.get(key))
+        if k not in seen:
+            seen.add(k)
+            out.append(m.payload)
+    return out
+
+
+def tracking_arrays(data: SessionData) -> dict[str, np.ndarray]:
+    rows = _unique(data.messages.get("/tracking", []), "state_seq")
+    rows.sort(key=lambda r: r["t_s"])
+    t = np.array([r["t_s"] for r in rows])
+    theta = np.array([[r["theta1_rad"], r["theta2_rad"]] for r in rows]).reshape(-1, 2)
+    desired = np.array([[r["theta1_d_rad"], r["theta2_d_rad"]] for r in rows]).reshape(-1, 2)
+    ev_t = np.array([r["t_s"] for r in rows if r.get("event")])
+    reasons = [r.get("reason", "") for r in rows if r.get("event")]
+    return {"t_s": t, "theta_rad": theta, "desired_rad": desired, "event_t_s": ev_t, "reasons": np.array(reasons)}
+
+
+def _phase_of(data: SessionData, rows: list[dict[str, Any]]) -> Callable[[int], str]:
+    """state seq -> "cycle" | "lead_in" | "outside", from the state's sample time and the controller's time axis."""
+    sample_ns = {p["seq"]: p["sample_t_ns"] for p in _unique(data.messages.get("/zenoh/state", []))}
+    t_of = {r["state_seq"]: round(r["t_s"] * 1e9) for r in rows}
+    anchor = next((r for r in rows if r["state_seq"] in sample_ns), None)
+    if anchor is None:
+        return lambda seq: "cycle"
+    t0_ns = sample_ns[anchor["state_seq"]] - t_of[anchor["state_seq"]]
+    first_ns, last_ns = min(t_of.values()), max(t_of.values())
+
+    def phase(seq: int) -> str:
+        t = t_of.get(seq, sample_ns[seq] - t0_ns if seq in sample_ns else None)
+        if t is None or 0 <= t <= last_ns:
+            return "cycle"
+        return "lead_in" if first_ns <= t < 0 else "outside"
+    return phase
+
+
+def _counts(down: list[dict[str, Any]], up: list[dict[str, Any]]) -> dict[str, int]:
+    return {"downlink_msgs": len(down), "downlink_bytes": int(sum(d["payload_bytes"] for d in down)),
+            "uplink_msgs": len(up), "uplink_bytes": int(sum(u["payload_bytes"] for u in up))}
+
+
+def _tracking(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[float]]:
+    if len(theta):
+        return tracking_block(theta, desired)
+    return {"max_abs_error_rad": [0.0, 0.0], "rms_error_rad": [0.0, 0.0]}
+
+
+def final_edge_stats(data: SessionData) -> dict[str, Any]:
+    finals = [m.payload for m in data.messages.get("/stats", []) if m.payload.get("final")]
+    return finals[-1] if finals else {}
+
+
+def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
+    tr = tracking_arrays(data)
+    phase = _phase_of(data, _unique(data.messages.get("/tracking", []), "state_seq"))
+    down_all = _unique(data.messages.get("/zenoh/setpoint", [])) + _unique(data.messages.get("/zenoh/voltage", []))
+    up_all = _unique(data.messages.get("/zenoh/state", []))
+    down = [d for d in down_all if phase(d["state_seq"]) == "cycle"]
+    up = [u for u in up_all if phase(u["seq"]) == "cycle"]
+    lead = tr["t_s"] < 0
+    tr_lead = {k: tr[k][lead] for k in ("t_s", "theta_rad", "desired_rad")}
+    tr = {**{k: tr[k][~lead] for k in ("t_s", "theta_rad", "desired_rad")},
+          "event_t_s": tr["event_t_s"][tr["event_t_s"] >= 0], "reasons": tr["reasons"][tr["event_t_s"] >= 0]}
+    volts = [(m.payload.get("u1_v", 0.0), m.payload.get("u2_v", 0.0)) for m in data.messages.get("/can/command", [])]
+    v = np.abs(np.array(volts, dtype=float)).max(axis=0) if volts else np.zeros(2)
+    edge = final_edge_stats(data)
+    reasons: dict[str, int] = {}
+    for r in tr["reasons"]:
+        reasons[str(r)] = reasons.get(str(r), 0) + 1
+    summary: dict[str, Any] = {
+        "controller": controller,
+        "duration_s": float(tr["t_s"][-1]) if len(tr["t_s"]) else 0.0,
+        "transmissions": _counts(down, up),
+        "lead_in": {"duration_s": float(-tr_lead["t_s"][0]) if len(tr_lead["t_s"]) else 0.0,
+                    **_counts([d for d in down_all if phase(d["state_seq"]) == "lead_in"],
+                              [u for u in up_all if phase(u["seq"]) == "lead_in"]),
+                    "tracking": _tracking(tr_lead["theta_rad"], tr_lead["desired_rad"])},
+        "uplink_outside_msgs": sum(phase(u["seq"]) == "outside" for u in up_all),
+        "events_by_reason": dict(sorted(reasons.items())),
+        "tracking": _tracking(tr["theta_rad"], tr["desired_rad"]),
+        "inter_event_s": inter_event_block(tr["event_t_s"]),
+        "max_abs_voltage_v": [float(v[0]), float(v[1])],
+        "latency_us": {k: float(edge.get(f"latency_{k}_us", -1.0)) for k in ("min", "p50", "p90", "p99", "max")},
+        "latency_samples": int(edge.get("latency_count", 0)),
+        "edge": {k: edge[k] for k in sorted(edge) if not k.startswith("latency") and k not in ("key", "final")},
+    }
+    return summary
+
+
+TIMING_FIELDS = ("latency_us", "latency_samples", "wall_s", "edge")  # vary with wall-clock timing

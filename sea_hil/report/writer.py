@@ -1,0 +1,109 @@
+"""`sea-hil report RUN.mcap --out DIR`: figures and report.md from any session recording."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from sea_hil.recorder.writer import SessionData, read_session
+from sea_hil.stats.session import can_frame_bits
+from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
+from sea_hil.report.session_summary import session_summary, tracking_arrays
+from sea_hil.report.summary import write_summary
+
+
+def _bins(msgs: list, value: Any, t0_ns: int, width_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    if not msgs:
+        return np.zeros(0), np.zeros(0)
+    t = np.array([(m.log_time_ns - t0_ns) * 1e-9 for m in msgs])
+    v = np.array([value(m.payload) for m in msgs], dtype=float)
+    edges = np.arange(0.0, max(t.max(), 0.0) + width_s, width_s)
+    if len(edges) < 2:
+        edges = np.array([0.0, width_s])
+    sums, _ = np.histogram(t, bins=edges, weights=v)
+    return edges[:-1], sums / width_s
+
+
+def state_to_setpoint_latency_us(data: SessionData) -> np.ndarray:
+    """Per event: controller's setpoint send time minus the edge's send time of the state it answers (both
+    CLOCK_MONOTONIC of one host: valid for same-host sessions)."""
+    sent = {m.payload["seq"]: m.payload["sent_t_ns"] for m in data.messages.get("/zenoh/state", [])}
+    out = [(m.payload["sent_t_ns"] - sent[m.payload["state_seq"]]) * 1e-3
+           for topic in ("/zenoh/setpoint", "/zenoh/voltage") for m in data.messages.get(topic, [])
+           if m.payload.get("state_seq") in sent]
+    return np.array([x for x in out if x >= 0])
+
+
+def write_report_figures(data: SessionData, out: Path) -> list[Path]:
+    out.mkdir(parents=True, exist_ok=True)
+    tr = tracking_arrays(data)
+    files = [out / "tracking.png", out / "inter_event.png", out / "latency.png", out / "bandwidth.png",
+             out / "bus_load.png"]
+    tracking_figure(files[0], tr["t_s"], tr["theta_rad"], tr["desired_rad"], "session")
+    inter_event_figure(files[1], tr["event_t_s"], "session")
+    histogram_cdf_figure(files[2], state_to_setpoint_latency_us(data), "state sent -> setpoint sent [us]",
+                         "closed-loop latency")
+    all_msgs = [m for v in data.messages.values() for m in v]
+    t0 = min((m.log_time_ns for m in all_msgs), default=0)
+    series: dict[str, np.ndarray] = {}
+    t_axis = np.zeros(0)
+    for name, topic in (("downlink setpoint+voltage B/s", "/zenoh/setpoint"), ("uplink state B/s", "/zenoh/state")):
+        msgs = data.messages.get(topic, []) + (data.messages.get("/zenoh/voltage", []) if "setpoint" in topic else [])
+        t_axis_i, rate = _bins(msgs, lambda p: p["payload_bytes"], t0)
+        if len(t_axis_i) > len(t_axis):
+            t_axis = t_axis_i
+        series[name] = rate
+    series_figure(files[3], t_axis, series, "payload bytes/s", "Zenoh bandwidth")
+    bitrate = float(data.metadata.get("sea-hil.config", {}).get("can.bitrate_bps", 1_000_000))
+    tb, bits = _bins(data.messages.get("/can/raw", []), lambda p: can_frame_bits(int(p["dlc"])), t0)
+    series_figure(files[4], tb, {"bus load %": 100.0 * bits / bitrate}, "load [%]", "CAN bus load (worst-case stuffing)")
+    return files
+
+
+def _lead_in_rows(summary: dict[str, Any]) -> list[str]:
+    lead = summary.get("lead_in") or {}
+    if not lead.get("duration_s"):
+        return []
+    err = lead["tracking"]["max_abs_error_rad"]
+    return [f"| lead-in (before the cycles, not counted above): duration [s] / downlink / uplink messages | "
+            f"{lead['duration_s']:.2f} / {lead['downlink_msgs']} / {lead['uplink_msgs']} |",
+            f"| lead-in max abs tracking error hip / knee [rad] | {err[0]:.5f} / {err[1]:.5f} |"]
+
+
+def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
+    tx = summary["transmissions"]
+    lat = summary["latency_us"]
+    lines = ["# sea-hil session report", "",
+             f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
+             f"file complete: {data.complete}, messages: {data.message_count}", "",
+             "| figure | value |", "|---|---|",
+             f"| downlink messages / bytes | {tx['downlink_msgs']} / {tx['downlink_bytes']} |",
+             f"| uplink messages / bytes | {tx['uplink_msgs']} / {tx['uplink_bytes']} |",
+             f"| max abs tracking error hip / knee [rad] | {summary['tracking']['max_abs_error_rad'][0]:.5f} / "
+             f"{summary['tracking']['max_abs_error_rad'][1]:.5f} |",
+             f"| rms tracking error hip / knee [rad] | {summary['tracking']['rms_error_rad'][0]:.5f} / "
+             f"{summary['tracking']['rms_error_rad'][1]:.5f} |",
+             f"| inter-event min / median / max [s] | {summary['inter_event_s']['min']:.3f} / "
+             f"{summary['inter_event_s']['median']:.3f} / {summary['inter_event_s']['max']:.3f} |",
+             f"| max abs voltage [V] | {summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f} |",
+             f"| closed-loop latency p50 / p99 / max [us] | {lat['p50']:.0f} / {lat['p99']:.0f} / {lat['max']:.0f} |",
+             *_lead_in_rows(summary),
+             "", "Figures: tracking.png (paper Fig. 2/3), inter_event.png (Fig. 4), latency.png, bandwidth.png, "
+             "bus_load.png", ""]
+    return "\n".join(lines)
+
+
+def run_report(path: Path, out: Path) -> dict[str, Any]:
+    data = read_session(path)
+    session = data.metadata.get("sea-hil.session", {})
+    summary = session_summary(data, session.get("controller", "et"))
+    write_report_figures(data, out)
+    write_summary(out / "summary.json", summary)
+    (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")
+    return summary
+
+
+def load_summary(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text(encoding="utf-8"))
