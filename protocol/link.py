@@ -10,6 +10,8 @@ Per submitted message, in this order:
    Lost messages have already used the link (lost on the wire, after serialisation).
 3. Delay: `deliver = serialised_end + delay_s + jitter`, jitter ~ uniform(-j, +j) (j = half-width, std j/sqrt(3)),
    normal(0, j) (std j) or exponential(mean j) (std j, one-sided); the added delay is clipped at >= 0.
+   With `trace_path` set, steps 2-3 come from the trace instead (`sea_hil.protocol.link_trace`: the delay and
+   loss of the trace packet sent at the same time, the trace looped; `dropped_trace`).
 4. Order: `reorder=False` (default, like one TCP stream) delivers FIFO: `deliver = max(deliver, last_deliver)`;
    `reorder=True` lets jitter reorder messages.
 
@@ -20,6 +22,7 @@ from __future__ import annotations
 
 import heapq
 import random
+from pathlib import Path
 from dataclasses import dataclass
 from typing import Generic, TypeVar
 
@@ -27,6 +30,7 @@ from pydantic import ValidationError
 
 from sea_hil.config import LinkConfig, LinkDirectionConfig
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.link_trace import load_trace
 
 T = TypeVar("T")
 NS_PER_S = 1_000_000_000
@@ -40,10 +44,11 @@ class LinkCounters:
     dropped_queue: int
     delivered: int
     mean_added_delay_s: float
+    dropped_trace: int = 0
 
     @property
     def dropped(self) -> int:
-        return self.dropped_random + self.dropped_burst + self.dropped_queue
+        return self.dropped_random + self.dropped_burst + self.dropped_queue + self.dropped_trace
 
 
 class LinkEmulator:
@@ -55,6 +60,8 @@ class LinkEmulator:
         self._rng_ge = random.Random(f"sea-hil-link/{seed}/ge")
         self._rng_jitter = random.Random(f"sea-hil-link/{seed}/jitter")
         self._delay_ns = round(cfg.delay_s * NS_PER_S)
+        self._trace = load_trace(cfg.trace_path) if cfg.trace_path else None
+        self._dropped_trace = 0
         self._bad = False
         self._busy_until_ns: int | None = None
         self._last_deliver_ns: int | None = None
@@ -109,9 +116,16 @@ class LinkEmulator:
                 return None
             sent_ns = start + round(payload_len_bytes * 8 * NS_PER_S / c.rate_bps)
             self._busy_until_ns = sent_ns
-        if self._lost():
+        if self._trace is not None:
+            delay_ns, lost = self._trace.at(sent_ns)
+            if lost:
+                self._dropped_trace += 1
+                return None
+            deliver = sent_ns + delay_ns
+        elif self._lost():
             return None
-        deliver = sent_ns + self._delay_ns + round(self._jitter_ns())
+        else:
+            deliver = sent_ns + self._delay_ns + round(self._jitter_ns())
         deliver = max(deliver, sent_ns)
         if not c.reorder and self._last_deliver_ns is not None:
             deliver = max(deliver, self._last_deliver_ns)
@@ -123,7 +137,7 @@ class LinkEmulator:
     def counters(self) -> LinkCounters:
         mean = self._added_delay_sum_ns / self._delivered / NS_PER_S if self._delivered else 0.0
         return LinkCounters(self._submitted, self._dropped_random, self._dropped_burst, self._dropped_queue,
-                            self._delivered, mean)
+                            self._delivered, mean, self._dropped_trace)
 
 
 def link_pair(cfg: LinkConfig) -> tuple[LinkEmulator, LinkEmulator]:
@@ -191,7 +205,8 @@ def _probability(text: str, what: str) -> float:
 
 def parse_link_spec(spec: str) -> dict[str, object]:
     """`"delay=20ms,jitter=5ms,dist=normal,loss=1%,ge=0.01/0.3/0.8,rate=1Mbps,qlimit=50ms,reorder=on"` ->
-    `LinkDirectionConfig` field overrides (validated). `ge=p_good_to_bad/p_bad_to_good[/loss_bad]`."""
+    `LinkDirectionConfig` field overrides (validated). `ge=p_good_to_bad/p_bad_to_good[/loss_bad]`;
+    `trace=FILE.csv` replays a per-packet trace (`sea_hil.protocol.link_trace`), optionally with rate/qlimit/reorder."""
     out: dict[str, object] = {}
     for item in (s.strip() for s in spec.split(",")):
         if not item:
@@ -215,12 +230,16 @@ def parse_link_spec(spec: str) -> dict[str, object]:
             out.update({n: _probability(p, f"ge.{n}") for n, p in zip(names, parts)})
         elif key == "rate":
             out["rate_bps"] = _with_unit(val, _RATE_UNITS, key)
+        elif key == "trace":   # resolved (a config written for another process stays valid) and read at once
+            out["trace_path"] = str(Path(val).expanduser().resolve())
+            load_trace(out["trace_path"])
         elif key == "reorder":
             if val.lower() not in _BOOLS:
                 raise ConfigError(f"link spec: reorder={val!r} must be on/off")
             out["reorder"] = _BOOLS[val.lower()]
         else:
-            raise ConfigError(f"link spec: unknown key {key!r} (delay, jitter, dist, loss, ge, rate, qlimit, reorder)")
+            raise ConfigError(f"link spec: unknown key {key!r} (delay, jitter, dist, loss, ge, rate, qlimit, reorder, "
+                              "trace)")
     try:
         LinkDirectionConfig(**out)
     except ValidationError as err:

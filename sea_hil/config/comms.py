@@ -101,6 +101,15 @@ class LinkDirectionConfig(_Frozen):
     rate_bps: float = Field(0.0, ge=0, description="0 = unlimited")
     queue_limit_s: float = Field(0.0, ge=0, description="rate-limit queue: drop if waiting would exceed; 0 = no limit")
     reorder: bool = Field(False, description="false = FIFO delivery like one TCP stream; true = jitter may reorder")
+    trace_path: str = Field("", description="CSV trace t_s,delay_s,lost replayed per packet (looped) in place of "
+                            "delay, jitter, loss and Gilbert-Elliott; '' = the statistical model")
+
+    @model_validator(mode="after")
+    def _trace_alone(self) -> LinkDirectionConfig:
+        if self.trace_path and (self.delay_s or self.jitter_s or self.loss or self.ge_p_good_to_bad):
+            raise ValueError("a link trace gives the delay and loss itself: do not combine trace with delay, "
+                             "jitter, loss or ge")
+        return self
 
 
 class LinkConfig(_Frozen):
