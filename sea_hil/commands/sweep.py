@@ -1,5 +1,7 @@
-"""`sea-hil sweep`: a grid over trigger thresholds (eta, r) and link conditions (delay, jitter, loss), each point a
-lockstep session in its own process, `--jobs` at a time; writes DIR/sweep.csv, DIR/pareto.png and DIR/sweep.md."""
+"""`sea-hil sweep`: a grid over trigger thresholds (eta, r), link conditions (delay, jitter, loss) and seeds, each
+point a lockstep session in its own process run as a Dask task (embedded local cluster, `--jobs` at a time, or an
+existing cluster with `--scheduler`); writes DIR/sweep.csv (appended as points finish; `--resume` continues it),
+DIR/pareto.png and DIR/sweep.md."""
 from __future__ import annotations
 
 import argparse
@@ -10,7 +12,7 @@ import time
 from pathlib import Path
 
 from sea_hil.errors import ConfigError
-from sea_hil.sweep.grid import DIRECTIONS, expand_grid, parse_axis
+from sea_hil.sweep.grid import DIRECTIONS, expand_grid, parse_axis, seed_axis
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -30,7 +32,14 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "setpoints down, each with the full delay/jitter/loss)")
     p.add_argument("--jobs", type=int, default=os.cpu_count() or 1, help="points run in parallel (default: CPUs)")
     p.add_argument("--cycles", type=int, default=1, help="walking cycles per point (default %(default)s)")
-    p.add_argument("--seed", type=int, help="seed for every point's RNGs (same for all points: paired comparison)")
+    p.add_argument("--seed", type=int, help="seed for every point's RNGs (same for all points: paired comparison); "
+                                            "with --seeds the first of the seeds")
+    p.add_argument("--seeds", type=int, metavar="N", help="seeds as an axis: every point under N seeds (--seed, "
+                                                          "--seed + 1, ...); figures show the mean and its 95 %% band")
+    p.add_argument("--scheduler", metavar="ADDRESS", help="run the points on an existing Dask cluster, e.g. "
+                                                           "tcp://10.0.0.5:8786 (default: an embedded local cluster)")
+    p.add_argument("--resume", action="store_true", help="keep DIR/sweep.csv and skip the points it holds as ok "
+                                                         "with the same effective config")
     p.add_argument("--mode", choices=("lockstep", "offline"), default="lockstep",
                    help="lockstep = `sea-hil run --lockstep` per point; offline = `sea-hil simulate` (no network, "
                         "so delay/jitter/loss must be 0)")
@@ -43,6 +52,8 @@ def _command_line(args: argparse.Namespace) -> str:
              "--delay-ms", args.delay_ms, "--jitter-ms", args.jitter_ms, "--loss", args.loss, "--link", args.link,
              "--jobs", str(args.jobs), "--cycles", str(args.cycles)]
     parts += ["--config", args.config] if args.config else []
+    parts += ["--seeds", str(args.seeds)] if args.seeds is not None else []
+    parts += ["--scheduler", args.scheduler] if args.scheduler else []
     return shlex.join(parts + (["--seed", str(args.seed)] if args.seed is not None else []))
 
 
@@ -57,14 +68,17 @@ def _main(args: argparse.Namespace) -> int:
         raise ConfigError(f"--cycles must be >= 1, not {args.cycles}")
     if args.mode == "offline" and any(v != 0 for name in ("delay-ms", "jitter-ms", "loss") for v in axes[name]):
         raise ConfigError("--mode offline has no network: --delay-ms, --jitter-ms and --loss must be 0")
-    points = expand_grid(axes["eta"], axes["r"], axes["delay-ms"], axes["jitter-ms"], axes["loss"])
+    points = expand_grid(axes["eta"], axes["r"], axes["delay-ms"], axes["jitter-ms"], axes["loss"],
+                         seed_axis(args.seeds, args.seed))
     opts = SweepOptions(out=args.out, config=Path(args.config) if args.config else None, mode=args.mode,
-                        cycles=args.cycles, seed=args.seed, jobs=args.jobs, direction=args.link)
+                        cycles=args.cycles, seed=args.seed, jobs=args.jobs, direction=args.link,
+                        scheduler=args.scheduler, resume=args.resume)
     configs = build_configs(points, opts)
     command = _command_line(args)
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+    where = f"cluster {args.scheduler}" if args.scheduler else f"{args.jobs} local jobs"
     log(f"sweep: {len(points)} points ({sum(p.controller == 'et' for p in points)} ET + "
-        f"{sum(p.controller == 'tt' for p in points)} TT references), {args.jobs} jobs, mode {args.mode} -> {args.out}")
+        f"{sum(p.controller == 'tt' for p in points)} TT references), {where}, mode {args.mode} -> {args.out}")
     t0 = time.monotonic()
     rows, interrupted = run_sweep(points, opts, log, configs)
     wall_s = time.monotonic() - t0

@@ -17,7 +17,8 @@ AXES: dict[str, tuple[float, bool, float | None]] = {
 DIRECTIONS = ("both", "uplink", "downlink")
 CSV_COLUMNS = ("point", "controller", "eta", "r", "delay_ms", "jitter_ms", "loss", "cycles", "seed",
                "downlink_msgs", "downlink_bytes", "uplink_msgs", "max_err_hip_rad", "max_err_knee_rad", "max_err_rad",
-               "rms_err_hip_rad", "rms_err_knee_rad", "rms_err_rad", "latency_p50_us", "latency_p99_us", "wall_s", "status", "error")
+               "rms_err_hip_rad", "rms_err_knee_rad", "rms_err_rad", "latency_p50_us", "latency_p99_us", "wall_s", "status", "error",
+               "config_sha256")
 
 
 def parse_axis(name: str, text: str) -> tuple[float, ...]:
@@ -56,34 +57,49 @@ class LinkCondition:
 
 @dataclass(frozen=True)
 class GridPoint:
-    """One session of the sweep. TT reference points have eta = r = None (the trigger is not used)."""
+    """One session of the sweep. TT reference points have eta = r = None (the trigger is not used); `seed` None =
+    the sweep's --seed (or the config's) for every point, else this point's seed (the seeds axis)."""
     index: int
     controller: str
     link: LinkCondition
     eta: float | None = None
     r: float | None = None
+    seed: int | None = None
 
     @property
     def name(self) -> str:
         trig = f"_eta{self.eta:g}_r{self.r:g}" if self.controller == "et" else ""
         lk = self.link
-        return f"p{self.index:03d}_{self.controller}{trig}_d{lk.delay_ms:g}_j{lk.jitter_ms:g}_l{lk.loss:g}"
+        seed = "" if self.seed is None else f"_s{self.seed}"
+        return f"p{self.index:03d}_{self.controller}{trig}_d{lk.delay_ms:g}_j{lk.jitter_ms:g}_l{lk.loss:g}{seed}"
 
     def label(self) -> str:
         trig = f" eta={self.eta:g} r={self.r:g}" if self.controller == "et" else ""
-        return f"{self.controller}{trig} | {self.link.label()}"
+        seed = "" if self.seed is None else f" | seed {self.seed}"
+        return f"{self.controller}{trig} | {self.link.label()}{seed}"
 
 
 def expand_grid(eta: Sequence[float], r: Sequence[float], delay_ms: Sequence[float], jitter_ms: Sequence[float],
-                loss: Sequence[float]) -> list[GridPoint]:
-    """Per link condition (delay x jitter x loss): one TT reference, then every ET (eta x r) point."""
+                loss: Sequence[float], seeds: Sequence[int | None] = (None,)) -> list[GridPoint]:
+    """Per link condition (delay x jitter x loss) and seed: one TT reference, then every ET (eta x r) point."""
     points: list[GridPoint] = []
     for d, j, l in itertools.product(delay_ms, jitter_ms, loss):
         link = LinkCondition(d, j, l)
-        points.append(GridPoint(len(points), "tt", link))
-        for e, rr in itertools.product(eta, r):
-            points.append(GridPoint(len(points), "et", link, e, rr))
+        for seed in seeds:
+            points.append(GridPoint(len(points), "tt", link, seed=seed))
+            for e, rr in itertools.product(eta, r):
+                points.append(GridPoint(len(points), "et", link, e, rr, seed))
     return points
+
+
+def seed_axis(n_seeds: int | None, base_seed: int | None) -> tuple[int | None, ...]:
+    """`--seeds N`: the seeds base, base + 1, ..., base + N - 1 (base = --seed, default 1); no axis: (None,)."""
+    if n_seeds is None:
+        return (None,)
+    if n_seeds < 1:
+        raise ConfigError(f"--seeds must be >= 1, not {n_seeds}")
+    base = 1 if base_seed is None else base_seed
+    return tuple(range(base, base + n_seeds))
 
 
 def point_overrides(point: GridPoint, direction: str = "both") -> dict[str, Any]:
@@ -121,13 +137,13 @@ def _tx(summary: dict[str, Any]) -> tuple[Any, Any, Any]:
 
 
 def csv_row(point: GridPoint, summary: dict[str, Any] | None, *, cycles: int, seed: int, wall_s: float,
-            status: str = "ok", error: str = "") -> dict[str, Any]:
+            status: str = "ok", error: str = "", config_sha256: str = "") -> dict[str, Any]:
     """One CSV row (keys = CSV_COLUMNS); `summary` is the point's summary.json (None if the point failed)."""
     row: dict[str, Any] = {c: "" for c in CSV_COLUMNS}
     row.update(point=point.name, controller=point.controller, eta="" if point.eta is None else point.eta,
                r="" if point.r is None else point.r, delay_ms=point.link.delay_ms, jitter_ms=point.link.jitter_ms,
                loss=point.link.loss, cycles=cycles, seed=seed, wall_s=round(wall_s, 3), status=status,
-               error=" ".join(error.split()))
+               error=" ".join(error.split()), config_sha256=config_sha256)
     if summary is None:
         return row
     row["downlink_msgs"], row["downlink_bytes"], row["uplink_msgs"] = _tx(summary)

@@ -1,8 +1,7 @@
-"""`sea-hil sweep` outputs: DIR/sweep.csv, DIR/pareto.png (transmissions vs max tracking error, Pareto front per
+"""`sea-hil sweep` outputs: DIR/pareto.png (transmissions vs max tracking error, Pareto front per
 link condition, TT references and the paper's points marked) and DIR/sweep.md."""
 from __future__ import annotations
 
-import csv
 from pathlib import Path
 from typing import Any, Sequence
 
@@ -12,16 +11,10 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from sea_hil.report.summary import PAPER  # noqa: E402
-from sea_hil.sweep.grid import CSV_COLUMNS, pareto_front  # noqa: E402
+from sea_hil.sweep.grid import pareto_front  # noqa: E402
+from sea_hil.sweep.seeds import fold_seeds  # noqa: E402
 
 LINK_KEYS = ("delay_ms", "jitter_ms", "loss")
-
-
-def write_csv(path: Path, rows: Sequence[dict[str, Any]]) -> None:
-    with path.open("w", newline="", encoding="utf-8") as fh:
-        writer = csv.DictWriter(fh, fieldnames=CSV_COLUMNS)
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 METRICS = {"max_err_rad": "max |tracking error| over both joints [rad]",
@@ -39,9 +32,10 @@ def _xy(row: dict[str, Any], metric: str = "max_err_rad") -> tuple[float, float]
 
 def fronts_by_link(rows: Sequence[dict[str, Any]],
                    metric: str = "max_err_rad") -> dict[tuple, list[tuple[dict[str, Any], bool]]]:
-    """Successful rows grouped by link condition, each with its Pareto flag within that group (TT included)."""
+    """Successful rows grouped by link condition, each with its Pareto flag within that group (TT included); rows
+    of one grid point under several seeds are folded into their mean first (`sea_hil.sweep.seeds`)."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
-    for r in _plottable(rows, metric):
+    for r in _plottable(fold_seeds(rows), metric):
         groups.setdefault(tuple(r[k] for k in LINK_KEYS), []).append(r)
     return {k: list(zip(g, pareto_front([_xy(r, metric) for r in g]))) for k, g in groups.items()}
 
@@ -73,6 +67,9 @@ def _panel(ax: Any, rows: Sequence[dict[str, Any]], metric: str, paper: bool) ->
             x, y = _xy(row, metric)
             marker = "s" if row["controller"] == "tt" else "o"
             ax.plot(x, y, marker, ms=9 if marker == "s" else 7, mec=c, mfc=c if on_front else "none", mew=1.5)
+            if row.get("n_seeds", 1) > 1:    # mean over seeds: 95 % confidence band of both coordinates
+                ax.errorbar(x, y, xerr=row["downlink_msgs_ci95"] / float(row["cycles"]),
+                            yerr=row.get(f"{metric}_ci95", 0.0), fmt="none", ecolor=c, alpha=0.5, capsize=2)
         for (x, y), text in _front_labels(flagged, metric).items():
             ax.annotate(text, (x, y), textcoords="offset points", xytext=(-6, 5), ha="right", fontsize=7, color=c)
         front = sorted(_xy(r, metric) for r, f in flagged if f)
@@ -84,6 +81,8 @@ def _panel(ax: Any, rows: Sequence[dict[str, Any]], metric: str, paper: bool) ->
                     label=f"paper {mode.upper()} ({p['transmissions']}, {p['max_abs_error_rad']} rad)")
     ax.plot([], [], "o", color="grey", mfc="none", label="ET point (filled = on the Pareto front)")
     ax.plot([], [], "s", color="grey", label="TT reference (same link)")
+    if any(r.get("n_seeds", 1) > 1 for r in fold_seeds(rows)):
+        ax.errorbar([], [], yerr=[], fmt="none", ecolor="grey", label="mean over seeds, 95 % confidence")
     ax.set_yscale("log")
     ax.set(xlabel="downlink transmissions (setpoints) per walking cycle", ylabel=METRICS[metric])
     ax.grid(True, which="both", alpha=0.3)
@@ -138,7 +137,7 @@ def sweep_markdown(rows: Sequence[dict[str, Any]], command: str, wall_s: float, 
 
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], command: str, wall_s: float, jobs: int, mode: str,
                   interrupted: bool) -> None:
+    """pareto.png and sweep.md (sweep.csv is written by the runner as points finish, `sea_hil.sweep.csvlog`)."""
     out.mkdir(parents=True, exist_ok=True)
-    write_csv(out / "sweep.csv", rows)
     pareto_figure(out / "pareto.png", rows)
     (out / "sweep.md").write_text(sweep_markdown(rows, command, wall_s, jobs, mode, interrupted), encoding="utf-8")

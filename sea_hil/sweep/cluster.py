@@ -1,0 +1,33 @@
+"""Where sweep points run: a Dask `distributed` client on an embedded local cluster (no set-up) or on an existing
+cluster (`--scheduler tcp://HOST:PORT`; its workers need only the installed package)."""
+from __future__ import annotations
+
+import contextlib
+import logging
+from collections.abc import Iterator
+
+from sea_hil.errors import ConfigError
+
+
+@contextlib.contextmanager
+def open_client(scheduler: str | None, jobs: int) -> Iterator[object]:
+    """A `distributed.Client`. Without `scheduler`: a local cluster of one worker with `jobs` threads (a lockstep
+    point is a child process the thread waits on, so threads cost no GIL time), no dashboard, closed on exit."""
+    from distributed import Client, LocalCluster
+    if scheduler is None:
+        cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, dashboard_address=None,
+                               silence_logs=logging.WARNING)
+        try:
+            with Client(cluster) as client:
+                yield client
+        finally:
+            cluster.close()
+        return
+    try:
+        client = Client(scheduler, timeout="10s")
+    except (OSError, TimeoutError) as err:
+        raise ConfigError(f"--scheduler {scheduler}: cannot reach the Dask scheduler ({err})") from err
+    try:
+        yield client
+    finally:
+        client.close()
