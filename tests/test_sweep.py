@@ -81,7 +81,8 @@ def test_point_command():
     cmd = point_command(ET, "lockstep", Path("c.toml"), Path("o"), 2, python="py")
     assert cmd[:6] == ["py", "-m", "sea_hil.cli", "run", "--lockstep", "--quiet"]
     assert cmd[cmd.index("--controller") + 1] == "et" and cmd[cmd.index("--cycles") + 1] == "2"
-    assert point_command(TT, "offline", Path("c.toml"), Path("o"), 1)[3] == "simulate"
+    with pytest.raises(ConfigError, match="only the lockstep engine"):
+        point_command(TT, "offline", Path("c.toml"), Path("o"), 1)
     with pytest.raises(ConfigError):
         point_command(ET, "realtime", Path("c.toml"), Path("o"), 1)
 
@@ -153,7 +154,8 @@ def test_failing_point_is_a_row_not_a_crash(tmp_path, monkeypatch):
     monkeypatch.setattr("sea_hil.sweep.task.point_command", fake)   # the local cluster runs tasks in threads
     lines: list[str] = []
     points = expand_grid((0.5,), (0.2,), (0.0,), (0.0,), (0.0,))
-    rows, interrupted = run_sweep(points, SweepOptions(out=tmp_path, jobs=2, progress_bar=False), lines.append)
+    rows, interrupted = run_sweep(points, SweepOptions(out=tmp_path, mode="lockstep", jobs=2, progress_bar=False),
+                                  lines.append)
     assert not interrupted and len(lines) == 2
     assert (rows[0]["status"], rows[0]["error"]) == ("error", "exit status 3: sea-hil run: error: boom")
     assert (rows[1]["status"], rows[1]["downlink_msgs"]) == ("ok", 304)
@@ -163,7 +165,7 @@ def test_failing_point_is_a_row_not_a_crash(tmp_path, monkeypatch):
 # ---- CLI -------------------------------------------------------------------------------------------------------------
 @pytest.mark.parametrize("extra,msg", [(["--eta", "0,1"], "--eta: 0 out of range"), (["--loss", "2"], "--loss"),
                                        (["--r", "a"], "--r: 'a' is not a number"), (["--jobs", "0"], "--jobs"),
-                                       (["--mode", "offline", "--delay-ms", "5"], "offline"),
+                                       (["--mode", "offline", "--engine", "lockstep"], "old name of --engine"),
                                        (["--config", "/nonexistent.toml"], "config file not found")])
 def test_bad_arguments_exit_2_with_one_line(tmp_path, capsys, extra, msg):
     assert main(["sweep", "--out", str(tmp_path / "o"), *extra]) == 2
@@ -176,7 +178,8 @@ def _sweep_cmd(tmp_path: Path, *extra: str) -> list[str]:
     short = tmp_path / "short.toml"
     short.write_text("[trajectory]\nperiod_s = 2.0\n", encoding="utf-8")
     return [sys.executable, "-m", "sea_hil.cli", "sweep", "--out", str(tmp_path / "sw"), "--config", str(short),
-            "--eta", "0.5", "--r", "0.2", "--jitter-ms", "0", "--loss", "0", "--seed", "1", *extra]
+            "--eta", "0.5", "--r", "0.2", "--jitter-ms", "0", "--loss", "0", "--seed", "1", "--engine", "lockstep",
+            *extra]
 
 
 def _pids_mentioning(*texts: str) -> list[int]:

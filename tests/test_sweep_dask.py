@@ -57,7 +57,7 @@ def _short_config(tmp_path: Path) -> Path:
 
 def _sweep(tmp_path: Path, out: str, *extra: str) -> tuple[list[dict[str, str]], str]:
     cmd = [sys.executable, "-m", "sea_hil.cli", "sweep", "--out", str(tmp_path / out), "--config",
-           str(_short_config(tmp_path)), "--eta", "0.5", "--r", "0.2", "--delay-ms", "5", "--seed", "3", *extra]
+           str(_short_config(tmp_path)), "--eta", "0.5", "--r", "0.2", "--delay-ms", "5", "--seed", "3", "--engine", "lockstep", *extra]
     proc = subprocess.run(cmd, cwd=ROOT, capture_output=True, text=True, timeout=300, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr
     with (tmp_path / out / "sweep.csv").open(encoding="utf-8") as fh:
@@ -123,7 +123,7 @@ def fake(point, mode, cfg_path, out, cycles, python):
 
 task.point_command = fake
 points = expand_grid((0.3, 0.5, 0.8), (0.2,), (0.0,), (0.0,), (0.0,))
-run_sweep(points, SweepOptions(out=Path({str(out)!r}), jobs=4, progress_bar=False), print)
+run_sweep(points, SweepOptions(out=Path({str(out)!r}), mode="lockstep", jobs=4, progress_bar=False), print)
 """, encoding="utf-8")
     return script
 
@@ -162,7 +162,7 @@ def test_killed_sweep_keeps_finished_points_and_resume_runs_only_the_rest(tmp_pa
     monkeypatch.setattr("sea_hil.sweep.task.point_command", fake)
     points = expand_grid((0.3, 0.5, 0.8), (0.2,), (0.0,), (0.0,), (0.0,))
     lines: list[str] = []
-    rows, interrupted = run_sweep(points, SweepOptions(out=out, jobs=2, resume=True, progress_bar=False), lines.append)
+    rows, interrupted = run_sweep(points, SweepOptions(out=out, mode="lockstep", jobs=2, resume=True, progress_bar=False), lines.append)
     assert not interrupted and sorted(ran) == [2, 3]
     assert lines[0].startswith("sweep: resuming, 2 of 4 points already in")
     assert [r["status"] for r in rows] == ["ok"] * 4
@@ -178,11 +178,12 @@ def test_resume_recomputes_a_point_whose_config_changed(tmp_path, monkeypatch):
                               f"{json.dumps(SUMMARY)!r})"]
     monkeypatch.setattr("sea_hil.sweep.task.point_command", fake)
     points = expand_grid((0.5,), (0.2,), (0.0,), (0.0,), (0.0,))
-    run_sweep(points, SweepOptions(out=tmp_path, jobs=2, progress_bar=False), lambda s: None)
+    run_sweep(points, SweepOptions(out=tmp_path, mode="lockstep", jobs=2, progress_bar=False), lambda s: None)
     changed = tmp_path / "c.toml"
     changed.write_text("[trigger]\nmax_inter_event_s = 0.2\n", encoding="utf-8")
     ran.clear()
-    run_sweep(points, SweepOptions(out=tmp_path, config=changed, jobs=2, resume=True, progress_bar=False),
+    run_sweep(points, SweepOptions(out=tmp_path, config=changed, mode="lockstep", jobs=2, resume=True,
+                                   progress_bar=False),
               lambda s: None)
     assert sorted(ran) == [0, 1]
 

@@ -10,13 +10,18 @@ from sea_hil.errors import ConfigError
 
 
 @contextlib.contextmanager
-def open_client(scheduler: str | None, jobs: int) -> Iterator[object]:
-    """A `distributed.Client`. Without `scheduler`: a local cluster of one worker with `jobs` threads (a lockstep
-    point is a child process the thread waits on, so threads cost no GIL time), no dashboard, closed on exit."""
+def open_client(scheduler: str | None, jobs: int, engine: str = "offline") -> Iterator[object]:
+    """A `distributed.Client`. Without `scheduler`, a local cluster (no dashboard, closed on exit): engine `offline`
+    computes in the worker (CPU and GIL bound), so `jobs` worker processes of one thread; engine `lockstep` points
+    are child processes a thread waits on, so one in-process worker with `jobs` threads (no GIL cost)."""
     from distributed import Client, LocalCluster
     if scheduler is None:
-        cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, dashboard_address=None,
-                               silence_logs=logging.WARNING)
+        if engine == "offline":
+            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                                   silence_logs=logging.WARNING)
+        else:
+            cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, dashboard_address=None,
+                                   silence_logs=logging.WARNING)
         try:
             with Client(cluster) as client:
                 yield client

@@ -117,15 +117,10 @@ def point_overrides(point: GridPoint, direction: str = "both") -> dict[str, Any]
 
 def point_command(point: GridPoint, mode: str, cfg_path: Path, out: Path, cycles: int,
                   python: str = "python3") -> list[str]:
-    """The `sea-hil run --lockstep` (or offline `sea-hil simulate`) command line of one point."""
-    cmd = [python, "-m", "sea_hil.cli"]
-    if mode == "lockstep":
-        cmd += ["run", "--lockstep", "--quiet"]
-    elif mode == "offline":
-        cmd += ["simulate"]
-    else:
-        raise ConfigError(f"--mode must be lockstep or offline, not {mode!r}")
-    return cmd + ["--controller", point.controller, "--config", str(cfg_path), "--cycles", str(cycles),
+    """The `sea-hil run --lockstep` command line of one point (engine lockstep)."""
+    if mode != "lockstep":
+        raise ConfigError(f"only the lockstep engine runs a point as a process, not {mode!r}")
+    return [python, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet"] + ["--controller", point.controller, "--config", str(cfg_path), "--cycles", str(cycles),
                   "--out", str(out)]
 
 
@@ -133,7 +128,7 @@ def _tx(summary: dict[str, Any]) -> tuple[Any, Any, Any]:
     t = summary.get("transmissions")
     if isinstance(t, dict):
         return t.get("downlink_msgs", ""), t.get("downlink_bytes", ""), t.get("uplink_msgs", "")
-    return (t if t is not None else ""), "", ""      # offline summary: an event count only
+    return (t if t is not None else ""), "", ""      # an old `simulate` summary: an event count only
 
 
 def csv_row(point: GridPoint, summary: dict[str, Any] | None, *, cycles: int, seed: int, wall_s: float,

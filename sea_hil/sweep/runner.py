@@ -26,7 +26,7 @@ from sea_hil.sweep.task import PointSpec, run_point
 class SweepOptions:
     out: Path
     config: Path | None = None
-    mode: str = "lockstep"
+    mode: str = "offline"             # the engine: offline (in-process session engine) or lockstep (sessions)
     cycles: int = 1
     seed: int | None = None
     jobs: int = 1
@@ -123,7 +123,7 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
         log(f"sweep: resuming, {len(rows)} of {len(points)} points already in {csv_path}")
     todo = [p for p in points if p.index not in rows]
     interrupted = False
-    with CsvLog(csv_path, keep_existing=opts.resume) as csv_log, open_client(opts.scheduler, opts.jobs) as client:
+    with CsvLog(csv_path, keep_existing=opts.resume) as csv_log, open_client(opts.scheduler, opts.jobs, opts.mode) as client:
         stop = Event(stop_name, client=client)
         progress = _Progress(len(points), len(rows), opts.progress_bar, log)
         futures = {client.submit(run_point, specs[p.index], key=f"{p.name}-{specs[p.index].config_sha256[:12]}",

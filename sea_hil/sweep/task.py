@@ -1,20 +1,24 @@
 """One sweep point as a self-contained task: what a Dask worker (local or remote) runs.
 
 `run_point(spec)` needs only the installed package: the point's effective config travels as TOML text in the
-`PointSpec`, the worker writes it to `<out>/points/<name>/input.toml`, runs `sea-hil run --lockstep` (or offline
-`sea-hil simulate`) as its own process group and returns the CSV row. Per-point output directories are written on the
+`PointSpec`. Engine `offline` (the default): the point runs in the worker process on the offline session engine
+(`sea_hil.offline.session_engine`: the lockstep session's timeline, links and quantisation, bit for bit the same
+summary) and only its row comes back. Engine `lockstep`: the worker writes the config to
+`<out>/points/<name>/input.toml`, runs `sea-hil run --lockstep` as its own process group and returns the CSV row. Per-point output directories are written on the
 worker's file system under the same path (on one machine: next to sweep.csv). A timeout or a stop request (the
 client sets the Dask `Event` named `spec.stop_event`, e.g. on Ctrl-C) ends the whole group: SIGINT first (the run
 cleans up), SIGKILL after `GRACE_S`. A failing point becomes a row with its error; it never raises.
 """
 from __future__ import annotations
 
+import functools
 import json
 import os
 import signal
 import subprocess
 import sys
 import time
+import tomllib
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -79,6 +83,24 @@ def _stop_requested(name: str) -> Callable[[], bool]:
 
 def run_point(spec: PointSpec) -> dict[str, Any]:
     """Run one point to completion (or timeout / stop); its CSV row."""
+    return (_run_offline if spec.mode == "offline" else _run_process)(spec)
+
+
+def _run_offline(spec: PointSpec) -> dict[str, Any]:
+    from sea_hil.config import config_from_dict
+    from sea_hil.errors import SeaHilError
+    from sea_hil.offline.session_engine import run_engine
+    from sea_hil.report.session_summary import session_summary
+    t0 = time.monotonic()
+    row = functools.partial(csv_row, spec.point, cycles=spec.cycles, seed=spec.seed, config_sha256=spec.config_sha256)
+    try:
+        res = run_engine(config_from_dict(tomllib.loads(spec.config_toml)), spec.point.controller, spec.cycles)
+    except SeaHilError as err:      # e.g. a diverged closed loop: the point's row says so, the sweep goes on
+        return row(None, wall_s=time.monotonic() - t0, status="error", error=str(err))
+    return row(session_summary(res.data, spec.point.controller), wall_s=time.monotonic() - t0)
+
+
+def _run_process(spec: PointSpec) -> dict[str, Any]:
     t0 = time.monotonic()
     point = spec.point
 

@@ -1,0 +1,237 @@
+"""Offline engine of a networked session: the lockstep session's timeline in one process, with the same link
+emulation, the same wire quantisation and the same summary, fast enough for sweeps of thousands of points.
+
+What it replays, sample by sample (1 ms), as `sea-hil run --lockstep` orders it (docs/sweep.md, "Offline engine"):
+the driver boots at rest (`plant.initial_theta_rad`) and integrates each period exactly as `DriverCore.step` does
+(the same float expressions and sub-steps, disturbance sampled at the same times); the edge publishes a state every
+outer sample through the uplink `LinkEmulator` (same seed stream `<seed>/up`, same payload size), the controller
+answers each released state at once (lead-in, trigger, SMC: the live `OuterController` and `LeadIn`), a setpoint
+enters the downlink emulator (`<seed>/down`) at that sample and is applied when released; the edge's voltage is the
+backstepping law on the DBC-quantised feedback, quantised and saturated as the VOLTAGE_CMD frame does. The per-sample
+part (inner law + RK4) runs in a numba kernel compiled from the live functions (`sea_hil.jit`); the outer part in
+Python. The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built as
+the recorder's `zenoh_record` builds them and summarised by `session_summary`, so the summary is the session's.
+
+Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats`, and `max_abs_voltage_v` is taken up to
+the controller's last sample (a session also records the commands of its shut-down tail).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Callable
+
+import numpy as np
+
+from sea_hil.config import SeaHilConfig
+from sea_hil.controller.inner import InnerLoop, limited_voltage
+from sea_hil.controller.outer import OuterController
+from sea_hil.controller.smc import JointState
+from sea_hil.controller.trajectory import LeadIn, make_trajectory
+from sea_hil.jit import compiled
+from sea_hil.mechanics import limb_params
+from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, is_finite, saturate
+from sea_hil.plant_emulator.integrator import rk4_core
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.link import DelayQueue, LinkEmulator
+from sea_hil.protocol.payloads import SetpointPayload, StatePayload, encode
+from sea_hil.recorder.reader import RecordedMessage, SessionData
+from sea_hil.errors import SeaHilError
+
+STATE_BYTES = len(encode(StatePayload(1, 0, 0, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))
+SETPOINT_BYTES = 53
+
+
+def make_session_steps(fingerprint: str = "") -> Callable[..., tuple[State, tuple, int, float, float, int]]:
+    """The per-sample kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
+
+    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, gains, limit_v, dist_tab,  # noqa
+                      lsb):
+        """Samples k0 .. k0 + n_steps - 1 from the state x of sample k0: DBC-quantised feedback m -> backstepping
+        voltage (edge) -> quantised, saturated VOLTAGE_CMD -> one driver period (`DriverCore.step`'s expressions).
+        Returns (x, m of the new x, saturated steps, max |u1|, max |u2|, first non-finite sample or -1)."""
+        fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
+        sat_count = 0
+        u1_max = 0.0
+        u2_max = 0.0
+        m = feedback_measurement(x, p, lsb)
+        for k in range(k0, k0 + n_steps):
+            v = (m[4], m[5]) if hold_measured else vx
+            u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v)
+            if saturated:
+                sat_count += 1
+            u1 = saturate(quantised(u1, lsb[4]), limit_v)
+            u2 = saturate(quantised(u2, lsb[4]), limit_v)
+            u1_max = max(u1_max, abs(u1))
+            u2_max = max(u2_max, abs(u2))
+            t = k * period_ns * 1e-9
+            h = (period_ns * 1e-9) / substeps
+            for i in range(substeps):
+                d = dist_tab[k * substeps + i]
+                x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
+            if not is_finite(x):
+                return x, m, sat_count, u1_max, u2_max, k
+            m = feedback_measurement(x, p, lsb)
+        return x, m, sat_count, u1_max, u2_max, -1
+
+    return session_steps
+
+
+def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float, float]
+                         ) -> tuple[float, float, float, float, float, float, float, float]:
+    """(theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2) of the driver's feedback frames as the
+    edge decodes them (DBC resolution; in range). Plain float code: the kernel compiles it."""
+    dl1, dl2, _, _ = deflections(x, p)
+    return (quantised(x[0], lsb[0]), quantised(x[1], lsb[0]), quantised(x[2], lsb[1]), quantised(x[3], lsb[1]),
+            quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
+
+
+def driver_disturbance_table(cfg: SeaHilConfig, n_samples: int, period_ns: int) -> np.ndarray:
+    """(n_samples * substeps, 6): d(t_i), d(t_i + h/2), d(t_i + h) of every sub-step, sampled in the order and at
+    the float times `DriverCore.step` -> `advance` samples them (so a stateful noise disturbance gives the same
+    values)."""
+    dc, substeps = cfg.disturbance, cfg.sim.substeps
+    if dc.kind == "none" or (dc.amplitude_nm[0] == 0.0 and dc.amplitude_nm[1] == 0.0):
+        return np.zeros((n_samples * substeps, 6))
+    dist = make_disturbance(dc)
+    h = (period_ns * 1e-9) / substeps
+    hh = 0.5 * h
+    out = np.empty((n_samples * substeps, 6))
+    for k in range(n_samples):
+        t = k * period_ns * 1e-9
+        for i in range(substeps):
+            ti = t + i * h
+            out[k * substeps + i] = (*dist(ti), *dist(ti + hh), *dist(ti + h))
+    return out
+
+
+@dataclass
+class EngineResult:
+    data: SessionData            # the messages a session's recorder would hold (see module docstring)
+    samples: int                 # driver periods simulated
+    saturated_steps: int
+
+
+class SessionRecords:
+    """What a session's recorder would record of the Zenoh traffic: the dicts `sea_hil.recorder.node.zenoh_record`
+    makes of the encoded payloads, built directly (no encode / decode / JSON round trip: float64 fields and JSON
+    floats pass unchanged; `tests/test_session_engine.py` checks these dicts equal the recorder's own)."""
+
+    def __init__(self, keys: Keys) -> None:
+        self.keys = keys
+        self.messages: dict[str, list[RecordedMessage]] = {"/zenoh/state": [], "/zenoh/setpoint": [], "/tracking": []}
+
+    def state(self, seq: int, sample_ns: int, fb: tuple, t_ns: int) -> None:
+        (th, om, de, _nut) = fb
+        self.messages["/zenoh/state"].append(RecordedMessage(t_ns, t_ns, {
+            "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": STATE_BYTES,
+            "sample_t_ns": sample_ns, "theta1_rad": th[0], "theta2_rad": th[1], "omega1_rad_s": om[0],
+            "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1]}))
+
+    def setpoint(self, sp: SetpointPayload, t_ns: int) -> None:
+        self.messages["/zenoh/setpoint"].append(RecordedMessage(t_ns, t_ns, {
+            "key": self.keys.setpoint, "seq": sp.seq, "sent_t_ns": sp.t_ns, "payload_bytes": SETPOINT_BYTES,
+            "state_seq": sp.state_seq, "delta1_ref_m": sp.deflection_m[0], "delta2_ref_m": sp.deflection_m[1],
+            "s1": sp.sliding[0], "s2": sp.sliding[1], "reason": sp.reason.name}))
+
+    def tracking(self, record: dict[str, Any], t_ns: int) -> None:
+        self.messages["/tracking"].append(RecordedMessage(t_ns, t_ns, {**record, "key": self.keys.event}))
+
+
+def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True) -> EngineResult:
+    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in)."""
+    p = limb_params(cfg.plant)
+    traj = make_trajectory(cfg.trajectory)
+    period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
+    outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
+    duration_ns = int(round(traj.period_s * cycles * 1e9))
+    lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
+    # the controller stops at its first state after the cycles; a lost state can only delay that by a few samples
+    n_max = (lead_in_ns + duration_ns) // period_ns + 20 * outer_every + 1000
+    theta0 = tuple(cfg.plant.initial_theta_rad)
+    x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
+    lsb = dbc_resolutions()
+    m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
+    outer = OuterController(cfg, p, mode)
+    inner = InnerLoop(cfg, p, theta0)          # the edge's: gains and the held setpoint
+    dist_tab = driver_disturbance_table(cfg, n_max, period_ns)
+    kernel = compiled(make_session_steps) if jit else None
+    steps = kernel if kernel is not None else make_session_steps()
+    tab = dist_tab if kernel is not None else dist_tab.tolist()
+    seed = cfg.link.seed
+    uplink, downlink = LinkEmulator(cfg.link.uplink, f"{seed}/up"), LinkEmulator(cfg.link.downlink, f"{seed}/down")
+    in_flight: DelayQueue[tuple[int, int, JointState]] = DelayQueue()
+    pending_down: DelayQueue[SetpointPayload] = DelayQueue()
+    keys = Keys.from_config(cfg.zenoh)
+    rec = SessionRecords(keys)
+    state_seq = setpoint_seq = newest = saturated = 0
+    u_max = [0.0, 0.0]
+    t0_ns: int | None = None
+    lead: LeadIn | None = None
+    done = False
+    k = 0
+    while not done and k < n_max:
+        now = k * period_ns
+        if k % outer_every == 0:                       # the edge publishes the feedback of sample k
+            state_seq += 1
+            fb = ((m[0], m[1]), (m[2], m[3]), (m[4], m[5]), (m[6], m[7]))
+            at = uplink.submit(now, STATE_BYTES)
+            if at is not None:
+                in_flight.push(at, (state_seq, now, fb))
+        for seq, sample_ns, fb in in_flight.pop_due(now):
+            if seq <= newest:                          # released after a newer one: the controller ignores it
+                continue
+            newest = seq
+            rec.state(seq, sample_ns, fb, now)
+            if t0_ns is None:
+                t0_ns = sample_ns + lead_in_ns
+                if lead_in_ns:
+                    lead = LeadIn(fb[0], fb[1], traj.sample(0.0), lead_in_ns * 1e-9)
+            t_ns = sample_ns - t0_ns
+            if t_ns > duration_ns:
+                done = True
+                break
+            ds = lead.sample(t_ns * 1e-9) if t_ns < 0 and lead else traj.sample(t_ns * 1e-9)
+            sp = outer.step(t_ns, seq, JointState(fb[0], fb[1]), ds)
+            if sp is not None:
+                setpoint_seq += 1
+                payload = SetpointPayload(setpoint_seq, now, seq, sp.deflection_m, sp.sliding, sp.reason)
+                rec.setpoint(payload, now)
+                at = downlink.submit(now, SETPOINT_BYTES)
+                if at is not None:
+                    pending_down.push(at, payload)
+            rec.tracking(tracking_record(t_ns, seq, fb[0], ds, sp, setpoint_seq), now)
+        if done:
+            break
+        for payload in pending_down.pop_due(now):
+            inner.hold(payload.deflection_m, payload.sliding)
+        nxt = _next_event_k(k, outer_every, period_ns, in_flight, pending_down, n_max)
+        held = inner.deflection_m
+        x, m, n_sat, u1m, u2m, bad = steps(x, k, nxt - k, period_ns, cfg.sim.substeps, held or (0.0, 0.0),
+                                        inner.sliding, held is None, p, inner.gains, p.voltage_limit, tab, lsb)
+        saturated += n_sat
+        u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
+        if bad >= 0:
+            raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * period_ns * 1e-9:.3f} s)")
+        k = nxt
+    rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
+    return EngineResult(SessionData(messages=rec.messages, complete=True), k, saturated)
+
+
+def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, sp: Any,
+                    setpoint_seq: int) -> dict[str, Any]:
+    """The controller's per-state tracking record (controller/remote.py publishes the same dict as JSON on `event`)."""
+    sent = sp is not None
+    return {"t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta_rad[0], "theta2_rad": theta_rad[1],
+            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1], "event": sent,
+            "reason": sp.reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}
+
+
+def _next_event_k(k: int, outer_every: int, period_ns: int, up: DelayQueue, down: DelayQueue, n_max: int) -> int:
+    """The next sample after k at which something happens: a state is published, a state or a setpoint released."""
+    nxt = min((k // outer_every + 1) * outer_every, n_max)
+    for due in (up.next_due_ns(), down.next_due_ns()):
+        if due is not None and due < nxt * period_ns:
+            nxt = max(k + 1, -(-due // period_ns))
+    return nxt
