@@ -7,6 +7,8 @@ offline closed loop uses them (`sea-hil simulate --quantise`) to show what quant
 """
 from __future__ import annotations
 
+import functools
+
 from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd, load_database
 
 Measurement = tuple[float, float, float, float, float, float, float, float]
@@ -17,6 +19,7 @@ _SIGNALS = (("FEEDBACK_ANGLE", "theta1"), ("FEEDBACK_JOINT1", "omega1"), ("FEEDB
             ("FEEDBACK_JOINT1", "nut_vel1"), ("VOLTAGE_CMD", "voltage1"))
 
 
+@functools.cache
 def dbc_resolutions() -> Resolutions:
     """(theta rad, omega rad/s, delta m, nut velocity m/s, voltage V) per LSB, from the DBC; joint 2 signals share
     joint 1's scale (checked by tests/test_quantisation.py)."""
