@@ -73,7 +73,7 @@ def test_records_are_the_recorders_own():
     assert rec.messages["/zenoh/state"][0].payload == zenoh_record(keys.state, state_bytes, counters)[1]
     assert rec.messages["/zenoh/setpoint"][0].payload == zenoh_record(keys.setpoint, encode(sp), counters)[1]
     ds = type("DS", (), {"theta_rad": (0.11, 0.19)})()
-    record = tracking_record(-5_000_000, 7, fb[0], ds, sp, 3)
+    record = tracking_record(-5_000_000, 7, fb[0], ds, sp.reason, 3)
     rec.tracking(record, 0)
     assert rec.messages["/tracking"][0].payload == zenoh_record(keys.event, json.dumps(record).encode(), counters)[1]
 

@@ -25,10 +25,12 @@ import numpy as np
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop, limited_voltage
 from sea_hil.controller.outer import OuterController
-from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
+from sea_hil.offline.predictor import Predictor
+from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, is_finite, saturate
@@ -139,99 +141,89 @@ class SessionRecords:
         self.messages["/tracking"].append(RecordedMessage(t_ns, t_ns, {**record, "key": self.keys.event}))
 
 
-def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True) -> EngineResult:
-    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in)."""
+class _Env:
+    """What the sample loop (`sea_hil.offline.session_loop.SessionLoop`) works with: the session's parts."""
+
+    def __init__(self, cfg: SeaHilConfig, mode: str, cycles: int, p: Any, jit: bool) -> None:
+        cc = cfg.controller
+        self.params, self.c, self.rho, self.boundary_layer = p, cc.c, cc.rho, cc.boundary_layer
+        self.traj = make_trajectory(cfg.trajectory)
+        self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
+        self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
+        self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
+        self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
+        # the controller stops at its first state after the cycles; lost states delay that by a few samples only
+        self.n_max = (self.lead_in_ns + self.duration_ns) // self.period_ns + 20 * self.outer_every + 1000
+        self.cfg, self.mode = cfg, mode
+        self.outer = OuterController(cfg, p, mode)
+        self.inner = InnerLoop(cfg, p, tuple(cfg.plant.initial_theta_rad))   # the edge's: gains, held setpoint
+        seed = cfg.link.seed
+        self.uplink = LinkEmulator(cfg.link.uplink, f"{seed}/up")
+        self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
+        self.rec = SessionRecords(Keys.from_config(cfg.zenoh))
+        self.state_bytes, self.setpoint_bytes = STATE_BYTES, SETPOINT_BYTES
+        self.tracking_record = tracking_record
+        kernel = compiled(make_session_steps) if jit else None
+        self.steps = kernel if kernel is not None else make_session_steps()
+        self.jit = kernel is not None
+        self.predictor: Predictor | None = None
+
+    def lead_in(self, fb: tuple) -> LeadIn:
+        return LeadIn(fb[0], fb[1], self.traj.sample(0.0), self.lead_in_ns * 1e-9)
+
+    def make_trigger(self) -> EventTrigger | TimeTrigger:
+        tc, cc = self.cfg.trigger, self.cfg.controller
+        if self.mode == "tt":
+            return TimeTrigger()
+        return EventTrigger(error_threshold(tc.eta, tc.lipschitz_l, cc.c), tc.r, int(round(tc.max_inter_event_s * 1e9)))
+
+    @staticmethod
+    def downlink_due(queue: DelayQueue[SetpointPayload], now_ns: int) -> list[SetpointPayload]:
+        return queue.pop_due(now_ns)
+
+
+def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
+               opts: EngineOptions = EngineOptions()) -> EngineResult:
+    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` selects the trigger
+    placement and delay compensation (the defaults are the paper's scheme, the lockstep session bit for bit)."""
     p = limb_params(cfg.plant)
-    traj = make_trajectory(cfg.trajectory)
-    period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
-    outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
-    duration_ns = int(round(traj.period_s * cycles * 1e9))
-    lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
-    # the controller stops at its first state after the cycles; a lost state can only delay that by a few samples
-    n_max = (lead_in_ns + duration_ns) // period_ns + 20 * outer_every + 1000
+    env = _Env(cfg, mode, cycles, p, jit)
     theta0 = tuple(cfg.plant.initial_theta_rad)
     x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
     lsb = dbc_resolutions()
     m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
-    outer = OuterController(cfg, p, mode)
-    inner = InnerLoop(cfg, p, theta0)          # the edge's: gains and the held setpoint
-    dist_tab = driver_disturbance_table(cfg, n_max, period_ns)
-    kernel = compiled(make_session_steps) if jit else None
-    steps = kernel if kernel is not None else make_session_steps()
-    tab = dist_tab if kernel is not None else dist_tab.tolist()
-    seed = cfg.link.seed
-    uplink, downlink = LinkEmulator(cfg.link.uplink, f"{seed}/up"), LinkEmulator(cfg.link.downlink, f"{seed}/down")
-    in_flight: DelayQueue[tuple[int, int, JointState]] = DelayQueue()
-    pending_down: DelayQueue[SetpointPayload] = DelayQueue()
-    keys = Keys.from_config(cfg.zenoh)
-    rec = SessionRecords(keys)
-    state_seq = setpoint_seq = newest = saturated = 0
-    u_max = [0.0, 0.0]
-    t0_ns: int | None = None
-    lead: LeadIn | None = None
-    done = False
-    k = 0
-    while not done and k < n_max:
-        now = k * period_ns
-        if k % outer_every == 0:                       # the edge publishes the feedback of sample k
-            state_seq += 1
-            fb = ((m[0], m[1]), (m[2], m[3]), (m[4], m[5]), (m[6], m[7]))
-            at = uplink.submit(now, STATE_BYTES)
-            if at is not None:
-                in_flight.push(at, (state_seq, now, fb))
-        for seq, sample_ns, fb in in_flight.pop_due(now):
-            if seq <= newest:                          # released after a newer one: the controller ignores it
-                continue
-            newest = seq
-            rec.state(seq, sample_ns, fb, now)
-            if t0_ns is None:
-                t0_ns = sample_ns + lead_in_ns
-                if lead_in_ns:
-                    lead = LeadIn(fb[0], fb[1], traj.sample(0.0), lead_in_ns * 1e-9)
-            t_ns = sample_ns - t0_ns
-            if t_ns > duration_ns:
-                done = True
-                break
-            ds = lead.sample(t_ns * 1e-9) if t_ns < 0 and lead else traj.sample(t_ns * 1e-9)
-            sp = outer.step(t_ns, seq, JointState(fb[0], fb[1]), ds)
-            if sp is not None:
-                setpoint_seq += 1
-                payload = SetpointPayload(setpoint_seq, now, seq, sp.deflection_m, sp.sliding, sp.reason)
-                rec.setpoint(payload, now)
-                at = downlink.submit(now, SETPOINT_BYTES)
-                if at is not None:
-                    pending_down.push(at, payload)
-            rec.tracking(tracking_record(t_ns, seq, fb[0], ds, sp, setpoint_seq), now)
-        if done:
+    dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
+    tab = dist_tab if env.jit else dist_tab.tolist()
+    if opts.compensation == "predict":
+        env.predictor = Predictor(p, env.inner.gains, env.period_ns, cfg.sim.substeps, env.steps,
+                                  np.zeros_like(dist_tab) if env.jit else np.zeros_like(dist_tab).tolist())
+    loop = SessionLoop(env, opts)
+    saturated, u_max, k = 0, [0.0, 0.0], 0
+    while k < env.n_max:
+        now = k * env.period_ns
+        loop.edge_sample(k, ((m[0], m[1]), (m[2], m[3]), (m[4], m[5]), (m[6], m[7])))
+        if not loop.controller(now):
             break
-        for payload in pending_down.pop_due(now):
-            inner.hold(payload.deflection_m, payload.sliding)
-        nxt = _next_event_k(k, outer_every, period_ns, in_flight, pending_down, n_max)
-        held = inner.deflection_m
-        x, m, n_sat, u1m, u2m, bad = steps(x, k, nxt - k, period_ns, cfg.sim.substeps, held or (0.0, 0.0),
-                                        inner.sliding, held is None, p, inner.gains, p.voltage_limit, tab, lsb)
+        loop.take_downlink(now)
+        nxt = loop.next_k(k)
+        held = env.inner.deflection_m
+        x, m, n_sat, u1m, u2m, bad = env.steps(x, k, nxt - k, env.period_ns, cfg.sim.substeps, held or (0.0, 0.0),
+                                               env.inner.sliding, held is None, p, env.inner.gains, p.voltage_limit,
+                                               tab, lsb)
         saturated += n_sat
         u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
         if bad >= 0:
-            raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * period_ns * 1e-9:.3f} s)")
+            raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * env.period_ns * 1e-9:.3f} s)")
         k = nxt
-    rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
-    return EngineResult(SessionData(messages=rec.messages, complete=True), k, saturated)
+    env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
+    return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated)
 
 
-def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, sp: Any,
+def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,
                     setpoint_seq: int) -> dict[str, Any]:
-    """The controller's per-state tracking record (controller/remote.py publishes the same dict as JSON on `event`)."""
-    sent = sp is not None
+    """The controller's per-state tracking record (controller/remote.py publishes the same dict as JSON on `event`);
+    `reason` None: no event at this state."""
+    sent = reason is not None
     return {"t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta_rad[0], "theta2_rad": theta_rad[1],
             "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1], "event": sent,
-            "reason": sp.reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}
-
-
-def _next_event_k(k: int, outer_every: int, period_ns: int, up: DelayQueue, down: DelayQueue, n_max: int) -> int:
-    """The next sample after k at which something happens: a state is published, a state or a setpoint released."""
-    nxt = min((k // outer_every + 1) * outer_every, n_max)
-    for due in (up.next_due_ns(), down.next_due_ns()):
-        if due is not None and due < nxt * period_ns:
-            nxt = max(k + 1, -(-due // period_ns))
-    return nxt
+            "reason": reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}

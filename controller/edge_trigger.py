@@ -1,0 +1,104 @@
+"""Sensor-side event generator (the trigger at the edge, issue 16): Eq. 16-19, the ||X~|| > r rule and the heartbeat
+evaluated on the edge's own samples, so that a state crosses the uplink only on an event and the controller answers
+each one with v_x(t_i) — both directions event-triggered.
+
+Pure core (no clock, no I/O): `on_sample` takes a measured sample and says whether to publish it; `sent` and
+`answered` tell it about the state in flight. The edge needs x_d(t): it builds the same trajectory as the controller
+and the same lead-in from the first measured state (t = 0 is that sample + `lead_in_s`). While a published state has
+no answer yet the trigger is not evaluated (no burst of duplicate events while the answer is in flight), until
+`answer_timeout_ns` has passed — a lost state or a lost setpoint then lets the next event through (re-trigger). The
+timeout follows the measured round trip: max(`min_timeout_ns`, 3 x the smoothed round trip).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from sea_hil.controller.smc import JointState, tracking_errors
+from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, _distance, epsilon
+
+
+@dataclass
+class EdgeEventGenerator:
+    trigger: EventTrigger | TimeTrigger
+    trajectory: GaitTrajectory | CsvTrajectory
+    lead_in_ns: int
+    min_timeout_ns: int = 20_000_000
+    t0_ns: int | None = None
+    lead_in: LeadIn | None = None
+    awaiting_seq: int | None = None
+    awaiting_since_ns: int = 0
+    rtt_ns: float | None = None
+    retriggers: int = 0
+    lookahead: bool = True            # evaluate the trigger on the state extrapolated one round trip ahead
+    _prev: tuple[int, tuple[float, float]] | None = None
+    _alpha: tuple[float, float] = (0.0, 0.0)
+
+    def desired(self, t_ns: int) -> DesiredSample:
+        """x_d at the controller's time t (ns after the start of the measured cycles)."""
+        if t_ns < 0 and self.lead_in is not None:
+            return self.lead_in.sample(t_ns * 1e-9)
+        return self.trajectory.sample(t_ns * 1e-9)
+
+    def time_of(self, sample_ns: int) -> int:
+        assert self.t0_ns is not None
+        return sample_ns - self.t0_ns
+
+    @property
+    def answer_timeout_ns(self) -> int:
+        return self.min_timeout_ns if self.rtt_ns is None else max(self.min_timeout_ns, int(3.0 * self.rtt_ns))
+
+    def on_sample(self, sample_ns: int, js: JointState) -> tuple[int, DesiredSample, TriggerReason | None]:
+        """(controller time t, x_d(t), the reason to publish this sample or None)."""
+        if self.t0_ns is None:
+            self.t0_ns = sample_ns + self.lead_in_ns
+            if self.lead_in_ns:
+                self.lead_in = LeadIn(js.theta_rad, js.omega_rad_s, self.trajectory.sample(0.0),
+                                      self.lead_in_ns * 1e-9)
+        t_ns = sample_ns - self.t0_ns
+        ds = self.desired(t_ns)
+        js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds)
+        eps = epsilon(tracking_errors(js_eval, ds_eval), ds_eval.theta_rad, ds_eval.omega_rad_s)
+        if self.awaiting_seq is not None:
+            if sample_ns - self.awaiting_since_ns >= self.answer_timeout_ns:
+                self.retriggers += 1            # the state or its answer was lost: let the next event through
+                self.awaiting_seq = None
+            elif not self.trigger_moved(eps):
+                return t_ns, ds, None           # only the error moving again may fire while an answer is in flight
+        reason = self.trigger.update(t_eval, eps)
+        return t_ns, ds, reason
+
+    def trigger_moved(self, eps: tuple[float, ...]) -> bool:
+        """Would the event error rule (Eq. 19) fire for eps? (the r rule and the heartbeat would fire on every sample
+        while an answer is in flight, so they wait for it)."""
+        trig = self.trigger
+        if not isinstance(trig, EventTrigger) or trig._eps_i is None:
+            return False
+        return _distance(trig._eps_i, eps) >= trig.threshold
+
+    def _ahead(self, sample_ns: int, js: JointState, t_ns: int, ds: DesiredSample
+               ) -> tuple[JointState, int, DesiredSample]:
+        """The state one smoothed round trip ahead (when the answer to an event now would act), extrapolated with the
+        measured velocity and a smoothed acceleration (finite differences of the 1 kHz or outer samples)."""
+        if self._prev is not None and sample_ns > self._prev[0]:
+            dt = (sample_ns - self._prev[0]) * 1e-9
+            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1]))
+            self._alpha = (0.8 * self._alpha[0] + 0.2 * a[0], 0.8 * self._alpha[1] + 0.2 * a[1])
+        self._prev = (sample_ns, js.omega_rad_s)
+        if not self.lookahead or not self.rtt_ns:
+            return js, t_ns, ds
+        h = self.rtt_ns * 1e-9
+        th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha))
+        om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha))
+        t_eval = t_ns + int(self.rtt_ns)
+        return JointState(th, om), t_eval, self.desired(t_eval)
+
+    def sent(self, seq: int, sample_ns: int) -> None:
+        self.awaiting_seq, self.awaiting_since_ns = seq, sample_ns
+
+    def answered(self, state_seq: int, now_ns: int, sampled_ns: int) -> None:
+        """A setpoint answering state `state_seq` (sampled at `sampled_ns`) was applied at `now_ns`."""
+        rtt = float(now_ns - sampled_ns)
+        self.rtt_ns = rtt if self.rtt_ns is None else 0.875 * self.rtt_ns + 0.125 * rtt
+        if self.awaiting_seq is not None and state_seq >= self.awaiting_seq:
+            self.awaiting_seq = None

@@ -1,0 +1,75 @@
+"""Delay compensation by prediction (issue 16), offline prototype: the controller computes v_x for the state at the
+instant its setpoint will act, by integrating its nominal model (plant + the edge's inner loop at 1 kHz) forward from
+the received state over the delay, with the setpoints it has already sent applied at their estimated arrival times.
+
+The delay: states carry their sample time and the clocks are taken as synchronised (in a session: PTP/chrony on the
+two hosts; here the simulated clock), so the uplink delay of each state is measured on arrival; the downlink delay
+is not observable by the controller alone and is estimated as the smoothed uplink delay (a symmetric link). When the
+delay varies, each prediction uses the state's own measured uplink delay for the past and the smoothed estimate for
+the future; an error in the estimate shifts when the predicted setpoint acts, by at most the jitter.
+
+Prototype: it runs the plant model of `sea_hil.plant_emulator` as the nominal model, which a remote controller must
+not import; the node version needs that model in the shared mechanics (docs/deviations.md, section on issue 16).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+from sea_hil.controller.smc import JointState
+from sea_hil.mechanics import LimbParams, sea_geometry
+from sea_hil.offline.wire_quantiser import EXACT
+
+
+@dataclass
+class Predictor:
+    params: LimbParams            # the controller's nominal model
+    gains: Any                    # the inner loop's InnerGains
+    period_ns: int
+    substeps: int
+    kernel: Callable[..., tuple]  # session_engine.make_session_steps (compiled)
+    zeros: np.ndarray             # a zero disturbance table long enough for the session
+    schedule: list[tuple[int, tuple[float, float], tuple[float, float]]] = field(default_factory=list)
+    down_delay_ns: float | None = None
+    predictions: int = 0
+
+    def observe_uplink(self, delay_ns: int) -> None:
+        self.down_delay_ns = float(delay_ns) if self.down_delay_ns is None else (
+            0.875 * self.down_delay_ns + 0.125 * delay_ns)
+
+    def apply_time_ns(self, now_ns: int) -> int:
+        """When a setpoint sent now is expected to act at the edge (on a sample boundary)."""
+        est = now_ns + int(self.down_delay_ns or 0.0)
+        return -(-est // self.period_ns) * self.period_ns
+
+    def sent(self, apply_ns: int, vx: tuple[float, float], s: tuple[float, float]) -> None:
+        self.schedule.append((apply_ns, vx, s))
+        if len(self.schedule) > 64:
+            del self.schedule[:-64]
+
+    def predict(self, fb: tuple[tuple[float, float], ...], sample_ns: int, until_ns: int) -> JointState:
+        """The joint state at `until_ns` from the feedback `fb` (theta, omega, delta, nut velocity) of `sample_ns`."""
+        (q1, q2), (w1, w2), (d1, d2), (nv1, nv2) = fb
+        p = self.params
+        len1, len2, _, _, _, _ = sea_geometry(q1, q2, p)
+        x = (q1, q2, w1, w2, len1 - p.l_ref[0] - d1, len2 - p.l_ref[1] - d2, nv1, nv2)
+        k, k_end = sample_ns // self.period_ns, until_ns // self.period_ns
+        if k_end <= k:
+            return JointState((q1, q2), (w1, w2))
+        self.predictions += 1
+        held = None
+        for apply_ns, vx, s in self.schedule:
+            if apply_ns <= sample_ns:
+                held = (vx, s)
+        for apply_ns, vx, s in [e for e in self.schedule if sample_ns < e[0] < until_ns] + [(until_ns, None, None)]:
+            k_next = min(apply_ns // self.period_ns, k_end)
+            if k_next > k:
+                hv, hs = held if held is not None else ((0.0, 0.0), (0.0, 0.0))
+                x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p, self.gains,
+                                p.voltage_limit, self.zeros, EXACT)[0]
+                k = k_next
+            if vx is not None:
+                held = (vx, s)
+        return JointState((x[0], x[1]), (x[2], x[3]))

@@ -1,0 +1,141 @@
+"""The sample loop of the offline session engine (`sea_hil.offline.session_engine.run_engine`), with the trigger
+placements and delay compensation of issue 16.
+
+- `placement="controller"` (the paper's): the edge publishes every outer sample, the controller's trigger decides;
+  this path is the lockstep session bit for bit.
+- `placement="edge"`: the edge's `EdgeEventGenerator` decides which samples cross the uplink (checked every outer
+  sample, or every 1 kHz sample with `edge_check="sample"`), the controller answers each state. State seqs are then
+  the 1 kHz sample index + 1 (gaps are normal), tracking records are the edge's, one per outer sample.
+- `compensation="predict"`: the controller answers with v_x for the state predicted at the instant its setpoint will
+  act (`sea_hil.offline.predictor`); the trigger (controller placement) sees the predicted state too.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sea_hil.controller.edge_trigger import EdgeEventGenerator
+from sea_hil.controller.outer import Setpoint
+from sea_hil.controller.smc import JointState, smc_deflection
+from sea_hil.protocol.link import DelayQueue
+from sea_hil.protocol.payloads import SetpointPayload
+
+
+@dataclass(frozen=True)
+class EngineOptions:
+    placement: str = "controller"       # controller | edge
+    compensation: str = "none"          # none | predict
+    edge_check: str = "outer"           # outer | sample: how often the edge evaluates its trigger
+
+    def __post_init__(self) -> None:
+        if self.placement not in ("controller", "edge") or self.compensation not in ("none", "predict") \
+                or self.edge_check not in ("outer", "sample"):
+            raise ValueError(f"bad engine options {self}")
+
+
+class SessionLoop:
+    """State of one offline session; `run()` steps it to the end. Built by `run_engine`."""
+
+    def __init__(self, env: Any, opts: EngineOptions) -> None:
+        self.e, self.o = env, opts
+        self.in_flight: DelayQueue[tuple[int, int, tuple, Any]] = DelayQueue()
+        self.pending_down: DelayQueue[SetpointPayload] = DelayQueue()
+        self.state_seq = self.setpoint_seq = self.newest = 0
+        self.t0_ns: int | None = None
+        self.lead: Any = None
+        self.sampled_at: dict[int, int] = {}
+        self.edge: EdgeEventGenerator | None = None
+        if opts.placement == "edge":
+            self.edge = EdgeEventGenerator(env.make_trigger(), env.traj, env.lead_in_ns)
+
+    # ---- edge ---------------------------------------------------------------------------------------------------
+    def edge_sample(self, k: int, fb: tuple) -> None:
+        """The edge's work for sample k before the controller's answers: publish a state (placement rules)."""
+        e, now = self.e, k * self.e.period_ns
+        if self.edge is None:
+            if k % e.outer_every == 0:
+                self.state_seq += 1
+                self._publish(self.state_seq, now, fb, None)
+            return
+        checked = self.o.edge_check == "sample" or k % e.outer_every == 0
+        if not checked:
+            return
+        t_ns, ds, reason = self.edge.on_sample(now, JointState(fb[0], fb[1]))
+        seq = k + 1
+        if reason is not None:
+            self.edge.sent(seq, now)
+            self._publish(seq, now, fb, reason)
+        if k % e.outer_every == 0:
+            e.rec.tracking(e.tracking_record(t_ns, seq, fb[0], ds, reason, 0), now)
+
+    def _publish(self, seq: int, now: int, fb: tuple, reason: Any) -> None:
+        self.sampled_at[seq] = now
+        at = self.e.uplink.submit(now, self.e.state_bytes)
+        if at is not None:
+            self.in_flight.push(at, (seq, now, fb, reason))
+
+    def take_downlink(self, now: int) -> None:
+        for payload in self.e.downlink_due(self.pending_down, now):
+            self.e.inner.hold(payload.deflection_m, payload.sliding)
+            if self.edge is not None:
+                self.edge.answered(payload.state_seq, now, self.sampled_at.get(payload.state_seq, now))
+
+    # ---- controller ---------------------------------------------------------------------------------------------
+    def controller(self, now: int) -> bool:
+        """Answer the states released by `now`; False when the controller has finished its cycles."""
+        e = self.e
+        for seq, sample_ns, fb, edge_reason in self.in_flight.pop_due(now):
+            if seq <= self.newest:                     # released after a newer one: the controller ignores it
+                continue
+            self.newest = seq
+            e.rec.state(seq, sample_ns, fb, now)
+            if self.t0_ns is None:
+                self.t0_ns = sample_ns + e.lead_in_ns
+                self.lead = e.lead_in(fb) if e.lead_in_ns else None
+            t_ns = sample_ns - self.t0_ns
+            if t_ns > e.duration_ns:
+                return False
+            ds = self._desired(t_ns)
+            sp = self._answer(seq, sample_ns, fb, now, t_ns, ds, edge_reason)
+            if sp is not None:
+                self.setpoint_seq += 1
+                payload = SetpointPayload(self.setpoint_seq, now, seq, sp.deflection_m, sp.sliding, sp.reason)
+                e.rec.setpoint(payload, now)
+                at = e.downlink.submit(now, e.setpoint_bytes)
+                if at is not None:
+                    self.pending_down.push(at, payload)
+                if e.predictor is not None:
+                    e.predictor.sent(e.predictor.apply_time_ns(now), sp.deflection_m, sp.sliding)
+            if self.edge is None:
+                e.rec.tracking(e.tracking_record(t_ns, seq, fb[0], ds, sp.reason if sp else None,
+                                                 self.setpoint_seq if sp else 0), now)
+        return True
+
+    def _desired(self, t_ns: int) -> Any:
+        return self.lead.sample(t_ns * 1e-9) if t_ns < 0 and self.lead else self.e.traj.sample(t_ns * 1e-9)
+
+    def _answer(self, seq: int, sample_ns: int, fb: tuple, now: int, t_ns: int, ds: Any,
+                edge_reason: Any) -> Setpoint | None:
+        e = self.e
+        js, t_eval, ds_eval = JointState(fb[0], fb[1]), t_ns, ds
+        if e.predictor is not None:
+            e.predictor.observe_uplink(now - sample_ns)
+            apply_ns = e.predictor.apply_time_ns(now)
+            js = e.predictor.predict(fb, sample_ns, apply_ns)
+            t_eval = apply_ns - self.t0_ns
+            ds_eval = self._desired(t_eval)
+        if self.edge is None:
+            return e.outer.step(t_eval, seq, js, ds_eval)
+        vx, s = smc_deflection(js, ds_eval, e.params, e.c, e.rho, e.boundary_layer)
+        return Setpoint(vx, s, edge_reason, seq, t_eval)
+
+    def next_k(self, k: int) -> int:
+        """The next sample after k at which something happens."""
+        e = self.e
+        if self.edge is not None and self.o.edge_check == "sample":
+            return k + 1
+        nxt = min((k // e.outer_every + 1) * e.outer_every, e.n_max)
+        for due in (self.in_flight.next_due_ns(), self.pending_down.next_due_ns()):
+            if due is not None and due < nxt * e.period_ns:
+                nxt = max(k + 1, -(-due // e.period_ns))
+        return nxt
