@@ -27,7 +27,10 @@ METHODS: list[tuple[str, str, EngineOptions, int]] = [
     ("ET paper", "et", EngineOptions(), 10), ("ET ctrl pred", "et", PREDICT, 10),
     ("ET edge", "et", EngineOptions(placement="edge"), 10),
     ("ET edge pred", "et", EngineOptions(placement="edge", compensation="predict"), 10),
-    ("ET edge1k pred", "et", EngineOptions(placement="edge", compensation="predict", edge_check="sample"), 10)]
+    ("ET edge1k pred", "et", EngineOptions(placement="edge", compensation="predict", edge_check="sample"), 10),
+    ("ET edge1k model", "et", EngineOptions(placement="edge", compensation="predict", edge_check="sample",
+                                            edge_model=True), 10),
+    ("ET edge model", "et", EngineOptions(placement="edge", compensation="predict", edge_model=True), 10)]
 
 
 def run(link: str, mode: str, opts: EngineOptions, period_ms: int) -> tuple[int, float, dict[str, Any]]:
@@ -43,10 +46,12 @@ def run(link: str, mode: str, opts: EngineOptions, period_ms: int) -> tuple[int,
     return t["uplink_msgs"] + t["downlink_msgs"], max(s["tracking"]["max_abs_error_rad"]), t
 
 
-def main(links: list[str]) -> None:
+def main(links: list[str], only: str = "") -> None:
     for link in links:
         tt_total = None
         for name, mode, opts, period_ms in METHODS:
+            if only and name != "TT 10ms" and only not in name:
+                continue
             t0 = time.perf_counter()
             total, err, t = run(link, mode, opts, period_ms)
             tt_total = tt_total or total
@@ -55,4 +60,6 @@ def main(links: list[str]) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or list(LINKS))
+    args = sys.argv[1:]
+    only = args.pop(args.index("--only") + 1) if "--only" in args else ""
+    main([a for a in args if a != "--only"] or list(LINKS), only)

@@ -11,6 +11,7 @@ timeout follows the measured round trip: max(`min_timeout_ns`, 3 x the smoothed 
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from sea_hil.controller.smc import JointState, tracking_errors
@@ -48,8 +49,10 @@ class EdgeEventGenerator:
     def answer_timeout_ns(self) -> int:
         return self.min_timeout_ns if self.rtt_ns is None else max(self.min_timeout_ns, int(3.0 * self.rtt_ns))
 
-    def on_sample(self, sample_ns: int, js: JointState) -> tuple[int, DesiredSample, TriggerReason | None]:
-        """(controller time t, x_d(t), the reason to publish this sample or None)."""
+    def on_sample(self, sample_ns: int, js: JointState, ahead: Callable[[int], JointState] | None = None
+                  ) -> tuple[int, DesiredSample, TriggerReason | None]:
+        """(controller time t, x_d(t), the reason to publish this sample or None). `ahead(horizon_ns)`, if given,
+        is the edge's model of the state `horizon_ns` ahead (used for the lookahead instead of extrapolation)."""
         if self.t0_ns is None:
             self.t0_ns = sample_ns + self.lead_in_ns
             if self.lead_in_ns:
@@ -57,7 +60,7 @@ class EdgeEventGenerator:
                                       self.lead_in_ns * 1e-9)
         t_ns = sample_ns - self.t0_ns
         ds = self.desired(t_ns)
-        js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds)
+        js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds, ahead)
         eps = epsilon(tracking_errors(js_eval, ds_eval), ds_eval.theta_rad, ds_eval.omega_rad_s)
         if self.awaiting_seq is not None:
             if sample_ns - self.awaiting_since_ns >= self.answer_timeout_ns:
@@ -76,8 +79,8 @@ class EdgeEventGenerator:
             return False
         return _distance(trig._eps_i, eps) >= trig.threshold
 
-    def _ahead(self, sample_ns: int, js: JointState, t_ns: int, ds: DesiredSample
-               ) -> tuple[JointState, int, DesiredSample]:
+    def _ahead(self, sample_ns: int, js: JointState, t_ns: int, ds: DesiredSample,
+               model: Callable[[int], JointState] | None) -> tuple[JointState, int, DesiredSample]:
         """The state one smoothed round trip ahead (when the answer to an event now would act), extrapolated with the
         measured velocity and a smoothed acceleration (finite differences of the 1 kHz or outer samples)."""
         if self._prev is not None and sample_ns > self._prev[0]:
@@ -87,10 +90,12 @@ class EdgeEventGenerator:
         self._prev = (sample_ns, js.omega_rad_s)
         if not self.lookahead or not self.rtt_ns:
             return js, t_ns, ds
+        t_eval = t_ns + int(self.rtt_ns)
+        if model is not None:
+            return model(int(self.rtt_ns)), t_eval, self.desired(t_eval)
         h = self.rtt_ns * 1e-9
         th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha))
         om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha))
-        t_eval = t_ns + int(self.rtt_ns)
         return JointState(th, om), t_eval, self.desired(t_eval)
 
     def sent(self, seq: int, sample_ns: int) -> None:

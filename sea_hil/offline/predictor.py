@@ -49,7 +49,18 @@ class Predictor:
         if len(self.schedule) > 64:
             del self.schedule[:-64]
 
-    def predict(self, fb: tuple[tuple[float, float], ...], sample_ns: int, until_ns: int) -> JointState:
+    def predict_held(self, fb: tuple[tuple[float, float], ...], sample_ns: int, until_ns: int,
+                     hold: tuple[tuple[float, float], tuple[float, float]] | None) -> JointState:
+        """The edge's view: the state at `until_ns` with the setpoint it holds now kept (None: hold measured)."""
+        saved = self.schedule
+        self.schedule = [] if hold is None else [(sample_ns, hold[0], hold[1])]
+        try:
+            return self.predict(fb, sample_ns, until_ns, count=False)
+        finally:
+            self.schedule = saved
+
+    def predict(self, fb: tuple[tuple[float, float], ...], sample_ns: int, until_ns: int,
+                count: bool = True) -> JointState:
         """The joint state at `until_ns` from the feedback `fb` (theta, omega, delta, nut velocity) of `sample_ns`."""
         (q1, q2), (w1, w2), (d1, d2), (nv1, nv2) = fb
         p = self.params
@@ -58,7 +69,7 @@ class Predictor:
         k, k_end = sample_ns // self.period_ns, until_ns // self.period_ns
         if k_end <= k:
             return JointState((q1, q2), (w1, w2))
-        self.predictions += 1
+        self.predictions += count
         held = None
         for apply_ns, vx, s in self.schedule:
             if apply_ns <= sample_ns:

@@ -26,6 +26,7 @@ class EngineOptions:
     placement: str = "controller"       # controller | edge
     compensation: str = "none"          # none | predict
     edge_check: str = "outer"           # outer | sample: how often the edge evaluates its trigger
+    edge_model: bool = False            # the edge's lookahead runs the nominal model (else: extrapolation)
 
     def __post_init__(self) -> None:
         if self.placement not in ("controller", "edge") or self.compensation not in ("none", "predict") \
@@ -60,7 +61,12 @@ class SessionLoop:
         checked = self.o.edge_check == "sample" or k % e.outer_every == 0
         if not checked:
             return
-        t_ns, ds, reason = self.edge.on_sample(now, JointState(fb[0], fb[1]))
+        ahead = None
+        if self.o.edge_model and self.e.predictor is not None:
+            pred, held = self.e.predictor, self.e.inner
+            hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
+            ahead = lambda h_ns: pred.predict_held(fb, now, now + h_ns, hold)  # noqa: E731
+        t_ns, ds, reason = self.edge.on_sample(now, JointState(fb[0], fb[1]), ahead)
         seq = k + 1
         if reason is not None:
             self.edge.sent(seq, now)
