@@ -195,7 +195,7 @@ def test_idle_child_runs_on_idle_cpu_time_only(tmp_path: Path) -> None:
     assert out.stdout.strip() == "True"
     rec = RecorderProcess(tmp_path / "idle.mcap", load_config().record, idle=True)
     try:
-        assert rec._proc.args[-1] == "1"                     # the flag reaches the child
+        assert rec._proc.args[-2:] == ["1", "wall"]          # the flags reach the child
         rec.record("/stats", 1, 1, {"final": True})
     finally:
         rec.close()

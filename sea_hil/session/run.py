@@ -82,11 +82,12 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
-    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep)
+    time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
+    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})
-    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002)
+    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002, time_base=time_base)
     plant = PlantNode(cfg, buses[0], (opts.node_id,), lockstep=opts.lockstep)
     edge = EdgeNode(cfg, buses[1], session, opts.node_id, inner=opts.inner, lockstep=opts.lockstep)
     threads = [threading.Thread(target=plant.run, name="plant", daemon=True),
@@ -122,7 +123,7 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
         for t in threads:
             t.join(timeout=10)
         recorder.stop()
-        now_ns = time.time_ns()
+        now_ns = edge._sample_t_ns if opts.lockstep else time.time_ns()
         rec.record("/stats", now_ns, now_ns, {**edge.stats_dict(), "final": True})
         rec.add_metadata("sea-hil.edge", {k: str(v) for k, v in edge.stats_dict().items()})
         rec.close(final_stats={"plant_overruns": plant.stats.overruns, "plant_ticks": plant.stats.ticks,
