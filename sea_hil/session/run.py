@@ -26,6 +26,7 @@ from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
 from sea_hil.session.processes import end_process
+from sea_hil.report.console import ProgressSample
 from sea_hil.report.writer import write_report_figures
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
@@ -110,10 +111,8 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
             if opts.progress:
                 c = edge.counters
                 lat = c.latency.to_dict()
-                sim_s = edge._sample_t_ns * 1e-9
-                log(f"[{now:6.1f} s] sim {sim_s:6.2f} s  cycle {min(int(sim_s // period_s) + 1, opts.cycles)}/"
-                    f"{opts.cycles}  setpoints {c.setpoints + c.voltages}  states {c.states_sent}  "
-                    f"latency p50 {lat['p50'] * 1e6 if lat['count'] else 0:.0f} us")
+                log(ProgressSample(now, edge._sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
+                                   c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
         if proc.returncode != 0:
             raise SeaHilError(f"controller process exited with status {proc.returncode}")
     finally:
