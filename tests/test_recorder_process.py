@@ -41,8 +41,9 @@ def _in_process(path: Path, frames: list[RawFrame]) -> None:
     codec = SeaCodec()
     with SessionRecorder.from_config(path, CFG) as rec:
         for f in frames:
+            seq = getattr(can_records(codec, f)[2], "seq", 0)
             for topic, payload in can_records(codec, f)[0]:
-                rec.record(topic, f.t_ns, f.t_ns, payload)
+                rec.record(topic, f.t_ns, f.t_ns, payload, seq)
 
 
 def test_child_writes_exactly_what_the_in_process_recorder_writes(tmp_path: Path) -> None:
