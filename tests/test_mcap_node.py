@@ -35,7 +35,8 @@ def checked(tmp_path_factory):
 
 
 @pytest.mark.parametrize("topic", [pytest.param(t, marks=pytest.mark.xfail(
-    reason="issue 18: /stats `final: true` fails the /stats schema; fixed with the /stats schema work", strict=False))
+    reason="issue 18: /stats `final: true` fails the /stats schema (the /stats schema work fixes it; then drop this "
+           "mark)", strict=True))
     if t == "/stats" else t for t in TOPICS])
 def test_every_message_decodes_and_validates_in_log_time_order(checked, topic):
     report = checked[0]

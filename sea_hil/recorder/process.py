@@ -5,7 +5,8 @@ recorder interface the recorder node and `sea-hil run` use (`submit`, `record`, 
 `write_session_header`, `close`) plus `submit_can(raw_frame)`: raw frames are shipped as they are and decoded in
 the child (`sea_hil.recorder.can_tap.can_records`, exactly what the in-process recorder writes). Operations are
 batched (`batch_ops`) into length-prefixed pickles on the child's stdin (a private pipe between two processes of
-the same program). A child that dies is reported by `close` (`RecordingError`); operations that could not be
+the same program). `time_base` (`sea_hil.recorder.clock`) is the log-time clock of the child's CAN tap. A child that
+dies is reported by `close` (`RecordingError`); operations that could not be
 delivered are counted in `dropped`, never raised into the submitting node.
 """
 from __future__ import annotations
