@@ -41,8 +41,9 @@ def _in_process(path: Path, frames: list[RawFrame]) -> None:
     codec = SeaCodec()
     with SessionRecorder.from_config(path, CFG) as rec:
         for f in frames:
+            seq = getattr(can_records(codec, f)[2], "seq", 0)
             for topic, payload in can_records(codec, f)[0]:
-                rec.record(topic, f.t_ns, f.t_ns, payload)
+                rec.record(topic, f.t_ns, f.t_ns, payload, seq)
 
 
 def test_child_writes_exactly_what_the_in_process_recorder_writes(tmp_path: Path) -> None:
@@ -195,7 +196,7 @@ def test_idle_child_runs_on_idle_cpu_time_only(tmp_path: Path) -> None:
     assert out.stdout.strip() == "True"
     rec = RecorderProcess(tmp_path / "idle.mcap", load_config().record, idle=True)
     try:
-        assert rec._proc.args[-1] == "1"                     # the flag reaches the child
+        assert rec._proc.args[-2:] == ["1", "wall"]          # the flags reach the child
         rec.record("/stats", 1, 1, {"final": True})
     finally:
         rec.close()

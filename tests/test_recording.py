@@ -19,6 +19,7 @@ from sea_hil.errors import RecordingError
 from sea_hil.recorder.writer import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, SessionRecorder,
                                 install_finalizer, read_session)
 from sea_hil.recorder.schemas import TOPICS, schema_for
+from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
 
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20.0
@@ -36,6 +37,9 @@ SAMPLES = {
                           "error_norm": 0.21, "threshold": 0.2},
     "/stats": {"t_ns": 8, "stream_state_tx_msgs_per_s": 100.0, "can_load_pct_window": 13.5},
     "/tracking": {"t_ns": 9, "theta1_d_rad": 0.3, "theta1_rad": 0.29, "e1_rad": 0.01, "e2_rad": -0.02},
+    "/log/events": log_message(10, LogLevel.INFO, "controller", "trigger event ERROR_BOUND"),
+    "/log/faults": log_message(10, LogLevel.ERROR, "driver1", "driver 1: FAULT"),
+    "/joint_states": joint_states(11, (0.1, 0.2), (0.0, 1.0), (1e-4, -1e-4)),
 }
 
 

@@ -82,10 +82,10 @@ def test_simulate_with_a_csv_trajectory(tmp_path: Path, capsys: pytest.CaptureFi
     swing = [0.2 * math.sin(math.pi * k * 0.1) for k in range(21)]
     rows = [f"{k * 0.1:.1f},{0.05 + a:.9f},{0.55 + a:.9f}" for k, a in enumerate(swing)]
     csv.write_text("t,theta1,theta2\n" + "\n".join(rows) + "\n", encoding="utf-8")
-    s = _run(tmp_path / "out", "--controller", "et", "--trajectory", str(csv))
+    s = _run(tmp_path / "out", "--controller", "et", "--trajectory", str(csv), "--json")
     assert s["duration_s"] == pytest.approx(2.0)
     assert max(s["tracking"]["max_abs_error_rad"]) < 0.1
-    assert json.loads(capsys.readouterr().out) == s  # stdout is the same summary
+    assert json.loads(capsys.readouterr().out) == s  # --json: stdout is the same summary
 
 
 def test_bad_trajectory_exits_2_with_one_line_error(tmp_path: Path) -> None:

@@ -7,6 +7,7 @@ import threading
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.recorder.clock import TIME_BASES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -14,6 +15,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", type=Path, required=True, metavar="FILE.mcap")
     p.add_argument("--can", metavar="SPEC", help="also record this CAN bus")
     p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (default: SIGINT/SIGTERM)")
+    p.add_argument("--time-base", choices=TIME_BASES, default="wall",
+                   help="MCAP log_time clock: wall (default) or the drive's sample time (for lockstep sessions)")
     add_zenoh_args(p)
     add_config_args(p)
     p.set_defaults(func=_main)
@@ -33,7 +36,7 @@ def _main(args: argparse.Namespace) -> int:
     bus = open_bus(args.can) if args.can else None
     rec = SessionRecorder.from_config(args.out, cfg.record)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
-    node = RecorderNode(rec, session, cfg.zenoh.prefix, bus)
+    node = RecorderNode(rec, session, cfg.zenoh.prefix, bus, time_base=args.time_base)
     node.start()
     try:
         stop.wait(args.duration)

@@ -26,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint this process listens on (default: a free loopback port)")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_link_args(p)
     add_config_args(p)
     p.set_defaults(func=_main)
@@ -40,6 +41,11 @@ def _main(args: argparse.Namespace) -> int:
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed)
-    summary = run_session(cfg, opts, log=lambda s: print(s, file=sys.stderr, flush=True))
-    print_summary(summary)
+    from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
+    with SessionProgress(sys.stderr) as progress:
+        summary = run_session(cfg, opts, log=progress)
+    if args.json:
+        print_summary(summary)
+    else:
+        print_end_of_run(summary, files_in(args.out))
     return 0

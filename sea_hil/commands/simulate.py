@@ -19,6 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quantise", action="store_true",
                    help="round measurements and voltages to their CAN frame resolutions (docs/can-protocol.md)")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
+    p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_config_args(p)
     p.set_defaults(func=_main)
 
@@ -34,5 +35,10 @@ def _main(args: argparse.Namespace) -> int:
         print(table)
     else:
         summary = run_simulation(cfg, args.controller, args.out, args.cycles, quantise=args.quantise)
-        print(json.dumps(summary, indent=2, sort_keys=True))
+        if args.json:
+            print(json.dumps(summary, indent=2, sort_keys=True))
+        else:
+            from sea_hil.report.console import files_in, print_end_of_run
+            print_end_of_run(summary, files_in(args.out), command="simulate",
+                             tt_msgs=round(summary["duration_s"] / cfg.controller.sample_period_s))
     return 0

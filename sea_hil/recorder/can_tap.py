@@ -2,6 +2,11 @@
 `/can/feedback` or `/can/command` message. Pure (no I/O); used by the in-process recorder node and the recorder
 process alike (through `CanTap`, which also keeps the CAN counters), so both write identical files.
 
+Time (`sea_hil.recorder.clock`): with `time_base="wall"` a frame is logged at its bus timestamp, with "sample" at the
+drive's sample time (its node's latest FEEDBACK_ANGLE `t_us`, unwrapped). The MCAP `sequence` of a frame's messages
+is the frame's own 8-bit `seq` (0 for frames without one). Faults go to `/log/faults` (`foxglove.Log`) as well: a
+driver's state or error flags changing (HEARTBEAT), a frame the DBC refuses, frames missed.
+
 Missed frames: feedback and voltage frames carry an 8-bit `seq` that steps by one per sample, and CAN keeps the
 order of one id's frames, so a forward step of n > 1 on one id means n - 1 frames of that id never reached the
 recorder (`SeqGapCounter`). A repeat (step 0: a lockstep re-send) is not a gap. Limits: a loss of a multiple of 256
@@ -16,8 +21,20 @@ import can
 
 from sea_hil.protocol.can_assembly import seq_gap
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import CMD_BITS, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd
+from sea_hil.protocol.can_frames import (CMD_BITS, DriverState, ErrorFlags, FeedbackAngle, FeedbackJoint1,
+                                         FeedbackJoint2, Heartbeat, VoltageCmd)
 from sea_hil.errors import MalformedFrame
+from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
+from sea_hil.recorder.well_known import LogLevel, log_message
+
+
+class Record(NamedTuple):
+    """One message to write: what the taps hand to `SessionRecorder.submit(*record)`."""
+    topic: str
+    log_time_ns: int
+    publish_time_ns: int
+    payload: dict[str, Any]
+    sequence: int = 0
 
 
 class RawFrame(NamedTuple):
@@ -37,16 +54,17 @@ class RawFrame(NamedTuple):
                    bool(msg.is_error_frame), bool(msg.is_remote_frame), bool(msg.is_fd))
 
 
-def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str, Any]]], bool]:
-    """((topic, payload) messages to record, rejected?) for one frame; rejected frames keep their `/can/raw`."""
+def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str, Any]]], bool, Any]:
+    """((topic, payload) messages to record, rejected?, the decoded frame or the DBC's error) for one frame;
+    rejected frames keep their `/can/raw`."""
     out: list[tuple[str, dict[str, Any]]] = [
         ("/can/raw", {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
                       "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS})]
     try:
         d = codec.decode_raw(f.can_id, f.data, f.dlc, is_extended=f.is_extended, is_error=f.is_error,
                              is_remote=f.is_remote, is_fd=f.is_fd)
-    except MalformedFrame:
-        return out, True
+    except MalformedFrame as err:
+        return out, True, err
     if isinstance(d, VoltageCmd):
         out.append(("/can/command", {"node_id": d.node_id, "seq": d.seq, "kind": "voltage",
                                      "u1_v": d.voltage_v[0], "u2_v": d.voltage_v[1]}))
@@ -55,9 +73,9 @@ def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str,
                                       "theta1_rad": d.theta_rad[0], "theta2_rad": d.theta_rad[1]}))
     elif isinstance(d, (FeedbackJoint1, FeedbackJoint2)):
         j = 1 if isinstance(d, FeedbackJoint1) else 2
-        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq,
-                                      f"omega{j}_rad_s": d.omega_rad_s, f"delta{j}_m": d.delta_m}))
-    return out, False
+        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, f"omega{j}_rad_s": d.omega_rad_s,
+                                      f"delta{j}_m": d.delta_m, f"nut_vel{j}_m_s": d.nut_vel_m_s}))
+    return out, False, d
 
 
 class SeqGapCounter:
@@ -76,22 +94,50 @@ class SeqGapCounter:
 
 
 class CanTap:
-    """`can_records` plus the recorder's CAN counters: frames seen, rejected by the DBC, missed (seq gaps)."""
+    """`can_records` plus the recorder's CAN counters (frames seen, rejected by the DBC, missed from seq gaps), the
+    log time of each message (`time_base`) and the `/log` messages of faults."""
 
-    def __init__(self, codec: SeaCodec | None = None) -> None:
+    def __init__(self, codec: SeaCodec | None = None, time_base: TimeBase = "wall") -> None:
         self.codec = codec or SeaCodec()
+        self.time_base = check_time_base(time_base)
+        self.clock = SampleClock()
         self.gaps = SeqGapCounter()
         self.frames = self.rejected = 0
+        self._driver: dict[int, tuple[DriverState, ErrorFlags]] = {}
 
-    def records(self, f: RawFrame) -> list[tuple[str, dict[str, Any]]]:
-        """The (topic, payload) messages of one frame, counted."""
-        out, rejected = can_records(self.codec, f)
+    def records(self, f: RawFrame) -> list[Record]:
+        """The messages of one frame, counted and timed."""
+        out, rejected, decoded = can_records(self.codec, f)
         self.frames += 1
         self.rejected += rejected
-        seq = out[1][1].get("seq") if len(out) > 1 else None   # the decoded record of a seq-carrying frame
-        if isinstance(seq, int):
-            self.gaps.feed(f.can_id, seq)
-        return out
+        if isinstance(decoded, FeedbackAngle):
+            self.clock.on_feedback(decoded.node_id, decoded.t_us)
+        t_ns = f.t_ns if self.time_base == "wall" else self.clock.node_ns(f.can_id >> CMD_BITS)
+        seq = getattr(decoded, "seq", 0)
+        recs = [Record(topic, t_ns, t_ns, payload, seq) for topic, payload in out]
+        logs: list[tuple[LogLevel, str, str]] = []
+        if rejected:
+            logs.append((LogLevel.WARNING, "recorder", f"CAN frame 0x{f.can_id:03X} rejected by the DBC: {decoded}"))
+        elif len(out) > 1 and isinstance(out[1][1].get("seq"), int):   # the decoded record of a seq-carrying frame
+            missed = self.gaps.feed(f.can_id, out[1][1]["seq"])
+            if missed:
+                logs.append((LogLevel.WARNING, "recorder", f"CAN id 0x{f.can_id:03X}: {missed} frame(s) missed"))
+        if isinstance(decoded, Heartbeat):
+            logs.extend(self._driver_change(decoded))
+        recs.extend(Record("/log/faults", t_ns, t_ns, log_message(t_ns, lv, who, text), seq) for lv, who, text in logs)
+        return recs
+
+    def _driver_change(self, hb: Heartbeat) -> list[tuple[LogLevel, str, str]]:
+        """A log line when a driver's state or error flags differ from its previous heartbeat's."""
+        now, before = (hb.state, hb.flags), self._driver.get(hb.node_id)
+        self._driver[hb.node_id] = now
+        if now == before:
+            return []
+        level = (LogLevel.ERROR if hb.state in (DriverState.FAULT, DriverState.ESTOP)
+                 else LogLevel.WARNING if hb.flags else LogLevel.INFO)
+        flags = "|".join(f.name or "" for f in ErrorFlags if f & hb.flags) or "none"
+        return [(level, f"driver{hb.node_id}", f"driver {hb.node_id}: {hb.state.name}, error flags {flags}, "
+                                               f"rejected frames {hb.rejected_frames}, overruns {hb.overruns}")]
 
     def counters(self) -> dict[str, int]:
         return {"can_frames": self.frames, "can_rejected": self.rejected, "can_frames_missed": self.gaps.missed}

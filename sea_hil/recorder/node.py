@@ -12,7 +12,6 @@ large receive buffer (`enlarge_rx_buffer`) and the frames that were missed anywa
 """
 from __future__ import annotations
 
-import json
 import logging
 import socket
 import threading
@@ -24,10 +23,14 @@ import zenoh
 
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.keys import everything
-from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload)
+from sea_hil.protocol.payloads import PayloadCounters
+from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
+
+__all__ = ["RecorderNode", "enlarge_rx_buffer", "zenoh_record"]
 
 log = logging.getLogger("sea_hil.record")
 SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it
@@ -54,49 +57,15 @@ def enlarge_rx_buffer(bus: can.BusABC, size_bytes: int = RX_BUFFER_BYTES) -> int
     return granted
 
 
-def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str, dict[str, Any]] | None:
-    """(topic, flat payload) for one Zenoh message, or None if it is not recordable."""
-    channel = key.rsplit("/", 1)[-1]
-    if channel in ("event", "stats"):
-        try:
-            obj = json.loads(data)
-        except (ValueError, UnicodeDecodeError):
-            payloads.rejected["json"] += 1
-            return None
-        if not isinstance(obj, dict):
-            return None
-        if channel == "stats":
-            return "/stats", {k: v for k, v in obj.items() if isinstance(v, (int, float, bool))}
-        flat = {k: v for k, v in obj.items() if isinstance(v, (int, float, str, bool)) or v is None}
-        flat["key"] = key
-        return "/tracking", flat
-    p = payloads.try_decode(data)
-    if p is None:
-        return None
-    base: dict[str, Any] = {"key": key, "seq": p.seq, "sent_t_ns": p.t_ns, "payload_bytes": len(data)}
-    if isinstance(p, StatePayload):
-        return "/zenoh/state", {**base, "sample_t_ns": p.sample_t_ns, "theta1_rad": p.theta_rad[0],
-                                "theta2_rad": p.theta_rad[1], "omega1_rad_s": p.omega_rad_s[0],
-                                "omega2_rad_s": p.omega_rad_s[1], "delta1_m": p.delta_m[0], "delta2_m": p.delta_m[1]}
-    if isinstance(p, SetpointPayload):
-        return "/zenoh/setpoint", {**base, "state_seq": p.state_seq, "delta1_ref_m": p.deflection_m[0],
-                                   "delta2_ref_m": p.deflection_m[1], "s1": p.sliding[0], "s2": p.sliding[1],
-                                   "reason": p.reason.name}
-    if isinstance(p, VoltagePayload):
-        return "/zenoh/voltage", {**base, "state_seq": p.state_seq, "u1_v": p.voltage_v[0], "u2_v": p.voltage_v[1]}
-    if isinstance(p, AckPayload):
-        return None   # lockstep control plane
-    return None
-
-
 class RecorderNode:
     def __init__(self, recorder: SessionRecorder | RecorderProcess, session: zenoh.Session | None, prefix: str,
                  bus: can.BusABC | None = None, *, tap_batch_s: float = 0.0,
-                 rx_buffer_bytes: int = RX_BUFFER_BYTES) -> None:
+                 rx_buffer_bytes: int = RX_BUFFER_BYTES, time_base: TimeBase = "wall") -> None:
         self.rec = recorder
         self.tap_batch_s = tap_batch_s
         self.payloads = PayloadCounters()
-        self.tap = CanTap(SeaCodec())
+        self.tap = CanTap(SeaCodec(), time_base)   # with a RecorderProcess, the child's tap (same time base) decodes
+        self.ztap = ZenohTap(self.payloads, time_base)
         self.stop_event = threading.Event()
         self.can_forwarded = 0   # frames shipped raw to a RecorderProcess (which counts and decodes them)
         self.can_tap_unfinished = False   # stop() gave up on a CAN backlog (frames not seen, not counted)
@@ -120,12 +89,10 @@ class RecorderNode:
                 if self.stop_event.wait(max(0.001, self.tap_batch_s)):   # idle: wait, then drain the batch
                     return
                 continue
-            now = time.time_ns()
-            out = zenoh_record(str(s.key_expr), s.payload.to_bytes(), self.payloads)
-            if out is not None:
-                self.zenoh_msgs += 1
-                sent = out[1].get("sent_t_ns", now)
-                self.rec.submit(out[0], now, sent if isinstance(sent, int) else now, out[1])
+            recs = self.ztap.records(str(s.key_expr), s.payload.to_bytes(), time.time_ns())
+            self.zenoh_msgs += bool(recs)
+            for r in recs:
+                self.rec.submit(*r)
 
     def _can_loop(self) -> None:
         """Wait for a frame, take everything queued, then (`tap_batch_s` > 0) pause: the tap wakes once per batch
@@ -154,8 +121,8 @@ class RecorderNode:
             self.can_forwarded += 1
             self.rec.submit_can(frame)    # decoded (rejects and gaps counted) by the recorder process
             return
-        for topic, payload in self.tap.records(frame):
-            self.rec.submit(topic, frame.t_ns, frame.t_ns, payload)
+        for r in self.tap.records(frame):
+            self.rec.submit(*r)
 
     def stop(self, timeout_s: float = 10.0) -> None:
         """Stop the taps; the CAN tap first records what is still queued on its socket (up to `timeout_s`)."""

@@ -5,7 +5,8 @@ recorder interface the recorder node and `sea-hil run` use (`submit`, `record`, 
 `write_session_header`, `close`) plus `submit_can(raw_frame)`: raw frames are shipped as they are and decoded in
 the child (`sea_hil.recorder.can_tap.can_records`, exactly what the in-process recorder writes). Operations are
 batched (`batch_ops`) into length-prefixed pickles on the child's stdin (a private pipe between two processes of
-the same program). A child that dies is reported by `close` (`RecordingError`); operations that could not be
+the same program). `time_base` (`sea_hil.recorder.clock`) is the log-time clock of the child's CAN tap. A child that
+dies is reported by `close` (`RecordingError`); operations that could not be
 delivered are counted in `dropped`, never raised into the submitting node.
 """
 from __future__ import annotations
@@ -24,6 +25,7 @@ from sea_hil.config import RecordConfig, SeaHilConfig
 from sea_hil.errors import RecordingError
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.clock import TimeBase, check_time_base
 from sea_hil.recorder.meta import write_session_header
 from sea_hil.recorder.schemas import validate_payload
 
@@ -36,12 +38,14 @@ class RecorderProcess:
     """Parent-side proxy of a `SessionRecorder` running in a child process. Thread-safe."""
 
     def __init__(self, path: str | os.PathLike[str], cfg: RecordConfig, *, batch_ops: int = 512,
-                 close_timeout_s: float = 300.0, nice: int = 10, idle: bool = False) -> None:
+                 close_timeout_s: float = 300.0, nice: int = 10, idle: bool = False,
+                 time_base: TimeBase = "wall") -> None:
         self.path = os.fspath(path)
         self.batch_ops = batch_ops
         self.close_timeout_s = close_timeout_s
         self._proc = subprocess.Popen([sys.executable, "-m", "sea_hil.recorder.process", self.path,
-                                       cfg.model_dump_json(), str(nice), str(int(idle))], stdin=subprocess.PIPE)
+                                       cfg.model_dump_json(), str(nice), str(int(idle)), check_time_base(time_base)],
+                                      stdin=subprocess.PIPE)
         self._lock = threading.Lock()
         self._pending: list[tuple[Any, ...]] = []
         self._closed = False
@@ -52,13 +56,15 @@ class RecorderProcess:
         """Queue one raw frame (decoded and written by the child)."""
         self._put((CAN, frame))
 
-    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> bool:
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> bool:
         """Validate here (bad input fails at its source) and queue; False once the child is gone."""
         validate_payload(topic, payload)
-        return self._put((RECORD, topic, log_time_ns, publish_time_ns, dict(payload)))
+        return self._put((RECORD, topic, log_time_ns, publish_time_ns, dict(payload), sequence))
 
-    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> None:
-        self.submit(topic, log_time_ns, publish_time_ns, payload)
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> None:
+        self.submit(topic, log_time_ns, publish_time_ns, payload, sequence)
         self.flush()
 
     def add_metadata(self, name: str, data: Mapping[str, Any]) -> None:
@@ -139,8 +145,8 @@ def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]]) -> boo
         try:
             if kind == CAN:
                 frame: RawFrame = op[1]
-                for topic, payload in tap.records(frame):
-                    rec.record(topic, frame.t_ns, frame.t_ns, payload)
+                for r in tap.records(frame):
+                    rec.record(*r)
             elif kind == RECORD:
                 rec.record(*op[1:])
             elif kind == METADATA:
@@ -168,7 +174,8 @@ def _idle_policy() -> None:
         log.info("recorder process keeps the normal policy: %s", err)
 
 
-def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: bool = False) -> int:
+def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: bool = False,
+               time_base: TimeBase = "wall") -> int:
     """The child: apply batches from `stream` until CLOSE; end of stream without CLOSE still finalises the file.
     `nice` > 0 lowers its CPU priority: recording is background work that must not delay the nodes. `idle` (real-time
     sessions) also asks for Linux's SCHED_IDLE policy, so it runs only on otherwise idle CPU time: with nice 10 alone
@@ -180,7 +187,7 @@ def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: 
     if idle:
         _idle_policy()
     rec = SessionRecorder.from_config(path, RecordConfig.model_validate_json(cfg_json))
-    tap = CanTap()
+    tap = CanTap(time_base=time_base)
     while (head := _read_exact(stream, _LEN.size)) is not None:
         blob = _read_exact(stream, _LEN.unpack(head)[0])
         if blob is None:
@@ -194,4 +201,5 @@ def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: 
 
 if __name__ == "__main__":
     sys.exit(child_main(sys.argv[1], sys.argv[2], sys.stdin.buffer, int(sys.argv[3]) if len(sys.argv) > 3 else 0,
-                        len(sys.argv) > 4 and sys.argv[4] == "1"))
+                        len(sys.argv) > 4 and sys.argv[4] == "1",
+                        check_time_base(sys.argv[5]) if len(sys.argv) > 5 else "wall"))

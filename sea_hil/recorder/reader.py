@@ -17,6 +17,7 @@ class RecordedMessage(NamedTuple):
     log_time_ns: int
     publish_time_ns: int
     payload: dict[str, Any]
+    sequence: int = 0   # the sender's sequence number (MCAP `sequence`)
 
 
 @dataclass
@@ -65,7 +66,7 @@ def read_session(path: str | os.PathLike[str]) -> SessionData:
             if ch is None or not isinstance(payload, dict):
                 out.undecodable += 1
                 return
-            out.messages[ch.topic].append(RecordedMessage(rec.log_time, rec.publish_time, payload))
+            out.messages[ch.topic].append(RecordedMessage(rec.log_time, rec.publish_time, payload, rec.sequence))
         elif isinstance(rec, Metadata):
             out.metadata[rec.name] = dict(rec.metadata)
         elif isinstance(rec, Attachment):

@@ -1,8 +1,10 @@
 """JSON schemas (draft 2020-12, MCAP schema encoding "jsonschema") of the recorder's channels.
 
-Every message is one flat JSON object of scalars so Foxglove can plot each numeric field. Listed properties
-document the expected fields; further flat scalar fields are allowed (`additionalProperties` is a scalar).
-`validate_payload` is the cheap check the recorder applies (required keys present, every value a scalar).
+Every sea-hil channel message is one flat JSON object of scalars so Foxglove can plot each numeric field. Listed
+properties document the expected fields; further flat scalar fields are allowed (`additionalProperties` is a
+scalar). The Foxglove well-known channels (`/log`, `/joint_states`) keep Foxglove's own nested schemas
+(`sea_hil.recorder.well_known`). `validate_payload` is the cheap check the recorder applies (required keys present,
+every value a scalar; the well-known channels: their structure).
 """
 from __future__ import annotations
 
@@ -12,6 +14,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from sea_hil.errors import RecordingError
+from sea_hil.recorder.well_known import WELL_KNOWN, validate_well_known
 
 SCALAR_TYPES = ["number", "integer", "boolean", "string", "null"]
 _NUM = {"type": ["number", "null"]}  # null: a non-finite float is written as null
@@ -19,7 +22,7 @@ _INT = {"type": "integer"}
 _STR = {"type": "string"}
 
 _JOINT_STATE = {"theta1_rad": _NUM, "theta2_rad": _NUM, "omega1_rad_s": _NUM, "omega2_rad_s": _NUM,
-                "delta1_m": _NUM, "delta2_m": _NUM}
+                "delta1_m": _NUM, "delta2_m": _NUM, "nut_vel1_m_s": _NUM, "nut_vel2_m_s": _NUM}
 _VOLTS = {"u1_v": _NUM, "u2_v": _NUM}
 _DEFLECTION_REF = {"delta1_ref_m": _NUM, "delta2_ref_m": _NUM}
 
@@ -30,13 +33,14 @@ _CHANNELS: dict[str, tuple[str, str, dict[str, Any], list[str]]] = {
                   "data_hex": _STR, "direction": {"enum": ["rx", "tx"]}, "node_id": _INT},
                  ["can_id", "dlc", "data_hex", "direction"]),
     "/can/feedback": ("sea_hil.CanFeedback", "Decoded driver feedback, one message per node and frame set.",
-                      {"t_ns": _INT, "node_id": _INT, "seq": _INT, **_JOINT_STATE, "r1_m": _NUM, "r2_m": _NUM,
-                       "status": _INT}, ["node_id"]),
+                      {"t_ns": _INT, "node_id": _INT, "seq": _INT, "t_us": _INT, **_JOINT_STATE, "r1_m": _NUM,
+                       "r2_m": _NUM, "status": _INT}, ["node_id"]),
     "/can/command": ("sea_hil.CanCommand", "Decoded voltage / deflection commands sent to a node.",
                      {"t_ns": _INT, "node_id": _INT, "seq": _INT, "kind": _STR, **_VOLTS, **_DEFLECTION_REF},
                      ["node_id"]),
     "/zenoh/state": ("sea_hil.ZenohState", "Joint state published by the edge node over Zenoh.",
-                     {"t_ns": _INT, "seq": _INT, **_JOINT_STATE, "latency_s": _NUM}, []),
+                     {"t_ns": _INT, "seq": _INT, "sent_t_ns": _INT, "sample_t_ns": _INT, **_JOINT_STATE,
+                      "latency_s": _NUM}, []),
     "/zenoh/setpoint": ("sea_hil.ZenohSetpoint", "Event-triggered setpoint from the remote controller.",
                         {"t_ns": _INT, "seq": _INT, "event_index": _INT, **_DEFLECTION_REF,
                          "tau1_nm": _NUM, "tau2_nm": _NUM, "theta1_d_rad": _NUM, "theta2_d_rad": _NUM,
@@ -54,11 +58,13 @@ _CHANNELS: dict[str, tuple[str, str, dict[str, Any], list[str]]] = {
 }
 _NUMERIC_ONLY = {"/stats"}
 
-TOPICS: tuple[str, ...] = tuple(_CHANNELS)
+TOPICS: tuple[str, ...] = (*_CHANNELS, *WELL_KNOWN)
 
 
 def schema_for(topic: str) -> dict[str, Any]:
     """The JSON schema (as a dict) of `topic`; `RecordingError` for an unknown topic."""
+    if topic in WELL_KNOWN:
+        return {"$schema": "https://json-schema.org/draft/2020-12/schema", **WELL_KNOWN[topic][1]}
     try:
         title, desc, props, required = _CHANNELS[topic]
     except KeyError:
@@ -69,7 +75,7 @@ def schema_for(topic: str) -> dict[str, Any]:
 
 
 def schema_name(topic: str) -> str:
-    return _CHANNELS[topic][0]
+    return WELL_KNOWN[topic][0] if topic in WELL_KNOWN else _CHANNELS[topic][0]
 
 
 def schema_bytes(topic: str) -> bytes:
@@ -78,10 +84,13 @@ def schema_bytes(topic: str) -> bytes:
 
 def validate_payload(topic: str, payload: Mapping[str, Any]) -> None:
     """Cheap structural check: known topic, a mapping of str keys to scalars, required keys present."""
-    if topic not in _CHANNELS:
+    if topic not in _CHANNELS and topic not in WELL_KNOWN:
         schema_for(topic)  # raises with the list of topics
     if not isinstance(payload, Mapping):
         raise RecordingError(f"{topic}: payload must be a mapping, got {type(payload).__name__}")
+    if topic in WELL_KNOWN:
+        validate_well_known(topic, payload)
+        return
     missing = [k for k in _CHANNELS[topic][3] if k not in payload]
     if missing:
         raise RecordingError(f"{topic}: missing required field(s) {missing}")

@@ -75,9 +75,12 @@ class SessionRecorder:
         self._writer = Writer(self._sink, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
         self._writer.start(profile="", library="sea-hil")
         self._channels: dict[str, int] = {}
+        schema_ids: dict[tuple[str, bytes], int] = {}   # one schema record per distinct schema
         for topic in TOPICS:
-            sid = self._writer.register_schema(schema_name(topic), "jsonschema", schema_bytes(topic))
-            self._channels[topic] = self._writer.register_channel(topic, "json", sid)
+            key = (schema_name(topic), schema_bytes(topic))
+            if key not in schema_ids:
+                schema_ids[key] = self._writer.register_schema(key[0], "jsonschema", key[1])
+            self._channels[topic] = self._writer.register_channel(topic, "json", schema_ids[key])
         self._lock = threading.Lock()
         self._count_lock = threading.Lock()
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_limit)
@@ -119,18 +122,21 @@ class SessionRecorder:
         write_session_header(self, config, seed=seed, argv=argv, extra=extra)
 
     # -- messages ------------------------------------------------------------------------------------------------
-    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> None:
-        """Validate and write one message now (`RecordingError` on bad input or after close)."""
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> None:
+        """Validate and write one message now (`RecordingError` on bad input or after close). `sequence` is the
+        sender's sequence number (MCAP `sequence`, u32; 0 when the message has none)."""
         validate_payload(topic, payload)
-        self._write(topic, log_time_ns, publish_time_ns, encode_payload(payload))
+        self._write(topic, log_time_ns, publish_time_ns, encode_payload(payload), sequence)
 
-    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any]) -> bool:
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> bool:
         """Validate, encode and enqueue; returns False (and counts `dropped`) when the queue is full."""
         validate_payload(topic, payload)
         if self._closing:
             raise RecordingError("recorder is closed")
         try:
-            self._queue.put_nowait((topic, log_time_ns, publish_time_ns, encode_payload(payload)))
+            self._queue.put_nowait((topic, log_time_ns, publish_time_ns, encode_payload(payload), sequence))
             return True
         except queue.Full:
             with self._count_lock:
@@ -144,12 +150,14 @@ class SessionRecorder:
                 raise RecordingError("recorder is closed")
             yield
 
-    def _write(self, topic: str, log_time_ns: int, publish_time_ns: int, data: bytes) -> None:
+    def _write(self, topic: str, log_time_ns: int, publish_time_ns: int, data: bytes, sequence: int = 0) -> None:
+        if not 0 <= sequence < 1 << 32:
+            raise RecordingError(f"{topic}: sequence {sequence} is not a u32")
         with self._locked():
             self._writing_thread = threading.get_ident()
             try:
                 before = self._sink.bytes_written
-                self._writer.add_message(self._channels[topic], log_time_ns, data, publish_time_ns)
+                self._writer.add_message(self._channels[topic], log_time_ns, data, publish_time_ns, sequence)
                 self.written += 1
                 self.per_topic[topic] += 1
                 now = time.monotonic_ns()
@@ -191,11 +199,14 @@ class SessionRecorder:
         while not self._queue.empty():  # raced in after the stop marker: never written
             self._queue.get_nowait()
             self.dropped += 1
-        final = {**self.counters(), "closed_by": self.closed_by, "last_error": self.last_error or "",
-                 **{f"messages.{t}": n for t, n in self.per_topic.items()}, **(final_stats or {})}
         with self._lock:
             self._closed = True
             try:
+                before = self._sink.bytes_written
+                self._writer.flush()   # the open chunk goes out first, so `chunks_written` counts it
+                self.chunks_written += self._sink.bytes_written != before
+                final = {**self.counters(), "closed_by": self.closed_by, "last_error": self.last_error or "",
+                         **{f"messages.{t}": n for t, n in self.per_topic.items()}, **(final_stats or {})}
                 self._writer.add_metadata(META_FINAL, {k: v if isinstance(v, str) else json.dumps(v)
                                                        for k, v in final.items()})
                 self._writer.finish()

@@ -26,6 +26,7 @@ from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
 from sea_hil.session.processes import end_process
+from sea_hil.report.console import ProgressSample
 from sea_hil.report.writer import write_report_figures
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
@@ -82,11 +83,12 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
-    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep)
+    time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
+    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})
-    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002)
+    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002, time_base=time_base)
     plant = PlantNode(cfg, buses[0], (opts.node_id,), lockstep=opts.lockstep)
     edge = EdgeNode(cfg, buses[1], session, opts.node_id, inner=opts.inner, lockstep=opts.lockstep)
     threads = [threading.Thread(target=plant.run, name="plant", daemon=True),
@@ -109,10 +111,8 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
             if opts.progress:
                 c = edge.counters
                 lat = c.latency.to_dict()
-                sim_s = edge._sample_t_ns * 1e-9
-                log(f"[{now:6.1f} s] sim {sim_s:6.2f} s  cycle {min(int(sim_s // period_s) + 1, opts.cycles)}/"
-                    f"{opts.cycles}  setpoints {c.setpoints + c.voltages}  states {c.states_sent}  "
-                    f"latency p50 {lat['p50'] * 1e6 if lat['count'] else 0:.0f} us")
+                log(ProgressSample(now, edge._sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
+                                   c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
         if proc.returncode != 0:
             raise SeaHilError(f"controller process exited with status {proc.returncode}")
     finally:
@@ -122,7 +122,7 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
         for t in threads:
             t.join(timeout=10)
         recorder.stop()
-        now_ns = time.time_ns()
+        now_ns = edge._sample_t_ns if opts.lockstep else time.time_ns()
         rec.record("/stats", now_ns, now_ns, {**edge.stats_dict(), "final": True})
         rec.add_metadata("sea-hil.edge", {k: str(v) for k, v in edge.stats_dict().items()})
         rec.close(final_stats={"plant_overruns": plant.stats.overruns, "plant_ticks": plant.stats.ticks,

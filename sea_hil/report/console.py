@@ -1,0 +1,173 @@
+"""What `sea-hil run` and `sea-hil simulate` print: live progress while a session runs and one short table at the
+end (mode, messages up/down/total and the ratio to TT, tracking error per joint, latency, warnings, files written).
+
+Rendering only: the numbers come from summary.json as written (read through `field`, which also finds the
+timing-derived fields under a `timing` key). Progress is a rich progress bar when its stream is a terminal and one
+plain line per update otherwise (logs, CI, pipes), so `sea-hil run --json > summary.json` keeps a clean stdout.
+"""
+from __future__ import annotations
+
+import sys
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+from typing import Any, NamedTuple, TextIO
+
+from rich.console import Console
+from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
+from rich.table import Table
+
+JOINTS = ("hip", "knee")
+_MISSING = object()
+
+
+def field(summary: Mapping[str, Any], *path: str, default: Any = None) -> Any:
+    """`summary[path...]`, also looked up under `summary["timing"]` (timing-derived fields live there), else
+    `default`."""
+    for root in (summary, summary.get("timing")):
+        node: Any = root
+        for key in path:
+            node = node.get(key, _MISSING) if isinstance(node, Mapping) else _MISSING
+        if node is not _MISSING:
+            return node
+    return default
+
+
+class ProgressSample(NamedTuple):
+    """One progress update of a running session; `str()` is the plain progress line."""
+    wall_s: float
+    sim_s: float
+    lead_in_s: float
+    period_s: float
+    cycles: int
+    setpoints: int
+    states: int
+    latency_p50_us: float
+
+    @property
+    def total_s(self) -> float:
+        return self.lead_in_s + self.period_s * self.cycles
+
+    @property
+    def phase(self) -> str:
+        if self.sim_s < self.lead_in_s:
+            return "lead-in"
+        cycle = min(int((self.sim_s - self.lead_in_s) // self.period_s) + 1, self.cycles)
+        return f"cycle {cycle}/{self.cycles}"
+
+    def __str__(self) -> str:
+        return (f"[{self.wall_s:6.1f} s] sim {self.sim_s:6.2f}/{self.total_s:.2f} s  {self.phase}  setpoints "
+                f"{self.setpoints}  states {self.states}  latency p50 {self.latency_p50_us:.0f} us")
+
+
+class SessionProgress:
+    """Callable progress sink for `run_session(log=...)`: `ProgressSample`s drive a rich bar on a terminal, any
+    other line (and every sample off a terminal) is printed as it is. `close()` ends the bar."""
+
+    def __init__(self, stream: TextIO | None = None, *, terminal: bool | None = None) -> None:
+        self.stream = stream if stream is not None else sys.stderr
+        self.terminal = self.stream.isatty() if terminal is None else terminal
+        self._progress: Progress | None = None
+        self._task: Any = None
+
+    def __call__(self, line: object) -> None:
+        if not self.terminal or not isinstance(line, ProgressSample):
+            print(line, file=self.stream, flush=True)
+            return
+        if self._progress is None:
+            self._progress = Progress(TextColumn("[bold]{task.description}"), BarColumn(),
+                                      TextColumn("sim {task.completed:.2f}/{task.total:.2f} s"),
+                                      TextColumn("{task.fields[info]}"), TimeElapsedColumn(),
+                                      console=Console(file=self.stream, force_terminal=True), transient=True)
+            self._progress.start()
+            self._task = self._progress.add_task("session", total=line.total_s, info="")
+        self._progress.update(self._task, completed=min(line.sim_s, line.total_s), description=line.phase,
+                              info=f"setpoints {line.setpoints}  states {line.states}  "
+                                   f"p50 {line.latency_p50_us:.0f} us")
+
+    def close(self) -> None:
+        if self._progress is not None:
+            self._progress.stop()
+            self._progress = None
+
+    def __enter__(self) -> SessionProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _messages(summary: Mapping[str, Any], tt_msgs: int | None) -> list[tuple[str, str]]:
+    tx = summary.get("transmissions")
+    if isinstance(tx, Mapping):   # a networked session: states up, setpoints (or voltages) down
+        up, down = int(tx.get("uplink_msgs", 0)), int(tx.get("downlink_msgs", 0))
+        tt = up if tt_msgs is None else tt_msgs   # TT answers every state
+        rows = [("messages up / down / total", f"{up} / {down} / {up + down}"),
+                ("bytes up / down", f"{tx.get('uplink_bytes', 0)} / {tx.get('downlink_bytes', 0)}")]
+    else:   # the offline loop: transmissions = setpoints sent
+        down, tt = int(tx or 0), tt_msgs
+        rows = [("messages down (setpoints)", f"{down}")]
+    if tt:
+        rows.append(("ratio to TT", f"{down / tt:.3f} ({down} / {tt} samples)"))
+    return rows
+
+
+def _warnings(summary: Mapping[str, Any]) -> list[str]:
+    edge = field(summary, "edge", default={}) or {}
+    out = []
+    if not summary.get("lockstep", True):   # lockstep has no deadlines: simulated time waits for every node
+        out.append(f"deadline misses: {edge.get('loop_overruns', 0)} edge loop overruns")
+    drops = {k: edge.get(k, 0) for k in ("uplink_dropped", "downlink_dropped", "seq_lost", "stale_setpoints",
+                                         "rejected_frames", "rejected_samples", "bus_errors")}
+    out += [f"{k.replace('_', ' ')}: {v}" for k, v in drops.items() if v]
+    saturated = summary.get("saturated_steps", edge.get("saturated_steps", 0))
+    if saturated:
+        out.append(f"voltage saturated: {saturated} steps")
+    return out
+
+
+def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, command: str = "run",
+                    tt_msgs: int | None = None) -> list[tuple[str, str]]:
+    """The (what, value) rows of the end-of-run table."""
+    ctrl = str(summary.get("controller", "?")).upper() + "-SMC"
+    if command == "simulate":
+        mode = f"simulate (offline), {ctrl}" + (", quantised" if summary.get("quantised") else "")
+    else:
+        mode = f"{'lockstep' if summary.get('lockstep') else 'real time'}, {ctrl}, inner loop on " \
+               f"{summary.get('inner', 'edge')}"
+    lead = field(summary, "lead_in", "duration_s", default=0.0)
+    rows = [("mode", mode), ("duration", f"{summary.get('duration_s', 0.0):.2f} s" +
+                                        (f" (+ {lead:.2f} s lead-in)" if lead else ""))]
+    rows += _messages(summary, tt_msgs)
+    tracking = summary.get("tracking", {})
+    for j, name in enumerate(JOINTS):
+        mx, rms = tracking.get("max_abs_error_rad", [None] * 2)[j], tracking.get("rms_error_rad", [None] * 2)[j]
+        if mx is not None:
+            rows.append((f"error {name} max / RMS", f"{mx:.4f} / {rms:.4f} rad"))
+    lat = field(summary, "latency_us", default=None)
+    if isinstance(lat, Mapping) and lat.get("p50", -1) >= 0:
+        rows.append(("latency p50 / p99", f"{lat['p50'] / 1000:.2f} / {lat.get('p99', 0) / 1000:.2f} ms"))
+    wall = field(summary, "wall_s", default=None)
+    cpu = summary.get("cpu_s")
+    for what, value in (("wall time", wall), ("CPU time", cpu)):
+        if isinstance(value, (int, float)):
+            rows.append((what, f"{value:.1f} s"))
+    rows.append(("warnings", "; ".join(_warnings(summary)) or "none"))
+    if files:
+        rows.append(("files", "\n".join(str(f) for f in files)))
+    return rows
+
+
+def print_end_of_run(summary: Mapping[str, Any], files: Sequence[Path] = (), *, command: str = "run",
+                     tt_msgs: int | None = None, stream: TextIO | None = None) -> None:
+    """Print the end-of-run table (plain box drawing when `stream` is not a terminal)."""
+    table = Table(title=f"sea-hil {command}", show_header=False, title_justify="left")
+    table.add_column("what", style="bold")
+    table.add_column("value")
+    for what, value in end_of_run_rows(summary, files, command=command, tt_msgs=tt_msgs):
+        table.add_row(what, value)
+    Console(file=stream if stream is not None else sys.stdout, width=120).print(table)
+
+
+def files_in(directory: Path) -> list[Path]:
+    """The files a command wrote into `directory` (sorted)."""
+    return sorted(p for p in directory.iterdir() if p.is_file()) if directory.is_dir() else []
