@@ -125,20 +125,22 @@ class SessionRecords:
         self.messages: dict[str, list[RecordedMessage]] = {"/zenoh/state": [], "/zenoh/setpoint": [], "/tracking": []}
 
     def state(self, seq: int, sample_ns: int, fb: tuple, t_ns: int) -> None:
-        (th, om, de, _nut) = fb
+        (th, om, de, nut) = fb
         self.messages["/zenoh/state"].append(RecordedMessage(t_ns, t_ns, {
             "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": STATE_BYTES,
             "sample_t_ns": sample_ns, "theta1_rad": th[0], "theta2_rad": th[1], "omega1_rad_s": om[0],
-            "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1]}))
+            "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1], "nut_vel1_m_s": nut[0],
+            "nut_vel2_m_s": nut[1]}, seq))
 
     def setpoint(self, sp: SetpointPayload, t_ns: int) -> None:
         self.messages["/zenoh/setpoint"].append(RecordedMessage(t_ns, t_ns, {
             "key": self.keys.setpoint, "seq": sp.seq, "sent_t_ns": sp.t_ns, "payload_bytes": SETPOINT_BYTES,
             "state_seq": sp.state_seq, "delta1_ref_m": sp.deflection_m[0], "delta2_ref_m": sp.deflection_m[1],
-            "s1": sp.sliding[0], "s2": sp.sliding[1], "reason": sp.reason.name}))
+            "s1": sp.sliding[0], "s2": sp.sliding[1], "reason": sp.reason.name}, sp.seq))
 
     def tracking(self, record: dict[str, Any], t_ns: int) -> None:
-        self.messages["/tracking"].append(RecordedMessage(t_ns, t_ns, {**record, "key": self.keys.event}))
+        self.messages["/tracking"].append(RecordedMessage(t_ns, t_ns, {**record, "key": self.keys.event},
+                                                          record["state_seq"]))
 
 
 class _Env:
