@@ -21,6 +21,7 @@ from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.errors import SeaHilError
+from sea_hil.live.link import await_live
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
@@ -82,10 +83,18 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
-    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep)
+    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep,
+                          live=(cfg.live, cfg.can.bitrate_bps) if cfg.live.enabled else None)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})
+    try:   # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
+        waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
+    except BaseException:
+        rec.close()
+        for b in buses:
+            b.shutdown()
+        raise
     recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002)
     plant = PlantNode(cfg, buses[0], (opts.node_id,), lockstep=opts.lockstep)
     edge = EdgeNode(cfg, buses[1], session, opts.node_id, inner=opts.inner, lockstep=opts.lockstep)
@@ -95,7 +104,7 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     for t in threads:
         t.start()
     period_s = cfg.trajectory.period_s
-    budget_s = 60.0 + 3.0 * period_s * opts.cycles
+    budget_s = 60.0 + 3.0 * period_s * opts.cycles + waited_s
     try:
         while True:
             try:

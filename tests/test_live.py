@@ -1,0 +1,121 @@
+"""The live view (issue 18): a lockstep `sea-hil run --foxglove 0 --foxglove-wait` session watched by an independent
+Foxglove WebSocket client (tests/foxglove_ws_client.py, no foxglove-sdk code); what it receives matches the MCAP
+recording of the same session."""
+from __future__ import annotations
+
+import asyncio
+import json
+import queue
+import re
+import subprocess
+import sys
+import threading
+from pathlib import Path
+
+import pytest
+
+from foxglove_ws_client import receive
+from sea_hil.live.channels import CHANNELS, END_MESSAGE, LOG_LEVELS
+from sea_hil.protocol.can_frames import CMD_MASK
+from sea_hil.recorder.reader import read_session
+from sea_hil.session.processes import end_process
+
+pytestmark = pytest.mark.slow
+URL = re.compile(r"Foxglove live view: (ws://\S+)")
+HEARTBEAT_CMD = 39 & CMD_MASK   # sea.dbc: BO_ 39 HEARTBEAT (node 1)
+
+
+def _lines(stream, sink: queue.Queue) -> None:
+    for line in iter(stream.readline, b""):
+        sink.put(line.decode(errors="replace"))
+    sink.put(None)
+
+
+@pytest.fixture(scope="module")
+def watched(tmp_path_factory):
+    """(client's view, recording) of one short lockstep session started with --foxglove 0 --foxglove-wait."""
+    tmp = tmp_path_factory.mktemp("live")
+    (tmp / "short.toml").write_text("[trajectory]\nperiod_s = 2.0\n", encoding="utf-8")
+    cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--controller", "et", "--cycles", "1",
+           "--out", str(tmp / "run"), "--quiet", "--config", str(tmp / "short.toml"), "--foxglove", "0",
+           "--foxglove-wait"]
+    with open(tmp / "stdout.json", "wb") as stdout:
+        proc = subprocess.Popen(cmd, stdout=stdout, stderr=subprocess.PIPE)
+    lines: queue.Queue = queue.Queue()
+    reader = threading.Thread(target=_lines, args=(proc.stderr, lines), daemon=True)
+    reader.start()
+    try:
+        url, seen = None, []
+        while url is None:
+            line = lines.get(timeout=120)
+            assert line is not None, "sea-hil run ended before serving: " + "".join(seen)
+            seen.append(line)
+            if m := URL.search(line):
+                url = m.group(1)
+        got = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=240))
+        assert proc.wait(timeout=120) == 0
+    finally:
+        end_process(proc)
+        reader.join(timeout=10)
+    return got, read_session(tmp / "run" / "session.mcap")
+
+
+def test_client_negotiates_and_receives_the_advertised_channels(watched):
+    got, _ = watched
+    assert got.subprotocol in ("foxglove.sdk.v1", "foxglove.websocket.v1")
+    assert got.server_info["op"] == "serverInfo"
+    chans = got.by_topic()
+    assert set(chans) == set(CHANNELS)
+    for topic, (schema_name, schema) in CHANNELS.items():
+        assert chans[topic]["encoding"] == "json" and chans[topic]["schemaEncoding"] == "jsonschema"
+        assert chans[topic]["schemaName"] == schema_name and json.loads(chans[topic]["schema"]) == schema
+    assert chans["/live/events"]["schemaName"] == "foxglove.Log"
+    assert got.ended and got.unknown_subscription == 0
+    assert {t for t, msgs in got.messages.items() if msgs} == set(CHANNELS)
+
+
+def test_tracking_and_setpoints_match_the_recording(watched):
+    got, rec = watched
+    tracking = rec.messages["/tracking"]
+    live = got.messages["/live/tracking"]
+    assert len(live) == len(tracking) > 100   # --foxglove-wait: subscribed before the first sample
+    by_seq = {m.payload["state_seq"]: m for m in tracking}
+    for t_ns, msg in live:
+        r = by_seq[msg["state_seq"]]
+        assert t_ns == r.log_time_ns
+        for k in ("t_s", "theta1_rad", "theta2_rad", "theta1_d_rad", "theta2_d_rad", "reason"):
+            assert msg[k] == r.payload[k]
+        assert msg["e1_rad"] == pytest.approx(r.payload["theta1_d_rad"] - r.payload["theta1_rad"], abs=1e-15)
+        assert msg["e2_rad"] == pytest.approx(r.payload["theta2_d_rad"] - r.payload["theta2_rad"], abs=1e-15)
+    setpoints = {m.payload["seq"]: m for m in rec.messages["/zenoh/setpoint"]}
+    live_sp = got.messages["/live/setpoint"]
+    assert sorted(m["seq"] for _, m in live_sp) == sorted(setpoints)
+    for t_ns, msg in live_sp:
+        r = setpoints[msg["seq"]]
+        assert t_ns == r.log_time_ns
+        assert (msg["delta1_ref_m"], msg["delta2_ref_m"], msg["reason"]) == \
+            (r.payload["delta1_ref_m"], r.payload["delta2_ref_m"], r.payload["reason"])
+
+
+def test_events_driver_state_and_statistics_match_the_recording(watched):
+    got, rec = watched
+    logs = [m for _, m in got.messages["/live/events"]]
+    events = [m for m in logs if m["name"] == "controller"]
+    triggered = [m for m in rec.messages["/zenoh/setpoint"] if m.payload["reason"] != "TIME"]
+    assert len(events) == len(triggered) and all(m["level"] == LOG_LEVELS["INFO"] for m in events)
+    assert events[0]["message"].startswith(f"event: setpoint #1 ({triggered[0].payload['reason']})")
+    assert logs[-1]["message"] == END_MESSAGE
+    heartbeats = [m for m in rec.messages["/can/raw"] if m.payload["can_id"] & CMD_MASK == HEARTBEAT_CMD]
+    driver = got.messages["/live/driver"]
+    assert len(driver) == len(heartbeats) > 0
+    assert [t for t, _ in driver] == [m.log_time_ns for m in heartbeats]
+    assert driver[-1][1]["state_name"] == "RUNNING"
+    link = got.messages["/live/link"][-1][1]
+    assert link["up_msgs"] == len(rec.messages["/zenoh/state"])
+    assert link["down_msgs"] == len(rec.messages["/zenoh/setpoint"]) + len(rec.messages["/zenoh/voltage"])
+    assert link["up_bytes"] == sum(m.payload["payload_bytes"] for m in rec.messages["/zenoh/state"])
+    assert 0 < link["rtt_p50_us"] <= link["rtt_p99_us"] <= link["rtt_max_us"]
+    bus = got.messages["/live/bus"][-1][1]
+    assert bus["frames"] == len(rec.messages["/can/raw"])
+    assert 0 < bus["load_pct_session"] < 100
+    assert len(got.messages["/live/node_stats"]) == len(rec.messages["/stats"])
