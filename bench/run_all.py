@@ -1,4 +1,4 @@
-"""Run every benchmark (figures 1-7) and regenerate BENCHMARKS.md from their JSON results.
+"""Run every benchmark (figures 1-8) and regenerate BENCHMARKS.md from their JSON results.
 
 Run: python bench/run_all.py [--quick] [--only NAME,...] [--render-only] [--results DIR] [--out BENCHMARKS.md]
 Each script runs as a child process with `--json DIR/<name>.json`; its output is streamed with a progress prefix.
@@ -35,6 +35,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_bandwidth", "5", ["--runs", "3"], ["--quick"], 55),
     ("bench_scale", "6", ["--duration", "10"], ["--quick"], 90),
     ("bench_mcap", "7", ["--runs", "3"], ["--quick"], 30),
+    ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
 ]
 
 

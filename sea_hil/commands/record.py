@@ -7,31 +7,46 @@ import threading
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.live.cli import add_live_args, live_overrides
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record every Zenoh message (and CAN frame) of a session to MCAP")
-    p.add_argument("--out", type=Path, required=True, metavar="FILE.mcap")
+    p.add_argument("--out", type=Path, metavar="FILE.mcap", help="the recording (optional with --foxglove: live only)")
     p.add_argument("--can", metavar="SPEC", help="also record this CAN bus")
     p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (default: SIGINT/SIGTERM)")
     add_zenoh_args(p)
+    add_live_args(p)
     add_config_args(p)
     p.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
+    import os
     import sys
+    from sea_hil.errors import ConfigError
     from sea_hil.protocol.canbus import open_bus
     from sea_hil.recorder.node import RecorderNode
     from sea_hil.recorder.writer import SessionRecorder
     from sea_hil.protocol.zsession import open_session
-    cfg = config_from_args(args)
+    from sea_hil.live.child import end_with_parent_if_asked
+    end_with_parent_if_asked()   # started by `edge`/`controller --foxglove`: end with that node
+    cfg = config_from_args(args, live_overrides(args))
+    if args.out is None and not cfg.live.enabled:
+        raise ConfigError("record needs --out FILE.mcap (or --foxglove for a live view without a file)")
+    out = args.out if args.out is not None else Path(os.devnull)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     session = open_session(cfg.zenoh)
     bus = open_bus(args.can) if args.can else None
-    rec = SessionRecorder.from_config(args.out, cfg.record)
+    if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
+        from sea_hil.live.link import await_live
+        from sea_hil.recorder.process import RecorderProcess
+        rec = RecorderProcess(out, cfg.record, idle=True, live=(cfg.live, cfg.can.bitrate_bps))
+        await_live(rec.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
+    else:
+        rec = SessionRecorder.from_config(out, cfg.record)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
     node = RecorderNode(rec, session, cfg.zenoh.prefix, bus)
     node.start()

@@ -17,7 +17,8 @@ def _port(text: str) -> int:
     return port
 
 
-def add_live_args(p: argparse.ArgumentParser) -> None:
+def add_live_args(p: argparse.ArgumentParser, *, node: bool = False) -> None:
+    """The options; `node` (edge, controller): also `--foxglove-record`, the file of the serving recorder."""
     g = p.add_argument_group("live view (Foxglove WebSocket; docs/foxglove/)")
     g.add_argument("--foxglove", nargs="?", type=_port, const=CONFIG_PORT, default=None, metavar="PORT",
                    help="serve the session live over the Foxglove WebSocket protocol (default port 8765; 0 = a "
@@ -26,6 +27,9 @@ def add_live_args(p: argparse.ArgumentParser) -> None:
                    help="interface the live view listens on (default 127.0.0.1: this machine only)")
     g.add_argument("--foxglove-wait", action="store_true",
                    help="start the session only once a Foxglove client has subscribed")
+    if node:
+        g.add_argument("--foxglove-record", metavar="FILE.mcap",
+                       help="the live view is served by a `sea-hil record` child: also keep its recording here")
 
 
 def live_overrides(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> dict[str, Any]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import logging
 import os
+import signal
 from typing import Any
 
 from pydantic import BaseModel, ConfigDict
@@ -72,6 +73,9 @@ class LiveFeed:
 def start_live_feed(live_json: str) -> LiveFeed | None:
     """The recorder child's live view from its `LiveSpec` argument, or None. A server that cannot start is reported
     to the parent (which stops the session before it begins) while the recording goes on."""
+    # its parent ends this process (CLOSE or end of stdin); Ctrl-C in a terminal reaches the whole process group and
+    # must not cut the recording and the live view short
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
     spec = LiveSpec.model_validate_json(live_json)
     try:
         return LiveFeed(spec)

@@ -55,7 +55,9 @@ def _controller_cmd(opts: RunOptions, cfg_path: Path, endpoint: str) -> list[str
 def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] = print) -> dict[str, Any]:
     opts.out.mkdir(parents=True, exist_ok=True)
     cfg_path = opts.out / "config.toml"
-    cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
+    # the live view is served from this process's recorder: the controller started from this file must not
+    cfg_path.write_text(config_to_toml(cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})),
+                        encoding="utf-8")
     endpoint = opts.listen[0] if opts.listen else f"tcp/127.0.0.1:{free_tcp_port()}"
     spec = opts.can or cfg.can.interface
     session = open_session(make_config(listen=[endpoint, *opts.listen[1:]]))

@@ -1,0 +1,140 @@
+"""Figure 8: what the live view costs the 1 kHz loops: real-time sessions with and without `--foxglove`.
+
+Run: python bench/bench_live.py [--runs 3] [--controller et] [--json OUT]
+Each run is a pair of real-time `sea-hil run --controller et --cycles 1` sessions, one plain and one with
+`--foxglove 0 --foxglove-wait` watched by a client subscribed to every live channel (tests/foxglove_ws_client.py, the
+test suite's independent client, at nice 10: what a Foxglove app with the shipped layout open costs). The
+order alternates per pair so a drift in machine load does not favour one side. Per session: closed-loop latency p99
+(summary.json `latency_us`, the edge's state k published -> setpoint(k) applied) and driver tick misses (the
+plant's `plant_overruns` of `plant_ticks`, MCAP metadata `sea-hil.final`). Goal (issue 18): with the live view,
+both within 10 % of without (tick misses: or no more than without when there are none).
+"""
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import threading
+from pathlib import Path
+from typing import Any
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
+
+from benchlib import REPO, bench_args, command_line, emit, record  # noqa: E402
+from foxglove_ws_client import receive  # noqa: E402
+from sea_hil.errors import SeaHilError  # noqa: E402
+from sea_hil.live.channels import CHANNELS, END_MESSAGE  # noqa: E402
+from sea_hil.recorder.reader import read_session  # noqa: E402
+from sea_hil.session.processes import end_process  # noqa: E402
+
+GOAL_RATIO = 1.10
+URL = re.compile(r"Foxglove live view: (ws://\S+)")
+
+
+def _watch(url: str, nice: int, timeout_s: float) -> dict[str, Any]:
+    """The client, in a thread of this process lowered to `nice` (a viewer on this machine is background work)."""
+    result: dict[str, Any] = {}
+
+    def run() -> None:
+        os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)   # Linux: per-thread nice
+        res = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=timeout_s))
+        result.update(live_messages=sum(len(v) for v in res.messages.values()), live_ended=res.ended)
+    t = threading.Thread(target=run, name="foxglove-client")
+    t.start()
+    t.join()
+    return result
+
+
+def _session(out: Path, controller: str, live: bool, client_nice: int = 10,
+             timeout_s: float = 300.0) -> dict[str, Any]:
+    """One real-time session (with a subscribed client when `live`); its figures."""
+    cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--controller", controller, "--cycles", "1", "--out",
+           str(out), "--quiet", *(["--foxglove", "0", "--foxglove-wait"] if live else [])]
+    out.mkdir(parents=True, exist_ok=True)
+    got: dict[str, Any] = {}
+    with open(out / "stdout.json", "wb") as stdout:
+        proc = subprocess.Popen(cmd, cwd=REPO, stdout=stdout, stderr=subprocess.PIPE)
+    try:
+        assert proc.stderr is not None
+        if live:
+            for raw in proc.stderr:
+                if m := URL.search(raw.decode(errors="replace")):
+                    break
+            else:
+                raise SeaHilError(f"{' '.join(cmd)}: no live view address printed")
+            tail: list[bytes] = []
+            drain = threading.Thread(target=lambda: tail.append(proc.stderr.read()), daemon=True)   # pipe not full
+            drain.start()
+            got = _watch(m.group(1), client_nice, timeout_s)
+        if proc.wait(timeout=timeout_s) != 0:
+            err = proc.stderr.read() if not live else (drain.join(10) or b"".join(tail))
+            raise SeaHilError(f"{' '.join(cmd)} failed ({proc.returncode}): {err.decode(errors='replace')[-1500:]}")
+    finally:
+        end_process(proc)
+    s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
+    final = read_session(out / "session.mcap").metadata.get("sea-hil.final", {})
+    ticks, overruns = int(final.get("plant_ticks", 0)), int(final.get("plant_overruns", 0))
+    return {"live": live, "p99_us": s["latency_us"]["p99"], "p50_us": s["latency_us"]["p50"],
+            "samples": s["latency_samples"], "plant_ticks": ticks, "plant_overruns": overruns,
+            "miss_pct": 100.0 * overruns / ticks if ticks else float("nan"),
+            "edge_loop_overruns": s["edge"]["loop_overruns"], "wall_s": s["wall_s"], **got}
+
+
+def _median(vals: list[float]) -> float:
+    v = sorted(vals)
+    n = len(v)
+    return v[n // 2] if n % 2 else 0.5 * (v[n // 2 - 1] + v[n // 2])
+
+
+def live_records(details: list[dict[str, Any]], command: str) -> list[dict[str, Any]]:
+    on = [d for d in details if d["live"]]
+    off = [d for d in details if not d["live"]]
+    p99_on, p99_off = [d["p99_us"] for d in on], [d["p99_us"] for d in off]
+    miss_on, miss_off = [d["miss_pct"] for d in on], [d["miss_pct"] for d in off]
+    lat_ok = _median(p99_on) <= GOAL_RATIO * _median(p99_off)
+    miss_ok = _median(miss_on) <= GOAL_RATIO * _median(miss_off) or _median(miss_on) <= _median(miss_off)
+    note = ("Pairs of real-time sessions, alternating order; with = `--foxglove 0 --foxglove-wait` and a client "
+            "subscribed to every live channel, in a thread at nice 10 (--client-nice) of the benchmark process; the server "
+            "runs in the SCHED_IDLE recorder process.")
+    lat = record("8a", "live view cost: closed-loop latency p99 with --foxglove (baseline: without)", runs=len(on),
+                 metric="per-session closed-loop latency p99 (summary.json latency_us), median over sessions",
+                 unit="us", per_run=p99_on, p99=max(p99_on), baseline=_median(p99_off),
+                 baseline_label="without --foxglove", goal="ratio <= 1.10", goal_met=lat_ok, command=command,
+                 details=details, notes=note)
+    miss = record("8b", "live view cost: driver tick misses with --foxglove (baseline: without)", runs=len(on),
+                  metric="plant_overruns / plant_ticks per session (MCAP sea-hil.final), median over sessions",
+                  unit="%", per_run=miss_on, p99=max(miss_on), baseline=_median(miss_off),
+                  baseline_label="without --foxglove", goal="ratio <= 1.10 (or no more than without)",
+                  goal_met=miss_ok, command=command, notes=note)
+    return [lat, miss]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = bench_args(__doc__.splitlines()[0], runs=3)
+    ap.add_argument("--controller", choices=("et", "tt"), default="et")
+    ap.add_argument("--client-nice", type=int, default=10, help="nice of the watching client's thread (default 10)")
+    ap.add_argument("--workdir", type=Path, help="keep the run directories here (default: a temporary directory)")
+    args = ap.parse_args(argv)
+    runs = 1 if args.quick else args.runs
+    details = []
+    with tempfile.TemporaryDirectory(prefix="bench-live-") as tmp:
+        base = args.workdir or Path(tmp)
+        for i in range(runs):
+            for live in ((False, True) if i % 2 == 0 else (True, False)):
+                d = _session(base / f"pair{i + 1}-{'live' if live else 'plain'}", args.controller, live,
+                             args.client_nice)
+                details.append({"pair": i + 1, **d})
+                print(f"pair {i + 1}/{runs} {'with' if live else 'without'} --foxglove: p99 {d['p99_us']:.0f} us  "
+                      f"tick misses {d['plant_overruns']}/{d['plant_ticks']}"
+                      f"{'  live messages %d' % d['live_messages'] if live else ''}", flush=True)
+    emit(live_records(details, command_line()), args.json)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
