@@ -74,27 +74,28 @@ def test_client_negotiates_and_receives_the_advertised_channels(watched):
     assert {t for t, msgs in got.messages.items() if msgs} == set(CHANNELS)
 
 
+TRACKED = ("state_seq", "t_s", "theta1_rad", "theta2_rad", "theta1_d_rad", "theta2_d_rad", "event", "reason")
+SETPOINT = ("seq", "state_seq", "delta1_ref_m", "delta2_ref_m", "s1", "s2", "reason")
+
+
+def _rows(pairs, fields):
+    return sorted((t, *(p[k] for k in fields)) for t, p in pairs)
+
+
 def test_tracking_and_setpoints_match_the_recording(watched):
     got, rec = watched
-    tracking = rec.messages["/tracking"]
+    recorded = _rows(((m.log_time_ns, m.payload) for m in rec.messages["/tracking"]), TRACKED)
     live = got.messages["/live/tracking"]
-    assert len(live) == len(tracking) > 100   # --foxglove-wait: subscribed before the first sample
-    by_seq = {m.payload["state_seq"]: m for m in tracking}
-    for t_ns, msg in live:
-        r = by_seq[msg["state_seq"]]
-        assert t_ns == r.log_time_ns
-        for k in ("t_s", "theta1_rad", "theta2_rad", "theta1_d_rad", "theta2_d_rad", "reason"):
-            assert msg[k] == r.payload[k]
-        assert msg["e1_rad"] == pytest.approx(r.payload["theta1_d_rad"] - r.payload["theta1_rad"], abs=1e-15)
-        assert msg["e2_rad"] == pytest.approx(r.payload["theta2_d_rad"] - r.payload["theta2_rad"], abs=1e-15)
-    setpoints = {m.payload["seq"]: m for m in rec.messages["/zenoh/setpoint"]}
-    live_sp = got.messages["/live/setpoint"]
-    assert sorted(m["seq"] for _, m in live_sp) == sorted(setpoints)
-    for t_ns, msg in live_sp:
-        r = setpoints[msg["seq"]]
-        assert t_ns == r.log_time_ns
-        assert (msg["delta1_ref_m"], msg["delta2_ref_m"], msg["reason"]) == \
-            (r.payload["delta1_ref_m"], r.payload["delta2_ref_m"], r.payload["reason"])
+    # --foxglove-wait: subscribed before the first sample; the end-of-session line comes after the last. A state
+    # the lockstep edge re-sent can have two /tracking messages: rows are compared as multisets with their log time
+    rows = _rows(live, TRACKED)
+    assert len(rows) == len(recorded) > 100, f"{len(rows)} of {len(recorded)} tracking messages"
+    assert rows == recorded
+    for _, msg in live:
+        assert msg["e1_rad"] == pytest.approx(msg["theta1_d_rad"] - msg["theta1_rad"], abs=1e-15)
+        assert msg["e2_rad"] == pytest.approx(msg["theta2_d_rad"] - msg["theta2_rad"], abs=1e-15)
+    setpoints = _rows(((m.log_time_ns, m.payload) for m in rec.messages["/zenoh/setpoint"]), SETPOINT)
+    assert _rows(got.messages["/live/setpoint"], SETPOINT) == setpoints and len(setpoints) > 10
 
 
 def test_events_driver_state_and_statistics_match_the_recording(watched):

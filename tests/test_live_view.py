@@ -130,3 +130,21 @@ def test_non_finite_values_are_rejected_and_counted():
         assert (srv.rejected, srv.published) == (1, 1)
     finally:
         srv.close()
+
+
+def test_a_node_serves_through_a_record_child_on_its_own_zenoh_network():
+    from sea_hil.live.child import reachable, record_cmd
+    from sea_hil.errors import ConfigError
+    assert reachable("tcp/0.0.0.0:7447") == "tcp/127.0.0.1:7447"
+    assert reachable("tcp/10.0.0.2:7447") == "tcp/10.0.0.2:7447"
+    args = argparse.Namespace(config="x.toml", foxglove_record=None)
+    cfg = load_config(overrides={"live": {"enabled": True, "port": 9000, "wait": True},
+                                 "zenoh": {"connect": ["tcp/10.0.0.2:7447"], "listen": ["tcp/0.0.0.0:7448"]}})
+    cmd = record_cmd(args, cfg, "socketcan:vcan0")
+    assert cmd[cmd.index("record"):] == [
+        "record", "--foxglove", "9000", "--foxglove-host", "127.0.0.1", "--foxglove-wait", "--limb", "limb1",
+        "--connect", "tcp/10.0.0.2:7447", "--connect", "tcp/127.0.0.1:7448", "--can", "socketcan:vcan0",
+        "--config", "x.toml"]
+    assert "--can" not in record_cmd(args, cfg, "virtual:sea-hil")   # an in-process bus cannot be shared
+    with pytest.raises(ConfigError, match="needs --connect or --listen"):
+        record_cmd(args, load_config(overrides={"live": {"enabled": True}}), None)
