@@ -143,7 +143,7 @@ def test_a_node_serves_through_a_record_child_on_its_own_zenoh_network():
     cmd = record_cmd(args, cfg, "socketcan:vcan0")
     assert cmd[cmd.index("record"):] == [
         "record", "--foxglove", "9000", "--foxglove-host", "127.0.0.1", "--foxglove-wait", "--limb", "limb1",
-        "--connect", "tcp/10.0.0.2:7447", "--connect", "tcp/127.0.0.1:7448", "--can", "socketcan:vcan0",
+        "--connect", "tcp/127.0.0.1:7448", "--connect", "tcp/10.0.0.2:7447", "--can", "socketcan:vcan0",
         "--config", "x.toml"]
     assert "--can" not in record_cmd(args, cfg, "virtual:sea-hil")   # an in-process bus cannot be shared
     with pytest.raises(ConfigError, match="needs --connect or --listen"):

@@ -29,9 +29,9 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.recorder.node import RecorderNode
     from sea_hil.recorder.writer import SessionRecorder
     from sea_hil.protocol.zsession import open_session
-    from sea_hil.live.child import end_with_parent_if_asked
-    end_with_parent_if_asked()   # started by `edge`/`controller --foxglove`: end with that node
-    cfg = config_from_args(args, live_overrides(args))
+    from sea_hil.live.child import live_child_overrides
+    # started by `edge`/`controller --foxglove`: a Zenoh client of that node, ended with it
+    cfg = config_from_args(args, live_overrides(args, live_child_overrides()))
     if args.out is None and not cfg.live.enabled:
         raise ConfigError("record needs --out FILE.mcap (or --foxglove for a live view without a file)")
     out = args.out if args.out is not None else Path(os.devnull)

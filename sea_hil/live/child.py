@@ -1,8 +1,8 @@
 """`sea-hil edge --foxglove` / `controller --foxglove`: the live view of a node started on its own.
 
 The node does not serve it itself (its loops keep their CPU): it starts a `sea-hil record --foxglove ...` child that
-joins the node's Zenoh network (the node's `--connect` endpoints and its `--listen` endpoints, wildcard addresses
-replaced by loopback), taps the node's CAN bus when it can be shared between processes (not `virtual:`), records
+joins the node's Zenoh network as a Zenoh client (of the node's `--listen` endpoints, wildcard addresses replaced
+by loopback, or of what the node connects to), taps the node's CAN bus when it can be shared between processes (not `virtual:`), records
 to `--foxglove-record FILE` or nowhere, and serves from its SCHED_IDLE recorder process. `LiveChild.ready()` echoes
 the child's address line and, with `--foxglove-wait`, returns only once a client has subscribed.
 """
@@ -18,7 +18,7 @@ import subprocess
 import sys
 import threading
 from collections.abc import Callable
-from typing import IO
+from typing import IO, Any
 
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
@@ -38,7 +38,8 @@ def reachable(endpoint: str) -> str:
 
 def record_cmd(args: argparse.Namespace, cfg: SeaHilConfig, can_spec: str | None) -> list[str]:
     """The `sea-hil record` command line serving this node's live view."""
-    endpoints = [*cfg.zenoh.connect, *(reachable(e) for e in cfg.zenoh.listen)]
+    # a Zenoh client uses one of its endpoints: the node itself first (it sees everything it exchanges)
+    endpoints = [*(reachable(e) for e in cfg.zenoh.listen), *cfg.zenoh.connect]
     if not endpoints:
         raise ConfigError("--foxglove on a node needs --connect or --listen (the live view joins over Zenoh)")
     cmd = [sys.executable, "-m", "sea_hil.cli", "record", "--foxglove", str(cfg.live.port), "--foxglove-host",
@@ -88,18 +89,20 @@ class LiveChild:
         self._reader.join(timeout=5)
 
 
-def end_with_parent_if_asked() -> None:
-    """In `sea-hil record` started by `LiveChild`: ask for SIGTERM when the node dies, even by SIGKILL (Linux prctl
-    PR_SET_PDEATHSIG); a node that is already gone ends this process now."""
+def live_child_overrides() -> dict[str, Any]:
+    """In `sea-hil record`: when a node started it (`LiveChild`), the config overrides of its role — Zenoh client mode
+    (the peer it connects to then forwards it everything it sees: a peer forwards nothing to another peer) — and a
+    SIGTERM when the node dies, even by SIGKILL (Linux prctl PR_SET_PDEATHSIG); {} otherwise."""
     parent = os.environ.pop(PARENT_ENV, None)
     if parent is None:
-        return
+        return {}
     try:
         ctypes.CDLL(None, use_errno=True).prctl(PR_SET_PDEATHSIG, signal.SIGTERM)
     except (OSError, AttributeError):   # not Linux: the node's atexit ends it
         pass
-    if str(os.getppid()) != parent:
+    if str(os.getppid()) != parent:   # the node is already gone
         raise SystemExit(0)
+    return {"zenoh": {"mode": "client"}}
 
 
 def start_live_child(args: argparse.Namespace, cfg: SeaHilConfig, can_spec: str | None) -> LiveChild | None:
