@@ -16,13 +16,14 @@ import pytest
 
 from foxglove_ws_client import receive
 from sea_hil.live.channels import CHANNELS, END_MESSAGE, LOG_LEVELS
+from sea_hil.protocol.can_codec import load_database
 from sea_hil.protocol.can_frames import CMD_MASK
 from sea_hil.recorder.reader import read_session
 from sea_hil.session.processes import end_process
 
 pytestmark = pytest.mark.slow
 URL = re.compile(r"Foxglove live view: (ws://\S+)")
-HEARTBEAT_CMD = 39 & CMD_MASK   # sea.dbc: BO_ 39 HEARTBEAT (node 1)
+HEARTBEAT_CMD = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
 
 
 def _lines(stream, sink: queue.Queue) -> None:
