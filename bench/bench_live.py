@@ -21,13 +21,14 @@ import subprocess
 import sys
 import tempfile
 import threading
+import time
 from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
-from benchlib import REPO, bench_args, command_line, emit, record  # noqa: E402
+from benchlib import REPO, bench_args, command_line, emit, record, sea_hil_run  # noqa: E402
 from foxglove_ws_client import receive  # noqa: E402
 from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.live.channels import CHANNELS, END_MESSAGE  # noqa: E402
@@ -131,6 +132,34 @@ def live_records(details: list[dict[str, Any]], command: str) -> list[dict[str, 
     return [lat, miss, cpu]
 
 
+def replay_cost(mcap: Path, repeats: int = 5) -> dict[str, Any]:
+    """CPU cost of the live view itself (LiveView.feed + LiveServer.publish, no client), replaying a recording: the
+    work that would take the nodes' GIL if it were served from the `run` process (best of `repeats`)."""
+    from sea_hil.config import LiveConfig
+    from sea_hil.live.server import LiveServer
+    from sea_hil.live.view import LiveView
+    data = read_session(mcap)
+    recs = sorted(((m.log_time_ns, t, m.payload) for t, ms in data.messages.items() for m in ms), key=lambda r: r[0])
+    samples = [m.payload["sample_t_ns"] for m in data.messages["/zenoh/state"]]
+    span_s = (max(samples) - min(samples)) / 1e9   # simulated seconds: in real time, seconds of session
+    srv = LiveServer(LiveConfig(port=0))
+    best_view = best_pub = float("inf")
+    try:
+        for _ in range(repeats):
+            view = LiveView(bitrate_bps=1_000_000)
+            t0 = time.process_time()
+            out = [m for t, topic, p in recs for m in view.feed(topic, t, p)]
+            t1 = time.process_time()
+            for m in out:
+                srv.publish(m)
+            best_view, best_pub = min(best_view, t1 - t0), min(best_pub, time.process_time() - t1)
+    finally:
+        srv.close()
+    return {"records": len(recs), "live_messages": len(out), "simulated_s": span_s,
+            "view_us_per_record": 1e6 * best_view / len(recs), "publish_us_per_message": 1e6 * best_pub / len(out),
+            "cpu_ms_per_s": 1e3 * (best_view + best_pub) / span_s}
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = bench_args(__doc__.splitlines()[0], runs=3)
     ap.add_argument("--controller", choices=("et", "tt"), default="et")
@@ -149,7 +178,19 @@ def main(argv: list[str] | None = None) -> int:
                 print(f"pair {i + 1}/{runs} {'with' if live else 'without'} --foxglove: p99 {d['p99_us']:.0f} us  "
                       f"tick misses {d['plant_overruns']}/{d['plant_ticks']}"
                       f"{'  live messages %d' % d['live_messages'] if live else ''}", flush=True)
-    emit(live_records(details, command_line()), args.json)
+        lock = base / "lockstep"
+        sea_hil_run(lock, controller=args.controller, lockstep=True)
+        cost = replay_cost(lock / "session.mcap")
+    print(f"live view replay: {cost['view_us_per_record']:.2f} us per recorded message, "
+          f"{cost['publish_us_per_message']:.1f} us per live message, {cost['cpu_ms_per_s']:.1f} ms CPU per s", flush=True)
+    recs = live_records(details, command_line())
+    recs.append(record("8d", "live view CPU per second of session (replay of a lockstep recording, no client)", runs=1,
+                       metric="process_time of LiveView.feed + LiveServer.publish over the recording / its "
+                              "simulated seconds, best of 5", unit="ms CPU/s", per_run=[cost["cpu_ms_per_s"]], p99=float("nan"),
+                       goal="(informative)", command=command_line(), details=[cost],
+                       notes="What serving from the `run` process would add to the nodes' GIL; served from the "
+                             "recorder process it runs on idle CPU time instead."))
+    emit(recs, args.json)
     return 0
 
 
