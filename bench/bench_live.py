@@ -36,6 +36,7 @@ from sea_hil.recorder.reader import read_session  # noqa: E402
 from sea_hil.session.processes import end_process  # noqa: E402
 
 GOAL_RATIO = 1.10
+LOADED_MISS_PCT = 1.0   # a quiet machine misses < 0.1 % (figure 4); a baseline above 1 % is not a fair baseline
 URL = re.compile(r"Foxglove live view: (ws://\S+)")
 
 
@@ -107,11 +108,17 @@ def live_records(details: list[dict[str, Any]], command: str) -> list[dict[str, 
     off = [d for d in details if not d["live"]]
     p99_on, p99_off = [d["p99_us"] for d in on], [d["p99_us"] for d in off]
     miss_on, miss_off = [d["miss_pct"] for d in on], [d["miss_pct"] for d in off]
-    lat_ok = _median(p99_on) <= GOAL_RATIO * _median(p99_off)
-    miss_ok = _median(miss_on) <= GOAL_RATIO * _median(miss_off) or _median(miss_on) <= _median(miss_off)
+    # a baseline that already misses ticks means a loaded machine: the comparison is then not judged
+    judged = _median(miss_off) < LOADED_MISS_PCT
+    lat_ok = _median(p99_on) <= GOAL_RATIO * _median(p99_off) if judged else None
+    miss_ok = _median(miss_on) <= GOAL_RATIO * _median(miss_off) if judged else None
     note = ("Pairs of real-time sessions, alternating order; with = `--foxglove 0 --foxglove-wait` and a client "
-            "subscribed to every live channel, in a thread at nice 10 (--client-nice) of the benchmark process; the server "
-            "runs in the SCHED_IDLE recorder process.")
+            "subscribed to every live channel, in a thread at nice 10 (--client-nice) of the benchmark process; the "
+            "server runs in the SCHED_IDLE recorder process.")
+    if not judged:
+        note += (f" NOT JUDGED (provisional): the sessions without the live view already missed "
+                 f"{_median(miss_off):.1f} % of the driver ticks (>= {LOADED_MISS_PCT} %: the machine was loaded), "
+                 "so the with/without difference is within the noise; re-run in a quiet window.")
     lat = record("8a", "live view cost: closed-loop latency p99 with --foxglove (baseline: without)", runs=len(on),
                  metric="per-session closed-loop latency p99 (summary.json latency_us), median over sessions",
                  unit="us", per_run=p99_on, p99=max(p99_on), baseline=_median(p99_off),
