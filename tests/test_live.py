@@ -121,3 +121,55 @@ def test_events_driver_state_and_statistics_match_the_recording(watched):
     assert bus["frames"] == len(rec.messages["/can/raw"])
     assert 0 < bus["load_pct_session"] < 100
     assert len(got.messages["/live/node_stats"]) == len(rec.messages["/stats"])
+
+
+def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
+    """`sea-hil controller --foxglove`: its `record` child joins as a Zenoh client of the controller, so it also sees
+    the state the edge (a peer connected to the controller) publishes; plant and edge run here, in lockstep."""
+    from sea_hil.config import load_config
+    from sea_hil.controller.edge import EdgeNode
+    from sea_hil.plant_emulator.node import PlantNode
+    from sea_hil.protocol.canbus import open_bus
+    from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+    (tmp_path / "short.toml").write_text("[trajectory]\nperiod_s = 1.0\n", encoding="utf-8")
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    ctl = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "controller", "--listen", endpoint, "--config",
+                            str(tmp_path / "short.toml"), "--lockstep", "--cycles", "1", "--timeout", "200",
+                            "--foxglove", "0", "--foxglove-wait"], stdin=subprocess.DEVNULL, stderr=subprocess.PIPE)
+    lines: queue.Queue = queue.Queue()
+    reader = threading.Thread(target=_lines, args=(ctl.stderr, lines), daemon=True)
+    reader.start()
+    cfg = load_config(overrides={"trajectory": {"period_s": 1.0}})
+    session = buses = None
+    try:
+        url = None
+        while url is None:
+            line = lines.get(timeout=120)
+            assert line is not None, "controller ended before serving"
+            url = m.group(1) if (m := URL.search(line)) else None
+        session = open_session(make_config(connect=[endpoint]))
+        buses = [open_bus("virtual:live-test"), open_bus("virtual:live-test")]
+        plant = PlantNode(cfg, buses[0], (1,), lockstep=True)
+        edge = EdgeNode(cfg, buses[1], session, 1, lockstep=True)
+        nodes = [threading.Thread(target=plant.run, daemon=True), threading.Thread(target=edge.run, daemon=True)]
+        for t in nodes:
+            t.start()
+        got = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=240))
+        assert ctl.wait(timeout=120) == 0
+        plant.stop()
+        edge.stop_event.set()
+        for t in nodes:
+            t.join(timeout=10)
+        edge.close()
+    finally:
+        end_process(ctl)
+        reader.join(timeout=10)
+        for b in buses or ():
+            b.shutdown()
+        if session is not None:
+            session.close()
+    assert got.ended and len(got.messages["/live/tracking"]) > 50
+    link = got.messages["/live/link"][-1][1]
+    assert link["up_msgs"] >= len(got.messages["/live/tracking"])   # the edge's states, forwarded by the controller
+    assert link["down_msgs"] == len(got.messages["/live/setpoint"]) > 0
+    assert "/live/driver" not in got.messages   # no CAN bus in the controller's view
