@@ -32,6 +32,17 @@ def _lines(stream, sink: queue.Queue) -> None:
     sink.put(None)
 
 
+def _served_url(lines: queue.Queue) -> str:
+    """The address the process announces on stderr (its lines arrive on `lines`)."""
+    seen = []
+    while True:
+        line = lines.get(timeout=120)
+        assert line is not None, "the process ended before serving: " + "".join(seen)
+        seen.append(line)
+        if m := URL.search(line):
+            return m.group(1)
+
+
 @pytest.fixture(scope="module")
 def watched(tmp_path_factory):
     """(client's view, recording) of one short lockstep session started with --foxglove 0 --foxglove-wait."""
@@ -46,13 +57,7 @@ def watched(tmp_path_factory):
     reader = threading.Thread(target=_lines, args=(proc.stderr, lines), daemon=True)
     reader.start()
     try:
-        url, seen = None, []
-        while url is None:
-            line = lines.get(timeout=120)
-            assert line is not None, "sea-hil run ended before serving: " + "".join(seen)
-            seen.append(line)
-            if m := URL.search(line):
-                url = m.group(1)
+        url = _served_url(lines)
         got = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=240))
         assert proc.wait(timeout=120) == 0
     finally:
@@ -142,11 +147,7 @@ def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
     cfg = load_config(overrides={"trajectory": {"period_s": 1.0}})
     session = buses = None
     try:
-        url = None
-        while url is None:
-            line = lines.get(timeout=120)
-            assert line is not None, "controller ended before serving"
-            url = m.group(1) if (m := URL.search(line)) else None
+        url = _served_url(lines)
         session = open_session(make_config(connect=[endpoint]))
         buses = [open_bus("virtual:live-test"), open_bus("virtual:live-test")]
         plant = PlantNode(cfg, buses[0], (1,), lockstep=True)
