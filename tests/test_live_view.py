@@ -148,3 +148,34 @@ def test_a_node_serves_through_a_record_child_on_its_own_zenoh_network():
     assert "--can" not in record_cmd(args, cfg, "virtual:sea-hil")   # an in-process bus cannot be shared
     with pytest.raises(ConfigError, match="needs --connect or --listen"):
         record_cmd(args, load_config(overrides={"live": {"enabled": True}}), None)
+
+
+def test_close_sends_the_end_line_and_waits_for_the_clients_to_leave():
+    import asyncio
+    import threading
+    import websockets
+    from foxglove_ws_client import SUBPROTOCOLS
+    from sea_hil.live.channels import END_MESSAGE
+    from sea_hil.live.server import LiveServer
+    srv = LiveServer(LiveConfig(port=0))
+    closer = threading.Thread(target=srv.close, kwargs={"linger_s": 120.0})
+    subscribed = threading.Event()
+    srv.listener.notify = lambda msg: subscribed.set() if msg["event"] == "subscribed" else None
+
+    async def client() -> dict:
+        async with websockets.connect(f"ws://127.0.0.1:{srv.port}", subprotocols=SUBPROTOCOLS) as ws:
+            chans = {}
+            while "/live/events" not in chans:
+                msg = json.loads(await ws.recv())
+                chans.update({c["topic"]: c for c in msg.get("channels", [])})
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": 1, "channelId": chans["/live/events"]["id"]}]}))
+            await asyncio.to_thread(subscribed.wait, 30)
+            closer.start()   # the session ends while this client is subscribed
+            while isinstance(frame := await ws.recv(), str):
+                pass
+            return json.loads(frame[13:])
+    last = asyncio.run(client())   # then the client leaves
+    assert last["message"] == END_MESSAGE and last["name"] == "sea-hil"
+    closer.join(timeout=60)
+    assert not closer.is_alive()   # returned once the client had gone, not after linger_s
