@@ -118,7 +118,7 @@ def test_a_taken_port_is_a_clear_error():
             LiveServer(LiveConfig(port=s.getsockname()[1]))
 
 
-def test_non_finite_values_are_rejected_and_counted():
+def test_non_finite_values_are_sent_as_null_and_bad_messages_counted():
     from sea_hil.live.server import LiveServer
     from sea_hil.live.view import LiveMessage
     notices = []
@@ -126,8 +126,9 @@ def test_non_finite_values_are_rejected_and_counted():
     try:
         assert notices[0]["event"] == "listening" and notices[0]["port"] == srv.port > 0
         srv.publish(LiveMessage("/live/bus", 1, {"load_pct": math.nan}))
-        srv.publish(LiveMessage("/live/bus", 2, {"load_pct": 1.0}))
-        assert (srv.rejected, srv.published) == (1, 1)
+        srv.publish(LiveMessage("/live/bus", 2, {"load_pct": object()}))
+        srv.publish(LiveMessage("/live/nowhere", 3, {}))
+        assert (srv.published, srv.nonfinite, srv.rejected) == (1, 1, 2)
     finally:
         srv.close()
 

@@ -5,12 +5,14 @@ own, with one JSON channel per `sea_hil.live.channels` topic; `publish(LiveMessa
 (the SDK drops it when nobody subscribes); `close` ends with `END_MESSAGE` on
 `/live/events` and lingers until the clients have unsubscribed. `notify(dict)` receives `{"event": "listening", "url", "port"}` once the
 server listens and `{"event": "subscribed", "topic"}` on each subscription (how `--foxglove-wait` learns that a
-client is there). Messages that cannot be encoded are counted in `rejected` and logged, never raised.
+client is there). Non-finite numbers are sent as null (as recorded, counted in `nonfinite`); messages that cannot
+be encoded are counted in `rejected` and logged, never raised.
 """
 from __future__ import annotations
 
 import json
 import logging
+import math
 import threading
 from collections.abc import Callable
 from typing import Any
@@ -57,6 +59,16 @@ class _Listener:
             return self.cond.wait_for(lambda: self.active <= 0, timeout=timeout_s)
 
 
+def _finite(obj: Any) -> Any:
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if isinstance(obj, dict):
+        return {k: _finite(v) for k, v in obj.items()}
+    if isinstance(obj, list):
+        return [_finite(v) for v in obj]
+    return obj
+
+
 class LiveServer:
     def __init__(self, cfg: LiveConfig, notify: Notify = lambda _msg: None, name: str = "sea-hil") -> None:
         self.context = foxglove.Context()
@@ -72,7 +84,7 @@ class LiveServer:
             raise LiveError(f"cannot serve the Foxglove live view on {cfg.host}:{cfg.port}: {err}") from err
         self.port = self.server.port
         self.url = f"ws://{cfg.host}:{self.port}"
-        self.published = self.rejected = self.last_log_time_ns = 0
+        self.published = self.rejected = self.nonfinite = self.last_log_time_ns = 0
         notify({"event": "listening", "url": self.url, "port": self.port})
         log.info("Foxglove live view on %s", self.url)
 
@@ -81,17 +93,21 @@ class LiveServer:
         try:
             if ch is None:
                 raise ValueError(f"unknown live topic {msg.topic!r}")
-            data = json.dumps(msg.message, allow_nan=False).encode()
+            try:
+                data = json.dumps(msg.message, allow_nan=False).encode()
+            except ValueError:   # NaN/inf: null, as in the recording (sea_hil.recorder.meta.encode_payload)
+                self.nonfinite += 1
+                data = json.dumps(_finite(msg.message), allow_nan=False).encode()
             ch.log(data, log_time=msg.log_time_ns)
             self.published += 1
             self.last_log_time_ns = max(self.last_log_time_ns, msg.log_time_ns)
-        except (ValueError, TypeError) as err:   # NaN/inf, unknown topic: count, keep serving
+        except (ValueError, TypeError) as err:   # unknown topic, not JSON-encodable: count, keep serving
             self.rejected += 1
             if self.rejected <= 10:
                 log.warning("live message on %s not published: %s", msg.topic, err)
 
     def counters(self) -> dict[str, int]:
-        return {"live_published": self.published, "live_rejected": self.rejected,
+        return {"live_published": self.published, "live_rejected": self.rejected, "live_nonfinite": self.nonfinite,
                 "live_subscriptions": self.listener.subscriptions}
 
     def close(self, linger_s: float = 0.0) -> None:
