@@ -1,4 +1,4 @@
-"""A 1,000-point offline sweep with delay, jitter and loss (figure 8): wall time of `sea-hil sweep --engine offline`.
+"""A 1,000-point offline sweep with delay, jitter and loss (figure 9): wall time of `sea-hil sweep --engine offline`.
 
 Run: python bench/bench_sweep.py [--runs 1] [--jobs N] [--quick] [--json OUT]
 The grid: eta 0.2,0.3,0.5,0.8,1.2 x r 0.05,0.1,0.2 (15 ET points + 1 TT reference per link condition) x delay
@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"run {i + 1}: {n} points ({ok} ok) in {wall_s:.1f} s wall, {n / wall_s:.1f} points/s, "
               f"{args.jobs} worker processes", flush=True)
     worst = max(walls)
-    rec = record("8", f"offline sweep of {details[0]['points']} points with delay, jitter and loss", runs=args.runs,
+    rec = record("9", f"offline sweep of {details[0]['points']} points with delay, jitter and loss", runs=args.runs,
                  metric="wall_s", unit="s", per_run=walls, p99=worst, goal=f"< {GOAL_S:.0f} s for 1,000 points",
                  goal_met=(not args.quick) and worst < GOAL_S,
                  notes="whole command: start-up, local Dask cluster, numba load per worker, all points, CSV, figure",

@@ -29,6 +29,9 @@ LEVERS = {
     "6": "Every limb adds a 1 kHz edge thread and 4 CAN frames per ms that the python-can virtual bus deep-copies "
          "to every bus handle (cost grows ~N^2), all under one GIL. Next levers: one edge thread serving all node "
          "ids, a process per limb, SocketCAN with kernel filters.",
+    "8": "The live view itself runs in the SCHED_IDLE recorder process (8d: its own CPU per simulated second); "
+         "what remains on the nodes' cores is the watching client and the pipe to the recorder. Next levers: watch "
+         "from another host (`--foxglove-host`), or send /live/tracking at a lower rate.",
     "7": "The recorder's JSON encoding and validation run in Python on the submitting thread. Next lever: a binary "
          "(e.g. protobuf/flatbuffer) channel encoding for /can/raw, or batching CAN frames per sample.",
 }

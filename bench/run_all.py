@@ -35,7 +35,8 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_bandwidth", "5", ["--runs", "3"], ["--quick"], 55),
     ("bench_scale", "6", ["--duration", "10"], ["--quick"], 90),
     ("bench_mcap", "7", ["--runs", "3"], ["--quick"], 30),
-    ("bench_sweep", "8", ["--runs", "1"], ["--quick"], 60),
+    ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
+    ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
 ]
 
 

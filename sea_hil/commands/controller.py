@@ -5,6 +5,7 @@ import argparse
 import signal
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.live.cli import add_live_args, live_overrides
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,6 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lockstep", action="store_true")
     p.add_argument("--timeout", type=float, default=None, help="give up after this many seconds without finishing")
     add_zenoh_args(p)
+    add_live_args(p, node=True)
     add_config_args(p)
     p.set_defaults(func=_main)
 
@@ -24,8 +26,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     from sea_hil.controller.remote import RemoteController
     from sea_hil.protocol.zsession import open_session
-    cfg = config_from_args(args)
+    from sea_hil.live.child import start_live_child
+    cfg = config_from_args(args, live_overrides(args))
     session = open_session(cfg.zenoh)
+    start_live_child(args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view, ended at exit
     node = RemoteController(cfg, session, args.controller, inner=args.inner, lockstep=args.lockstep,
                             cycles=args.cycles)
     signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())

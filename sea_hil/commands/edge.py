@@ -5,6 +5,7 @@ import argparse
 import signal
 
 from sea_hil.commands.common import add_config_args, add_link_args, add_zenoh_args, config_from_args
+from sea_hil.live.cli import add_live_args, live_overrides
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -15,6 +16,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--lockstep", action="store_true")
     add_zenoh_args(p)
     add_link_args(p)
+    add_live_args(p, node=True)
     add_config_args(p)
     p.set_defaults(func=_main)
 
@@ -23,8 +25,10 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.controller.edge import EdgeNode
     from sea_hil.protocol.canbus import open_bus
     from sea_hil.protocol.zsession import open_session
-    cfg = config_from_args(args)
+    from sea_hil.live.child import start_live_child
+    cfg = config_from_args(args, live_overrides(args))
     session = open_session(cfg.zenoh)
+    start_live_child(args, cfg, cfg.can.interface)   # --foxglove: a `sea-hil record` child serves the live view, ended at exit
     bus = None
     try:
         bus = open_bus(cfg.can.interface)

@@ -7,34 +7,49 @@ import threading
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.recorder.clock import TIME_BASES
 
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("record", help="record every Zenoh message (and CAN frame) of a session to MCAP")
-    p.add_argument("--out", type=Path, required=True, metavar="FILE.mcap")
+    p.add_argument("--out", type=Path, metavar="FILE.mcap", help="the recording (optional with --foxglove: live only)")
     p.add_argument("--can", metavar="SPEC", help="also record this CAN bus")
     p.add_argument("--duration", type=float, metavar="SECONDS", help="stop after this long (default: SIGINT/SIGTERM)")
     p.add_argument("--time-base", choices=TIME_BASES, default="wall",
                    help="MCAP log_time clock: wall (default) or the drive's sample time (for lockstep sessions)")
     add_zenoh_args(p)
+    add_live_args(p)
     add_config_args(p)
     p.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
+    import os
     import sys
+    from sea_hil.errors import ConfigError
     from sea_hil.protocol.canbus import open_bus
     from sea_hil.recorder.node import RecorderNode
     from sea_hil.recorder.writer import SessionRecorder
     from sea_hil.protocol.zsession import open_session
-    cfg = config_from_args(args)
+    from sea_hil.live.child import live_child_overrides
+    # started by `edge`/`controller --foxglove`: a Zenoh client of that node, ended with it
+    cfg = config_from_args(args, live_overrides(args, live_child_overrides()))
+    if args.out is None and not cfg.live.enabled:
+        raise ConfigError("record needs --out FILE.mcap (or --foxglove for a live view without a file)")
+    out = args.out if args.out is not None else Path(os.devnull)
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())
     session = open_session(cfg.zenoh)
     bus = open_bus(args.can) if args.can else None
-    rec = SessionRecorder.from_config(args.out, cfg.record)
+    if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
+        from sea_hil.live.link import await_live
+        from sea_hil.recorder.process import RecorderProcess
+        rec = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base, live=(cfg.live, cfg.can.bitrate_bps))
+        await_live(rec.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
+    else:
+        rec = SessionRecorder.from_config(out, cfg.record)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
     node = RecorderNode(rec, session, cfg.zenoh.prefix, bus, time_base=args.time_base)
     node.start()

@@ -6,6 +6,7 @@ import sys
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_link_args, config_from_args
+from sea_hil.live.cli import add_live_args, live_overrides
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,6 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_link_args(p)
+    add_live_args(p)
     add_config_args(p)
     p.set_defaults(func=_main)
 
@@ -37,7 +39,7 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.errors import ConfigError
     if args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
-    cfg = config_from_args(args)
+    cfg = config_from_args(args, live_overrides(args))
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed)

@@ -9,12 +9,13 @@ from __future__ import annotations
 from sea_hil.config.base import Pair
 from sea_hil.config.comms import (CanConfig, LinkConfig, LinkDirectionConfig, RecordConfig, ZenohAclConfig, ZenohConfig,
                                   ZenohTlsConfig)
+from sea_hil.config.live import LiveConfig
 from sea_hil.config.loader import config_from_dict, config_to_toml, default_toml_text, load_config
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
 from sea_hil.config.root import SeaHilConfig
 
-__all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "LinkConfig", "LinkDirectionConfig", "Pair",
+__all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "LinkConfig", "LinkDirectionConfig", "LiveConfig", "Pair",
            "PlantConfig", "RecordConfig", "SeaHilConfig", "SimConfig", "TrajectoryConfig", "TriggerConfig",
            "ZenohAclConfig", "ZenohConfig", "ZenohTlsConfig", "config_from_dict", "config_to_toml",
            "default_toml_text", "load_config"]

@@ -7,6 +7,7 @@ from pydantic import field_validator
 
 from sea_hil.config.base import _Frozen
 from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfig
+from sea_hil.config.live import LiveConfig
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
 
@@ -22,6 +23,7 @@ class SeaHilConfig(_Frozen):
     zenoh: ZenohConfig = ZenohConfig()
     link: LinkConfig = LinkConfig()
     record: RecordConfig = RecordConfig()
+    live: LiveConfig = LiveConfig()
 
     @field_validator("plant")
     @classmethod

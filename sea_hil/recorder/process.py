@@ -19,15 +19,19 @@ import subprocess
 import sys
 import threading
 from collections.abc import Mapping
-from typing import Any, BinaryIO
+from typing import TYPE_CHECKING, Any, BinaryIO
 
-from sea_hil.config import RecordConfig, SeaHilConfig
+from sea_hil.config import LiveConfig, RecordConfig, SeaHilConfig
 from sea_hil.errors import RecordingError
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
 from sea_hil.recorder.meta import write_session_header
 from sea_hil.recorder.schemas import validate_payload
+from sea_hil.live.link import live_child_argv
+
+if TYPE_CHECKING:
+    from sea_hil.live.feed import LiveFeed
 
 log = logging.getLogger("sea_hil.record")
 _LEN = struct.Struct("<I")
@@ -39,13 +43,19 @@ class RecorderProcess:
 
     def __init__(self, path: str | os.PathLike[str], cfg: RecordConfig, *, batch_ops: int = 512,
                  close_timeout_s: float = 300.0, nice: int = 10, idle: bool = False,
-                 time_base: TimeBase = "wall") -> None:
+                 time_base: TimeBase = "wall", live: tuple[LiveConfig, int] | None = None) -> None:
+        """`live` = (live config, CAN bitrate): the child also serves the live view (`sea_hil.live`), and
+        `self.live` is the parent's end of its notice pipe."""
         self.path = os.fspath(path)
         self.batch_ops = batch_ops
         self.close_timeout_s = close_timeout_s
+        argv, self.live = live_child_argv(live)
         self._proc = subprocess.Popen([sys.executable, "-m", "sea_hil.recorder.process", self.path,
-                                       cfg.model_dump_json(), str(nice), str(int(idle)), check_time_base(time_base)],
-                                      stdin=subprocess.PIPE)
+                                       cfg.model_dump_json(), str(nice), str(int(idle)), check_time_base(time_base),
+                                       *argv], stdin=subprocess.PIPE,
+                                      pass_fds=() if self.live is None else (self.live.write_fd,))
+        if self.live is not None:
+            self.live.child_started()
         self._lock = threading.Lock()
         self._pending: list[tuple[Any, ...]] = []
         self._closed = False
@@ -98,6 +108,8 @@ class RecorderProcess:
                 pass
         try:
             code = self._proc.wait(timeout=self.close_timeout_s)
+            if self.live is not None:
+                self.live.close()
         except subprocess.TimeoutExpired:
             self._proc.kill()
             self._proc.wait()
@@ -138,23 +150,28 @@ class RecorderProcess:
             log.error("recorder process pipe: %s", err)
 
 
-def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]]) -> bool:
-    """Apply one batch in the child; True when the batch closed the recording."""
+def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: LiveFeed | None = None) -> bool:
+    """Apply one batch in the child; True when the batch closed the recording. `live` sees what was written."""
     for op in ops:
         kind = op[0]
         try:
             if kind == CAN:
                 frame: RawFrame = op[1]
-                for r in tap.records(frame):
+                for r in tap.records(frame):    # (topic, log time, publish time, payload, sequence)
                     rec.record(*r)
+                    if live is not None:
+                        live.feed(r[0], r[1], r[3])
             elif kind == RECORD:
                 rec.record(*op[1:])
+                if live is not None:
+                    live.feed(op[1], op[2], op[4])
             elif kind == METADATA:
                 rec.add_metadata(*op[1:])
             elif kind == ATTACHMENT:
                 rec.add_attachment(*op[1:])
             elif kind == CLOSE:
-                rec.close(final_stats={**op[1], **tap.counters()})  # the child's CAN counts are authoritative
+                live_counts = live.counters() if live is not None else {}
+                rec.close(final_stats={**op[1], **tap.counters(), **live_counts})  # the child's CAN counts rule
                 return True
         except RecordingError as err:   # one bad message: counted in the file's final metadata, keep going
             rec.write_errors += 1
@@ -175,31 +192,41 @@ def _idle_policy() -> None:
 
 
 def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: bool = False,
-               time_base: TimeBase = "wall") -> int:
+               time_base: TimeBase = "wall", live_json: str | None = None) -> int:
     """The child: apply batches from `stream` until CLOSE; end of stream without CLOSE still finalises the file.
     `nice` > 0 lowers its CPU priority: recording is background work that must not delay the nodes. `idle` (real-time
     sessions) also asks for Linux's SCHED_IDLE policy, so it runs only on otherwise idle CPU time: with nice 10 alone
     its decoding bursts still took a core from the 1 kHz nodes (closed-loop latency p99 7.3-9.3 ms; with SCHED_IDLE
     1.2-2.6 ms). Lockstep keeps nice alone: there the nodes keep the CPUs busy and an idle-policy recorder would only
-    catch up at the end (5.1 s instead of ~4 s per cycle)."""
+    catch up at the end (5.1 s instead of ~4 s per cycle). `live_json` (a `LiveSpec`): also serve the live view
+    from here, on the same low priority, off the nodes' processes."""
     if nice > 0:
         os.nice(nice)
     if idle:
         _idle_policy()
     rec = SessionRecorder.from_config(path, RecordConfig.model_validate_json(cfg_json))
     tap = CanTap(time_base=time_base)
-    while (head := _read_exact(stream, _LEN.size)) is not None:
-        blob = _read_exact(stream, _LEN.unpack(head)[0])
-        if blob is None:
-            break
-        if _apply(rec, tap, pickle.loads(blob)):
-            return 0
-    rec.closed_by = "eof"   # the parent went away without closing: finalise what arrived
-    rec.close(final_stats=tap.counters())
-    return 0
+    live = None
+    if live_json is not None:
+        from sea_hil.live.feed import start_live_feed   # the SDK is imported only when asked for
+        live = start_live_feed(live_json)
+    try:
+        while (head := _read_exact(stream, _LEN.size)) is not None:
+            blob = _read_exact(stream, _LEN.unpack(head)[0])
+            if blob is None:
+                break
+            if _apply(rec, tap, pickle.loads(blob), live):
+                return 0
+        rec.closed_by = "eof"   # the parent went away without closing: finalise what arrived
+        rec.close(final_stats=tap.counters())
+        return 0
+    finally:
+        if live is not None:
+            live.close()
 
 
 if __name__ == "__main__":
     sys.exit(child_main(sys.argv[1], sys.argv[2], sys.stdin.buffer, int(sys.argv[3]) if len(sys.argv) > 3 else 0,
                         len(sys.argv) > 4 and sys.argv[4] == "1",
-                        check_time_base(sys.argv[5]) if len(sys.argv) > 5 else "wall"))
+                        check_time_base(sys.argv[5]) if len(sys.argv) > 5 else "wall",
+                        sys.argv[6] if len(sys.argv) > 6 else None))

@@ -21,6 +21,7 @@ from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.errors import SeaHilError
+from sea_hil.live.link import await_live
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
@@ -55,7 +56,9 @@ def _controller_cmd(opts: RunOptions, cfg_path: Path, endpoint: str) -> list[str
 def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] = print) -> dict[str, Any]:
     opts.out.mkdir(parents=True, exist_ok=True)
     cfg_path = opts.out / "config.toml"
-    cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
+    # the live view is served from this process's recorder: the controller started from this file must not
+    cfg_path.write_text(config_to_toml(cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})),
+                        encoding="utf-8")
     endpoint = opts.listen[0] if opts.listen else f"tcp/127.0.0.1:{free_tcp_port()}"
     spec = opts.can or cfg.can.interface
     session = open_session(make_config(listen=[endpoint, *opts.listen[1:]]))
@@ -84,10 +87,18 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
-    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base)
+    rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
+                          live=(cfg.live, cfg.can.bitrate_bps) if cfg.live.enabled else None)
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})
+    try:   # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
+        waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
+    except BaseException:
+        rec.close()
+        for b in buses:
+            b.shutdown()
+        raise
     recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002, time_base=time_base)
     plant = PlantNode(cfg, buses[0], (opts.node_id,), lockstep=opts.lockstep)
     edge = EdgeNode(cfg, buses[1], session, opts.node_id, inner=opts.inner, lockstep=opts.lockstep)
@@ -97,7 +108,7 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     for t in threads:
         t.start()
     period_s = cfg.trajectory.period_s
-    budget_s = 60.0 + 3.0 * period_s * opts.cycles
+    budget_s = 60.0 + 3.0 * period_s * opts.cycles + waited_s
     try:
         while True:
             try:

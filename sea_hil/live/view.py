@@ -1,0 +1,163 @@
+"""The live view's pure core: recorded messages in, live messages out (no clock, no I/O, no SDK).
+
+`LiveView.feed(topic, log_time_ns, payload)` takes exactly what the recorder writes to MCAP (`/tracking`,
+`/zenoh/state`, `/zenoh/setpoint`, `/zenoh/voltage`, `/can/raw`, `/stats`; other topics are ignored) and returns the
+`LiveMessage`s to publish (`sea_hil.live.channels`). A live message's log time is the log time of the recorded
+message it comes from, so live values and times match the recording. Link and bus statistics are emitted every
+`period_s` of log time (and once more by `finish`).
+"""
+from __future__ import annotations
+
+from typing import Any, NamedTuple
+
+from sea_hil.errors import MalformedFrame
+from sea_hil.live.events import DriverWatch, event_log
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
+from sea_hil.protocol.payloads import TriggerReason
+from sea_hil.stats.histogram import LogHistogram
+from sea_hil.stats.session import BusLoad, SlidingRate, StreamStats
+
+NS_PER_S = 1_000_000_000
+RTT_STATES_KEPT = 4096   # states remembered for matching their setpoint (the controller answers within a few)
+_REASON_CODES = {r.name: int(r) for r in TriggerReason}
+
+
+class LiveMessage(NamedTuple):
+    topic: str
+    log_time_ns: int
+    message: dict[str, Any]
+
+
+def _sub(a: Any, b: Any) -> float | None:
+    return a - b if isinstance(a, (int, float)) and isinstance(b, (int, float)) else None
+
+
+class LiveView:
+    """Derives the live channels from the recorded stream. One owner (not thread-safe)."""
+
+    def __init__(self, *, bitrate_bps: int, period_s: float = 0.1, window_s: float = 1.0) -> None:
+        self.period_ns = int(period_s * NS_PER_S)
+        self.window_s = window_s
+        self.up = StreamStats("state", "up", window_s=window_s)
+        self.down = StreamStats("setpoint", "down", window_s=window_s)
+        self.bus = BusLoad(bitrate_bps, window_s)
+        self._frame_rate = SlidingRate(window_s)
+        self.rtt = LogHistogram(1e-6, 100.0)
+        self.rtt_last_s: float | None = None
+        self.ignored = 0
+        self._state_rx: dict[int, int] = {}
+        self._codec = SeaCodec()
+        self._heartbeat_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
+        self._driver = DriverWatch()
+        self._now_ns: int | None = None
+        self._next_stats_ns: int | None = None
+
+    # -- input ---------------------------------------------------------------------------------------------------
+    def feed(self, topic: str, log_time_ns: int, payload: dict[str, Any]) -> list[LiveMessage]:
+        """The live messages caused by one recorded message (possibly none)."""
+        handler = self._HANDLERS.get(topic)
+        if handler is None:
+            return []
+        out = handler(self, log_time_ns, payload)
+        self._now_ns = log_time_ns if self._now_ns is None else max(self._now_ns, log_time_ns)
+        if self._next_stats_ns is None:
+            self._next_stats_ns = self._now_ns + self.period_ns
+        elif self._now_ns >= self._next_stats_ns:
+            out.extend(self.statistics())
+            self._next_stats_ns += self.period_ns * max(1, (self._now_ns - self._next_stats_ns) // self.period_ns + 1)
+        return out
+
+    def finish(self) -> list[LiveMessage]:
+        """The last statistics (at the end of the stream)."""
+        return self.statistics() if self._now_ns is not None else []
+
+    # -- per topic -----------------------------------------------------------------------------------------------
+    def _tracking(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        th1, th2, d1, d2 = (p.get(k) for k in ("theta1_rad", "theta2_rad", "theta1_d_rad", "theta2_d_rad"))
+        msg = {"t_s": p.get("t_s"), "state_seq": int(p.get("state_seq", -1)), "theta1_rad": th1, "theta2_rad": th2,
+               "theta1_d_rad": d1, "theta2_d_rad": d2, "e1_rad": _sub(d1, th1), "e2_rad": _sub(d2, th2),
+               "event": bool(p.get("event", False)), "reason": str(p.get("reason", ""))}
+        return [LiveMessage("/live/tracking", t_ns, msg)]
+
+    def _state(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        self.up.add(t_ns, int(p.get("payload_bytes", 0)))
+        seq = p.get("seq")
+        if isinstance(seq, int):
+            self._state_rx[seq] = t_ns
+            if len(self._state_rx) > RTT_STATES_KEPT:
+                del self._state_rx[next(iter(self._state_rx))]
+        return []
+
+    def _setpoint(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        self.down.add(t_ns, int(p.get("payload_bytes", 0)))
+        self._round_trip(t_ns, p.get("state_seq"))
+        reason = str(p.get("reason", ""))
+        msg = {"seq": int(p.get("seq", -1)), "state_seq": int(p.get("state_seq", -1)),
+               "delta1_ref_m": p.get("delta1_ref_m"), "delta2_ref_m": p.get("delta2_ref_m"), "s1": p.get("s1"),
+               "s2": p.get("s2"), "reason": reason, "reason_code": _REASON_CODES.get(reason, -1)}
+        out = [LiveMessage("/live/setpoint", t_ns, msg)]
+        log = event_log(t_ns, msg)
+        return out + ([LiveMessage("/live/events", t_ns, log)] if log is not None else [])
+
+    def _voltage(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        self.down.add(t_ns, int(p.get("payload_bytes", 0)))
+        self._round_trip(t_ns, p.get("state_seq"))
+        return []
+
+    def _can(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        can_id, dlc, ext = p.get("can_id"), p.get("dlc"), bool(p.get("is_extended", False))
+        if not isinstance(can_id, int) or not isinstance(dlc, int):
+            self.ignored += 1
+            return []
+        try:
+            self.bus.add_frame(t_ns, can_id, dlc, ext)
+            self._frame_rate.add(t_ns)
+        except MalformedFrame:
+            self.ignored += 1
+            return []
+        if ext or can_id & CMD_MASK != self._heartbeat_cmd:
+            return []
+        try:
+            hb = self._codec.decode_raw(can_id, bytes.fromhex(str(p.get("data_hex", ""))), dlc)
+        except (MalformedFrame, ValueError):
+            self.ignored += 1   # a malformed heartbeat: the recording keeps it in /can/raw
+            return []
+        if not isinstance(hb, Heartbeat):
+            return []
+        msg, logs = self._driver.on_heartbeat(t_ns, hb)
+        return [LiveMessage("/live/driver", t_ns, msg), *(LiveMessage("/live/events", t_ns, m) for m in logs)]
+
+    def _stats(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        flat = {k: v for k, v in p.items() if isinstance(v, (int, float, bool))}
+        return [LiveMessage("/live/node_stats", t_ns, flat)]
+
+    _HANDLERS = {"/tracking": _tracking, "/zenoh/state": _state, "/zenoh/setpoint": _setpoint,
+                 "/zenoh/voltage": _voltage, "/can/raw": _can, "/stats": _stats}
+
+    # -- statistics ----------------------------------------------------------------------------------------------
+    def _round_trip(self, t_ns: int, state_seq: Any) -> None:
+        sent = self._state_rx.get(state_seq) if isinstance(state_seq, int) else None
+        if sent is not None and t_ns >= sent:
+            self.rtt_last_s = (t_ns - sent) / NS_PER_S
+            self.rtt.record(self.rtt_last_s)
+
+    def statistics(self) -> list[LiveMessage]:
+        """`/live/link` and `/live/bus` at the latest log time seen."""
+        now = self._now_ns
+        if now is None:
+            return []
+        link: dict[str, Any] = {"window_s": self.window_s, "rtt_count": self.rtt.count}
+        for name, s in (("up", self.up), ("down", self.down)):
+            d = s.to_dict(now)
+            link.update({f"{name}_msgs_per_s": d["msgs_per_s"], f"{name}_bytes_per_s": d["wire_bytes_per_s"],
+                         f"{name}_msgs": d["messages"], f"{name}_bytes": d["wire_bytes"]})
+        h = self.rtt.to_dict()
+        link["rtt_last_us"] = None if self.rtt_last_s is None else self.rtt_last_s * 1e6
+        for q in ("p50", "p90", "p99", "max"):
+            v = h[q]
+            link[f"rtt_{q}_us"] = None if v is None else float(v) * 1e6
+        b = self.bus
+        bus = {"frames": b.frames, "frames_per_s": self._frame_rate.rates(now)[0], "load_pct": b.window_load_pct(now),
+               "load_pct_session": b.session_load_pct(now), "bitrate_bps": b.bitrate_bps, "window_s": self.window_s}
+        return [LiveMessage("/live/link", now, link), LiveMessage("/live/bus", now, bus)]

@@ -1,0 +1,182 @@
+"""The live view's pure core, its options, its layout and its server's errors (fast; the session-level acceptance
+test is tests/test_live.py)."""
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import socket
+from pathlib import Path
+
+import pytest
+
+from sea_hil.config import LiveConfig, load_config
+from sea_hil.live import layout
+from sea_hil.live.channels import CHANNELS, LOG_LEVELS
+from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.live.view import LiveView
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+
+REPO = Path(__file__).resolve().parent.parent
+MS = 1_000_000
+
+
+def _raw(msg) -> dict:
+    return {"can_id": msg.arbitration_id, "dlc": msg.dlc, "data_hex": bytes(msg.data).hex(), "direction": "rx",
+            "is_extended": False, "node_id": msg.arbitration_id >> 5}
+
+
+def _heartbeat(state: DriverState, flags: ErrorFlags = ErrorFlags(0), seq: int = 0) -> dict:
+    return _raw(SeaCodec().encode(Heartbeat(1, state, flags, 3, 0, seq)))
+
+
+def test_tracking_errors_and_statistics_on_log_time():
+    v = LiveView(bitrate_bps=1_000_000, period_s=0.1, window_s=1.0)
+    out = v.feed("/tracking", 5 * MS, {"t_s": 0.0, "state_seq": 7, "theta1_rad": 0.1, "theta2_rad": 0.2,
+                                       "theta1_d_rad": 0.15, "theta2_d_rad": None, "event": True, "reason": "INITIAL"})
+    (msg,) = out
+    assert msg.topic == "/live/tracking" and msg.log_time_ns == 5 * MS
+    assert msg.message["e1_rad"] == pytest.approx(0.05) and msg.message["e2_rad"] is None
+    for i in range(10):   # states every 10 ms, each answered 2 ms later
+        t = 10 * MS * (i + 1)
+        assert v.feed("/zenoh/state", t, {"seq": i, "payload_bytes": 88}) == []
+        v.feed("/zenoh/setpoint", t + 2 * MS, {"seq": i, "state_seq": i, "payload_bytes": 53, "reason": "TIME",
+                                               "delta1_ref_m": 0.0, "delta2_ref_m": 0.0, "s1": 0.0, "s2": 0.0})
+    stats = {m.topic: m.message for m in v.finish()}
+    link = stats["/live/link"]
+    assert (link["up_msgs"], link["up_bytes"], link["down_msgs"], link["down_bytes"]) == (10, 880, 10, 530)
+    assert link["rtt_count"] == 10 and link["rtt_p50_us"] == pytest.approx(2000, rel=0.02)
+    assert link["up_msgs_per_s"] == pytest.approx(10 / 0.092)   # 10 states from 10 ms to now = 102 ms
+
+
+def test_statistics_are_emitted_every_period_of_log_time():
+    v = LiveView(bitrate_bps=1_000_000, period_s=0.1)
+    topics = [m.topic for t in range(0, 1000 * MS, MS) for m in v.feed("/can/raw", t, _raw(
+        SeaCodec().encode(Heartbeat(1, DriverState.RUNNING, ErrorFlags(0), 0, 0, 0))) if t == 0 else
+        {"can_id": 35, "dlc": 8, "data_hex": "00" * 8, "is_extended": False})]
+    assert topics.count("/live/bus") == topics.count("/live/link") == 9   # at 100, 200, ... 900 ms
+    assert v.bus.frames == 1000
+
+
+def test_driver_state_changes_and_faults_are_logged():
+    v = LiveView(bitrate_bps=1_000_000)
+    logs = []
+    for i, (state, flags) in enumerate([(DriverState.INIT, ErrorFlags(0)), (DriverState.RUNNING, ErrorFlags(0)),
+                                        (DriverState.RUNNING, ErrorFlags(0)),
+                                        (DriverState.FAULT, ErrorFlags.WATCHDOG | ErrorFlags.OVERRUN)]):
+        out = v.feed("/can/raw", i * 100 * MS, _heartbeat(state, flags, i))
+        assert [m.topic for m in out][0] == "/live/driver"
+        logs += [m.message for m in out if m.topic == "/live/events"]
+    assert [(m["level"], m["message"]) for m in logs] == [
+        (LOG_LEVELS["INFO"], "state INIT"), (LOG_LEVELS["INFO"], "state RUNNING (was INIT)"),
+        (LOG_LEVELS["ERROR"], "state FAULT (was RUNNING)"),
+        (LOG_LEVELS["WARNING"], "error flags set: WATCHDOG, OVERRUN (rejected 3, overruns 0)")]
+    assert logs[-1]["timestamp"] == {"sec": 0, "nsec": 300 * MS}
+
+
+def test_bad_input_is_counted_not_raised():
+    v = LiveView(bitrate_bps=1_000_000)
+    assert v.feed("/can/raw", 1, {"can_id": "x"}) == []
+    assert v.feed("/can/raw", 2, {"can_id": 39 | 32, "dlc": 7, "data_hex": "zz"}) == []   # a heartbeat id, no hex
+    assert v.feed("/can/raw", 3, {"can_id": 33, "dlc": 99}) == []
+    assert v.ignored == 3
+    assert v.feed("/unknown", 4, {}) == []
+
+
+def test_options_enable_the_view_and_keep_the_config_port():
+    p = argparse.ArgumentParser()
+    add_live_args(p)
+    assert live_overrides(p.parse_args([])) == {}
+    cfg = load_config(overrides=live_overrides(p.parse_args(["--foxglove"])))
+    assert cfg.live.enabled and cfg.live.port == 8765 and cfg.live.host == "127.0.0.1"
+    cfg = load_config(overrides=live_overrides(p.parse_args(["--foxglove", "0", "--foxglove-host", "0.0.0.0",
+                                                             "--foxglove-wait"])))
+    assert (cfg.live.port, cfg.live.host, cfg.live.wait) == (0, "0.0.0.0", True)
+    with pytest.raises(SystemExit):
+        p.parse_args(["--foxglove", "70000"])
+
+
+def test_shipped_layout_is_generated_and_reads_only_live_fields():
+    shipped = (REPO / "docs" / "foxglove" / "sea-hil-layout.json").read_text(encoding="utf-8")
+    assert shipped == layout.text()
+    paths = layout.message_paths(json.loads(shipped))
+    assert {p.split(".")[0] for p in paths} >= {"/live/tracking", "/live/events", "/live/link", "/live/bus"}
+    for path in paths:
+        topic, _, field = path.partition(".")
+        assert topic in CHANNELS, path
+        if field:
+            assert field in CHANNELS[topic][1]["properties"], path
+
+
+def test_a_taken_port_is_a_clear_error():
+    from sea_hil.live.server import LiveError, LiveServer
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        with pytest.raises(LiveError, match="cannot serve the Foxglove live view on 127.0.0.1:"):
+            LiveServer(LiveConfig(port=s.getsockname()[1]))
+
+
+def test_non_finite_values_are_sent_as_null_and_bad_messages_counted():
+    from sea_hil.live.server import LiveServer
+    from sea_hil.live.view import LiveMessage
+    notices = []
+    srv = LiveServer(LiveConfig(port=0), notices.append)
+    try:
+        assert notices[0]["event"] == "listening" and notices[0]["port"] == srv.port > 0
+        srv.publish(LiveMessage("/live/bus", 1, {"load_pct": math.nan}))
+        srv.publish(LiveMessage("/live/bus", 2, {"load_pct": object()}))
+        srv.publish(LiveMessage("/live/nowhere", 3, {}))
+        assert (srv.published, srv.nonfinite, srv.rejected) == (1, 1, 2)
+    finally:
+        srv.close()
+
+
+def test_a_node_serves_through_a_record_child_on_its_own_zenoh_network():
+    from sea_hil.live.child import reachable, record_cmd
+    from sea_hil.errors import ConfigError
+    assert reachable("tcp/0.0.0.0:7447") == "tcp/127.0.0.1:7447"
+    assert reachable("tcp/10.0.0.2:7447") == "tcp/10.0.0.2:7447"
+    args = argparse.Namespace(config="x.toml", foxglove_record=None)
+    cfg = load_config(overrides={"live": {"enabled": True, "port": 9000, "wait": True},
+                                 "zenoh": {"connect": ["tcp/10.0.0.2:7447"], "listen": ["tcp/0.0.0.0:7448"]}})
+    cmd = record_cmd(args, cfg, "socketcan:vcan0")
+    assert cmd[cmd.index("record"):] == [
+        "record", "--foxglove", "9000", "--foxglove-host", "127.0.0.1", "--foxglove-wait", "--limb", "limb1",
+        "--connect", "tcp/127.0.0.1:7448", "--connect", "tcp/10.0.0.2:7447", "--can", "socketcan:vcan0",
+        "--config", "x.toml"]
+    assert "--can" not in record_cmd(args, cfg, "virtual:sea-hil")   # an in-process bus cannot be shared
+    with pytest.raises(ConfigError, match="needs --connect or --listen"):
+        record_cmd(args, load_config(overrides={"live": {"enabled": True}}), None)
+
+
+def test_close_sends_the_end_line_and_waits_for_the_clients_to_leave():
+    import asyncio
+    import threading
+    import websockets
+    from foxglove_ws_client import SUBPROTOCOLS
+    from sea_hil.live.channels import END_MESSAGE
+    from sea_hil.live.server import LiveServer
+    srv = LiveServer(LiveConfig(port=0))
+    closer = threading.Thread(target=srv.close, kwargs={"linger_s": 120.0})
+    subscribed = threading.Event()
+    srv.listener.notify = lambda msg: subscribed.set() if msg["event"] == "subscribed" else None
+
+    async def client() -> dict:
+        async with websockets.connect(f"ws://127.0.0.1:{srv.port}", subprotocols=SUBPROTOCOLS) as ws:
+            chans = {}
+            while "/live/events" not in chans:
+                msg = json.loads(await ws.recv())
+                chans.update({c["topic"]: c for c in msg.get("channels", [])})
+            await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
+                {"id": 1, "channelId": chans["/live/events"]["id"]}]}))
+            await asyncio.to_thread(subscribed.wait, 30)
+            closer.start()   # the session ends while this client is subscribed
+            while isinstance(frame := await ws.recv(), str):
+                pass
+            return json.loads(frame[13:])
+    last = asyncio.run(client())   # then the client leaves
+    assert last["message"] == END_MESSAGE and last["name"] == "sea-hil"
+    closer.join(timeout=60)
+    assert not closer.is_alive()   # returned once the client had gone, not after linger_s
