@@ -46,7 +46,8 @@ def _main(args: argparse.Namespace) -> int:
     if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
         from sea_hil.live.link import await_live
         from sea_hil.recorder.process import RecorderProcess
-        rec = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base, live=(cfg.live, cfg.can.bitrate_bps))
+        rec = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base,
+                              live=(cfg.live, cfg.can.bitrate_bps))
         await_live(rec.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
     else:
         rec = SessionRecorder.from_config(out, cfg.record)
