@@ -26,7 +26,7 @@ from typing import Any
 
 import zenoh
 
-from etsmc import Gait, LeadIn, Limb, Trigger, smc
+from etsmc import OuterLoop
 
 DEFAULT_LAYOUT = Path(__file__).resolve().parents[2] / "protocol" / "payloads.toml"
 U32 = 0xFFFF_FFFF
@@ -67,16 +67,8 @@ class Wire:
 class ExternalController:
     def __init__(self, cfg: dict[str, Any], wire: Wire, session: zenoh.Session, *, lockstep: bool, cycles: int,
                  mode: str) -> None:
-        self.cfg, self.wire, self.lockstep = cfg, wire, lockstep
-        cc = cfg["controller"]
-        self.c, self.rho, self.bl = cc["c"], cc["rho"], cc["boundary_layer"]
-        tr = cfg["trajectory"]
-        if tr["kind"] != "gait":
-            raise SystemExit(f"this example follows the built-in gait only, not trajectory.kind = {tr['kind']!r}")
-        self.limb, self.gait = Limb(cfg["plant"]), Gait(tr["period_s"])
-        self.trigger = Trigger(cfg["trigger"], self.c, mode)
-        self.lead_in_ns = int(round(tr["lead_in_s"] * 1e9))
-        self.duration_ns = int(round(tr["period_s"] * cycles * 1e9))
+        self.wire, self.lockstep = wire, lockstep
+        self.outer = OuterLoop(cfg, cycles, mode)
         base = f"{cfg['zenoh']['prefix']}/{cfg['zenoh']['limb']}"
         pub = dict(express=True, priority=zenoh.Priority.REAL_TIME, congestion_control=zenoh.CongestionControl.DROP)
         self.sp_pub = session.declare_publisher(f"{base}/setpoint", **pub)
@@ -88,8 +80,6 @@ class ExternalController:
         self._newest: bytes | None = None
         self._cond = threading.Condition()
         self.sub = session.declare_subscriber(f"{base}/state", self._on_state)
-        self.t0_ns: int | None = None
-        self.lead_in: LeadIn | None = None
         self.last_seq: int | None = None
         self.last_answer: tuple[int, list[tuple[Any, bytes]]] | None = None
         self.setpoint_seq = 0
@@ -142,27 +132,20 @@ class ExternalController:
             return
         self.last_seq = seq
         theta, omega = st["theta_rad"], st["omega_rad_s"]
-        if self.t0_ns is None:
-            self.t0_ns = st["sample_t_ns"] + self.lead_in_ns
-            if self.lead_in_ns:
-                self.lead_in = LeadIn(theta, omega, self.gait.sample(0.0), self.lead_in_ns * 1e-9)
-        t_ns = st["sample_t_ns"] - self.t0_ns
-        if t_ns > self.duration_ns:
+        try:
+            d = self.outer.step(st["sample_t_ns"], theta, omega)
+        except (ArithmeticError, ValueError):   # an absurd (finite) state: count it, answer nothing
+            self.counts["unusable"] += 1
+            return
+        if d is None:           # past the measured cycles: leave it unanswered, stop
             self.done = True
             return
-        des = self.lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self.lead_in else self.gait.sample(t_ns * 1e-9)
-        x = (theta[0] - des[0][0], theta[1] - des[0][1], omega[0] - des[1][0], omega[1] - des[1][1])
-        reason = self.trigger.update(t_ns, (*x, *des[0], *des[1]))
+        reason, des = d.reason, d.desired
         answer: list[tuple[Any, bytes]] = []
         if reason is not None:
-            try:
-                vx, s = smc(self.limb, theta, omega, des, self.c, self.rho, self.bl)
-            except (ArithmeticError, ValueError):   # an absurd (finite) state: count it, answer nothing
-                self.counts["unusable"] += 1
-                return
             self.setpoint_seq += 1
-            answer.append((self.sp_pub, self.wire.encode("SETPOINT", self.setpoint_seq, seq, *vx, *s,
-                                                          self.wire.reasons[reason])))
+            answer.append((self.sp_pub, self.wire.encode("SETPOINT", self.setpoint_seq, seq, *d.deflection_m,
+                                                          *d.sliding, self.wire.reasons[reason])))
         if self.lockstep:
             sent = reason is not None
             answer.append((self.ack_pub, self.wire.encode("ACK", seq, seq, self.setpoint_seq if sent else 0,
@@ -173,7 +156,7 @@ class ExternalController:
         self.counts["states"] += 1
         self.counts["setpoints"] = self.setpoint_seq
         self.event_pub.put(json.dumps({
-            "t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta[0], "theta2_rad": theta[1],
+            "t_s": d.t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta[0], "theta2_rad": theta[1],
             "theta1_d_rad": des[0][0], "theta2_d_rad": des[0][1], "event": reason is not None,
             "reason": reason or "", "setpoint_seq": self.setpoint_seq if reason is not None else 0}).encode())
 

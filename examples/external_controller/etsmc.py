@@ -8,7 +8,7 @@ Parameters come from the session's config TOML (`[plant]`, `[controller]`, `[tri
 from __future__ import annotations
 
 import math
-from typing import Any
+from typing import Any, NamedTuple
 
 Pair = tuple[float, float]
 
@@ -18,7 +18,7 @@ KNEE = (0.55, ((0.40, 1, -0.5 * math.pi - 0.5), (0.10, 2, 1.0)))
 
 
 class Limb:
-    """Nominal model of the 2-DOF limb from `[plant]`: SEA moment arms, mass matrix, N terms."""
+    """Nominal model of the 2-DOF limb from `[plant]`: SEA moment arms, mass matrix, N terms, f_x and g_x."""
 
     def __init__(self, plant: dict[str, Any]) -> None:
         d = [float(v) for v in plant["d_m"]]
@@ -37,15 +37,29 @@ class Limb:
         self.grav2 = m2 * r2 * g
         self.b1, self.b2 = plant["b1_nms"], plant["b2_nms"]
         self.k1, self.k2 = plant["k1_n_per_m"], plant["k2_n_per_m"]
+        self.nut_damping, self.voltage_limit = plant["nut_damping_per_s"], plant["voltage_limit_v"]
 
-    def moment_arms(self, q1: float, q2: float) -> Pair:
-        """a_i = dL_Si / dtheta_i of the cosine-rule SEA lengths (Eq. 1)."""
+    def geometry(self, q1: float, q2: float) -> tuple[float, float, float, float]:
+        """(a1, a2, a1', a2'): moment arms a_i = dL_Si / dtheta_i of the cosine-rule SEA lengths (Eq. 1) and their
+        derivatives d2L_Si / dtheta_i2."""
         b1 = 0.5 * math.pi - self.sigma1 + q1 - self.alpha1
         b2 = math.pi - self.sigma2 + q2 - self.alpha2
+        c1, s1, c2, s2 = math.cos(b1), math.sin(b1), math.cos(b2), math.sin(b2)
         k1, k2 = self.d3 * self.d4, self.d8 * self.d9
-        len1 = math.sqrt(self.d3 * self.d3 + self.d4 * self.d4 - 2.0 * k1 * math.cos(b1))
-        len2 = math.sqrt(self.d8 * self.d8 + self.d9 * self.d9 - 2.0 * k2 * math.cos(b2))
-        return k1 * math.sin(b1) / len1, k2 * math.sin(b2) / len2
+        len1 = math.sqrt(self.d3 * self.d3 + self.d4 * self.d4 - 2.0 * k1 * c1)
+        len2 = math.sqrt(self.d8 * self.d8 + self.d9 * self.d9 - 2.0 * k2 * c2)
+        a1, a2 = k1 * s1 / len1, k2 * s2 / len2
+        return a1, a2, (k1 * c1 - a1 * a1) / len1, (k2 * c2 - a2 * a2) / len2
+
+    def fx_gx(self, q1: float, q2: float, w1: float, w2: float, a1: float, a2: float
+              ) -> tuple[float, float, tuple[float, float, float, float]]:
+        """f_x = M^-1 N and g_x = M^-1 diag(-k1 a1, -k2 a2) (Eq. 8), g_x row-major."""
+        m11, m12, m22 = self.mass_matrix(q2)
+        n1, n2 = self.n_terms(q1, q2, w1, w2)
+        det = m11 * m22 - m12 * m12
+        f1, f2 = (m22 * n1 + m12 * n2) / det, (m12 * n1 + m11 * n2) / det
+        e1, e2 = -self.k1 * a1, -self.k2 * a2
+        return f1, f2, (m22 * e1 / det, m12 * e2 / det, m12 * e1 / det, m11 * e2 / det)
 
     def mass_matrix(self, q2: float) -> tuple[float, float, float]:
         """(M11, M12, M22), M = [[M11, -M12], [-M12, M22]] (Eq. 2)."""
@@ -78,7 +92,7 @@ def smc(limb: Limb, theta: Pair, omega: Pair, des: tuple[Pair, Pair, Pair], c: f
     y2 = ad2 - c * x4 - rho * switching(s[1], bl)
     m11, m12, m22 = limb.mass_matrix(q2)
     n1, n2 = limb.n_terms(q1, q2, w1, w2)
-    a1, a2 = limb.moment_arms(q1, q2)
+    a1, a2, _, _ = limb.geometry(q1, q2)
     return ((m11 * y1 - m12 * y2 - n1) / (-limb.k1 * a1), (-m12 * y1 + m22 * y2 - n2) / (-limb.k2 * a2)), s
 
 
@@ -161,3 +175,46 @@ class Trigger:
         if reason is not None:
             self._eps_i, self._t_i_ns = eps, t_ns
         return reason
+
+
+class Decision(NamedTuple):
+    t_ns: int                           # controller time of the state (t < 0: lead-in)
+    desired: tuple[Pair, Pair, Pair]    # theta_d, omega_d, alpha_d
+    reason: str | None                  # trigger reason name, None: no event
+    deflection_m: Pair | None           # v_x(t_i) on an event
+    sliding: Pair | None                # s(t_i) on an event
+
+
+class OuterLoop:
+    """The whole outer loop for one state: time axis (t = 0 at the first state's sample time + lead-in), desired
+    motion (lead-in, then the gait), trigger and, on an event, the SMC. From the session config (a dict)."""
+
+    def __init__(self, cfg: dict[str, Any], cycles: int, mode: str = "et") -> None:
+        cc, tr = cfg["controller"], cfg["trajectory"]
+        if tr["kind"] != "gait":
+            raise ValueError(f"this example follows the built-in gait only, not trajectory.kind = {tr['kind']!r}")
+        self.c, self.rho, self.bl = cc["c"], cc["rho"], cc["boundary_layer"]
+        self.limb, self.gait = Limb(cfg["plant"]), Gait(tr["period_s"])
+        self.trigger = Trigger(cfg["trigger"], self.c, mode)
+        self.lead_in_ns = int(round(tr["lead_in_s"] * 1e9))
+        self.duration_ns = int(round(tr["period_s"] * cycles * 1e9))
+        self.t0_ns: int | None = None
+        self.lead_in: LeadIn | None = None
+
+    def step(self, sample_t_ns: int, theta: Pair, omega: Pair) -> Decision | None:
+        """The decision for a new state; None once its time is past the cycles (stop answering). An absurd state
+        may raise ArithmeticError/ValueError from the model (the caller counts it)."""
+        if self.t0_ns is None:
+            self.t0_ns = sample_t_ns + self.lead_in_ns
+            if self.lead_in_ns:
+                self.lead_in = LeadIn(theta, omega, self.gait.sample(0.0), self.lead_in_ns * 1e-9)
+        t_ns = sample_t_ns - self.t0_ns
+        if t_ns > self.duration_ns:
+            return None
+        des = self.lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self.lead_in else self.gait.sample(t_ns * 1e-9)
+        x = (theta[0] - des[0][0], theta[1] - des[0][1], omega[0] - des[1][0], omega[1] - des[1][1])
+        reason = self.trigger.update(t_ns, (*x, *des[0], *des[1]))
+        if reason is None:
+            return Decision(t_ns, des, None, None, None)
+        vx, s = smc(self.limb, theta, omega, des, self.c, self.rho, self.bl)
+        return Decision(t_ns, des, reason, vx, s)

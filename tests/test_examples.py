@@ -1,17 +1,25 @@
-"""`sea-hil run --controller external` with examples/external_controller (which imports nothing of sea-hil: run
-here with `sea_hil` blocked from import) in lockstep: it tracks the gait as well as the built-in controller on the
-same config; the session's end detection (`ExternalWatch`) and its join timeout."""
+"""The two bring-your-own-controller examples against the built-in ET controller on the same config, in lockstep:
+examples/external_controller (run with `sea_hil` blocked from import) joining `sea-hil run --controller external`
+over Zenoh, and examples/can_controller driving the emulated driver over python-can `virtual` directly (the driver
+started here through sea-hil's Python, the example itself importing none). Also the session's end detection
+(`ExternalWatch`) and its join timeout."""
 from __future__ import annotations
 
 import ast
 import json
+import runpy
 import subprocess
 import sys
+import threading
+import tomllib
+import uuid
 from pathlib import Path
 
+import can
 import pytest
 
 from sea_hil.config import config_to_toml, load_config
+from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.errors import SeaHilError
 from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.session.external import ExternalWatch
@@ -20,6 +28,7 @@ from sea_hil.session.run import RunOptions, run_session
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "external_controller"
+CAN_EXAMPLE = REPO / "examples" / "can_controller"
 # a 3 s cycle keeps both lockstep sessions to a few seconds each
 TEST_CFG = {"trajectory": {"period_s": 3.0}}
 # run the example with every `sea_hil` import failing
@@ -33,7 +42,8 @@ def _max_error(summary: dict) -> float:
 
 def test_example_imports_only_zenoh_numpy_and_the_standard_library() -> None:
     allowed = set(sys.stdlib_module_names) | {"zenoh", "numpy", "__future__", "etsmc"}
-    for path in EXAMPLE.glob("*.py"):
+    allowed |= {"can", "cantools", "can_backstepping"}     # the CAN example: python-can, cantools, its own module
+    for path in [*EXAMPLE.glob("*.py"), *CAN_EXAMPLE.glob("*.py")]:
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
             names = ([a.name for a in node.names] if isinstance(node, ast.Import)
                      else [node.module or ""] if isinstance(node, ast.ImportFrom) else [])
@@ -41,11 +51,18 @@ def test_example_imports_only_zenoh_numpy_and_the_standard_library() -> None:
 
 
 @pytest.fixture(scope="module")
-def sessions(tmp_path_factory) -> tuple[dict, dict]:
+def builtin(tmp_path_factory) -> dict:
+    """summary.json of the built-in ET controller in lockstep on TEST_CFG."""
+    out = tmp_path_factory.mktemp("builtin")
+    return run_session(load_config(overrides=TEST_CFG), RunOptions(controller="et", out=out, lockstep=True,
+                                                                   progress=False))
+
+
+@pytest.fixture(scope="module")
+def sessions(builtin, tmp_path_factory) -> tuple[dict, dict]:
     """(built-in ET controller, the external example) in lockstep on TEST_CFG."""
     tmp = tmp_path_factory.mktemp("external")
     cfg = load_config(overrides=TEST_CFG)
-    builtin = run_session(cfg, RunOptions(controller="et", out=tmp / "builtin", lockstep=True, progress=False))
     cfg_path = tmp / "config.toml"
     cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
@@ -82,6 +99,32 @@ def test_external_controller_tracks_like_the_builtin_one(sessions) -> None:
     # written to the same order of operations: in lockstep it reproduces the built-in controller's decisions
     assert ext["events_by_reason"] == builtin["events_by_reason"]
     assert ext["tracking"] == builtin["tracking"]
+
+
+@pytest.mark.slow
+def test_can_example_on_virtual_tracks_like_the_builtin_controller(builtin) -> None:
+    cfg = load_config(overrides=TEST_CFG)
+    example = runpy.run_path(str(CAN_EXAMPLE / "controller.py"), run_name="can_example")
+    channel = f"byoc-{uuid.uuid4().hex}"
+    plant_bus, ctrl_bus = can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel)
+    plant = PlantNode(cfg, plant_bus, (1,), lockstep=True)     # advances one sample per answered feedback
+    thread = threading.Thread(target=plant.run, daemon=True)
+    ctrl = example["CanController"](tomllib.loads(config_to_toml(cfg)), example["load_dbc"](example["DEFAULT_DBC"]),
+                                    ctrl_bus, node_id=1, cycles=1)
+    thread.start()
+    try:
+        assert ctrl.run(timeout_s=120)
+    finally:
+        plant.stop()
+        thread.join(10)
+        plant_bus.shutdown()
+        ctrl_bus.shutdown()
+    s = ctrl.summary()
+    assert s["rejected"] == 0 and s["commands"] >= 3500 and 0 < s["events"] < s["outer"]
+    assert plant.drivers[1].counters.watchdog_trips == 0
+    assert 0 < max(s["max_abs_error_rad"]) <= 1.2 * _max_error(builtin)     # issue 13's acceptance
+    # the same outer and inner laws at the same samples as the edge + remote controller: the same tracking
+    assert s["max_abs_error_rad"] == builtin["tracking"]["max_abs_error_rad"]
 
 
 def test_watch_ends_after_lead_in_and_cycles_from_the_first_answer() -> None:
