@@ -7,19 +7,14 @@ from __future__ import annotations
 
 import ast
 import json
-import runpy
 import subprocess
 import sys
-import threading
-import tomllib
-import uuid
 from pathlib import Path
 
-import can
 import pytest
+from can_example import CAN_EXAMPLE, run_on_virtual
 
 from sea_hil.config import config_to_toml, load_config
-from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.errors import SeaHilError
 from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.session.external import ExternalWatch
@@ -28,7 +23,6 @@ from sea_hil.session.run import RunOptions, run_session
 
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "external_controller"
-CAN_EXAMPLE = REPO / "examples" / "can_controller"
 # a 3 s cycle keeps both lockstep sessions to a few seconds each
 TEST_CFG = {"trajectory": {"period_s": 3.0}}
 # run the example with every `sea_hil` import failing
@@ -103,24 +97,8 @@ def test_external_controller_tracks_like_the_builtin_one(sessions) -> None:
 
 @pytest.mark.slow
 def test_can_example_on_virtual_tracks_like_the_builtin_controller(builtin) -> None:
-    cfg = load_config(overrides=TEST_CFG)
-    example = runpy.run_path(str(CAN_EXAMPLE / "controller.py"), run_name="can_example")
-    channel = f"byoc-{uuid.uuid4().hex}"
-    plant_bus, ctrl_bus = can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel)
-    plant = PlantNode(cfg, plant_bus, (1,), lockstep=True)     # advances one sample per answered feedback
-    thread = threading.Thread(target=plant.run, daemon=True)
-    ctrl = example["CanController"](tomllib.loads(config_to_toml(cfg)), example["load_dbc"](example["DEFAULT_DBC"]),
-                                    ctrl_bus, node_id=1, cycles=1)
-    thread.start()
-    try:
-        assert ctrl.run(timeout_s=120)
-    finally:
-        plant.stop()
-        thread.join(10)
-        plant_bus.shutdown()
-        ctrl_bus.shutdown()
-    s = ctrl.summary()
-    assert s["rejected"] == 0 and s["commands"] >= 3500 and 0 < s["events"] < s["outer"]
+    s, plant = run_on_virtual(load_config(overrides=TEST_CFG))
+    assert s["done"] and s["rejected"] == 0 and s["commands"] >= 3500 and 0 < s["events"] < s["outer"]
     assert plant.drivers[1].counters.watchdog_trips == 0
     assert 0 < max(s["max_abs_error_rad"]) <= 1.2 * _max_error(builtin)     # issue 13's acceptance
     # the same outer and inner laws at the same samples as the edge + remote controller: the same tracking
