@@ -166,7 +166,11 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     cfg = tomllib.loads(args.config.read_text(encoding="utf-8"))
     with can.Bus(interface=args.interface, channel=args.channel) as bus:
-        node = CanController(cfg, load_dbc(args.dbc), bus, node_id=args.node, cycles=args.cycles, mode=args.mode)
+        try:
+            node = CanController(cfg, load_dbc(args.dbc), bus, node_id=args.node, cycles=args.cycles, mode=args.mode)
+        except (KeyError, ValueError) as err:     # e.g. a CSV trajectory, an incomplete config
+            print(f"controller.py: error: unusable config {args.config}: {err}", file=sys.stderr)
+            return 2
         done = node.run(args.timeout)
     print(json.dumps(node.summary()))
     return 0 if done else 3

@@ -182,7 +182,12 @@ def main(argv: list[str] | None = None) -> int:
     cfg = tomllib.loads(args.config.read_text(encoding="utf-8"))
     wire = Wire(tomllib.loads(args.layout.read_text(encoding="utf-8")))
     session = zenoh.open(zenoh_config(args.connect))
-    node = ExternalController(cfg, wire, session, lockstep=args.lockstep, cycles=args.cycles, mode=args.mode)
+    try:
+        node = ExternalController(cfg, wire, session, lockstep=args.lockstep, cycles=args.cycles, mode=args.mode)
+    except (KeyError, ValueError) as err:     # e.g. a CSV trajectory, an incomplete config
+        session.close()
+        print(f"controller.py: error: unusable config {args.config}: {err}", file=sys.stderr)
+        return 2
     try:
         done = node.run(args.timeout)
     finally:
