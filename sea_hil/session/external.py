@@ -15,6 +15,7 @@ No answer within `join_timeout_s` of wall time ends the session with a `SeaHilEr
 from __future__ import annotations
 
 import json
+import logging
 import subprocess
 import threading
 import time
@@ -28,6 +29,7 @@ from sea_hil.errors import SeaHilError
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload
 
+log = logging.getLogger("sea_hil.session")
 _KEEP_STATES = 4096     # state seq -> sample time entries kept (an answer refers to a recent state)
 
 
@@ -114,8 +116,10 @@ class ExternalController:
     def _on_record(self, sample: zenoh.Sample) -> None:
         try:
             seq = int(json.loads(sample.payload.to_bytes())["state_seq"])
-        except (ValueError, KeyError, TypeError):
-            self.bad_records += 1     # not a tracking record: counted, ignored
+        except (ValueError, KeyError, TypeError) as err:
+            self.bad_records += 1     # not a tracking record: counted, logged (first and every 1000th), ignored
+            if self.bad_records % 1000 == 1:
+                log.warning("ignored %d event-key message(s) that are not tracking records: %s", self.bad_records, err)
             return
         with self._lock:
             self.watch.on_record(seq)
@@ -150,6 +154,10 @@ class ExternalController:
             self.returncode = code
             for sub in self._subs:
                 sub.undeclare()
+            rejected = self.payloads.as_dict()["rejected_total"]
+            if rejected or self.bad_records:
+                log.warning("external controller session: %s malformed payload(s), %d bad tracking record(s)",
+                            rejected, self.bad_records)
 
     def terminate(self) -> None:
         self._end(-15)
