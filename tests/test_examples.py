@@ -7,16 +7,24 @@ from __future__ import annotations
 
 import ast
 import json
+import queue
+import runpy
 import subprocess
 import sys
+import tomllib
+import uuid
 from pathlib import Path
 
+import can
 import pytest
-from can_example import CAN_EXAMPLE, run_on_virtual
+import zenoh
+from can_example import CAN_EXAMPLE, load_example, run_on_virtual
 
 from sea_hil.config import config_to_toml, load_config
 from sea_hil.errors import SeaHilError
-from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Heartbeat, SeaCodec
+from sea_hil.protocol.payloads import AckPayload, StatePayload, decode, encode
+from sea_hil.protocol.zsession import free_tcp_port, make_config
 from sea_hil.session.external import ExternalWatch
 from sea_hil.session.processes import end_process
 from sea_hil.session.run import RunOptions, run_session
@@ -130,3 +138,58 @@ def test_no_controller_joining_is_a_clear_error(tmp_path) -> None:
     with pytest.raises(SeaHilError, match="no external controller answered"):
         run_session(cfg, RunOptions(controller="external", out=tmp_path / "alone", lockstep=True, progress=False,
                                     join_timeout_s=1.0), log=lambda s: None)
+
+
+def test_external_example_answers_a_resent_state_again_and_ignores_stale_and_malformed_ones() -> None:
+    sys.path.insert(0, str(EXAMPLE))
+    try:
+        example = runpy.run_path(str(EXAMPLE / "controller.py"), run_name="external_example")
+    finally:
+        sys.path.remove(str(EXAMPLE))
+    cfg = load_config()
+    session = zenoh.open(make_config())      # no endpoints: this process only
+    got: queue.SimpleQueue[tuple[str, bytes]] = queue.SimpleQueue()
+    sub = session.declare_subscriber("sea/limb1/**", lambda s: got.put((str(s.key_expr), s.payload.to_bytes())))
+    try:
+        wire = example["Wire"](tomllib.loads((REPO / "protocol" / "payloads.toml").read_text(encoding="utf-8")))
+        node = example["ExternalController"](tomllib.loads(config_to_toml(cfg)), wire, session, lockstep=True,
+                                             cycles=1, mode="et")
+        state = encode(StatePayload(5, 0, 10_000_000, tuple(cfg.plant.initial_theta_rad), (0.0, 0.0), (0.0, 0.0),
+                                    (0.0, 0.0)))
+        node.handle(state)
+        first = sorted(got.get(timeout=10) for _ in range(3))        # SETPOINT, ACK, tracking record
+        assert [k.rsplit("/", 1)[1] for k, _ in first] == ["control", "event", "setpoint"]
+        node.handle(state)                                               # the edge re-sent it
+        again = sorted(got.get(timeout=10) for _ in range(2))
+        assert again == [first[0], first[2]]                             # the same ACK and SETPOINT bytes
+        node.handle(encode(StatePayload(4, 0, 0, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))   # stale
+        node.handle(b"SH\x01\x01 not a state")                           # malformed
+        ack = decode(first[0][1])
+        assert isinstance(ack, AckPayload) and ack.state_seq == 5 and ack.sent and ack.setpoint_seq == 1
+        assert json.loads(first[1][1])["reason"] == "INITIAL"
+        assert node.counts == {**node.counts, "states": 1, "setpoints": 1, "resent_answers": 1, "ignored": 1,
+                               "rejected": 1}
+    finally:
+        sub.undeclare()
+        session.close()
+
+
+def test_can_example_clears_a_fault_and_counts_bad_frames() -> None:
+    example = load_example()
+    channel = f"byoc-{uuid.uuid4().hex}"
+    ctrl_bus, driver_bus = can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel)
+    try:
+        ctrl = example["CanController"](tomllib.loads(config_to_toml(load_config())),
+                                        example["load_dbc"](example["DEFAULT_DBC"]), ctrl_bus, node_id=1)
+        codec = SeaCodec([1, 2])
+        ctrl.on_message(codec.encode(Heartbeat(1, DriverState.FAULT, ErrorFlags.WATCHDOG, 0, 0, 7)))
+        sent = driver_bus.recv(timeout=10)
+        assert sent is not None and codec.decode(sent) == ClearErrors(1)
+        ctrl.on_message(codec.encode(Heartbeat(2, DriverState.FAULT, ErrorFlags.WATCHDOG, 0, 0, 7)))  # node 2
+        ctrl.on_message(can.Message(arbitration_id=0x3F, data=b"\x01", is_extended_id=False))        # bad cmd
+        ctrl.on_message(can.Message(arbitration_id=0x23, data=b"\x01\x02", is_extended_id=False))    # short
+        assert (ctrl.counts["clear_errors"], ctrl.counts["foreign"], ctrl.counts["rejected"]) == (1, 1, 2)
+        assert driver_bus.recv(timeout=0) is None                # nothing sent for them
+    finally:
+        ctrl_bus.shutdown()
+        driver_bus.shutdown()
