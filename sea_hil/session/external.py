@@ -9,7 +9,7 @@ too), and the controller's tracking records (`event` key) for every state it ans
 of wall time has passed without them (records are optional for control, needed only for the summary's tracking).
 No answer within `join_timeout_s` of wall time ends the session with a `SeaHilError`.
 
-`ExternalController` has the part of `subprocess.Popen`'s interface the session uses (`wait`, `poll`,
+`OutsideController` has the part of `subprocess.Popen`'s interface the session uses (`wait`, `poll`,
 `terminate`, `kill`, `returncode`), so `sea_hil.session.run` treats it like the controller child it replaces.
 """
 from __future__ import annotations
@@ -81,7 +81,7 @@ class ExternalWatch:
         return self.answered <= self.recorded or now_ns - self._cycles_done_at_ns >= self.grace_ns
 
 
-class ExternalController:
+class OutsideController:
     """Stands in for the controller child process: watches Zenoh until an outside controller has done its cycles."""
 
     def __init__(self, cfg: SeaHilConfig, cycles: int, session: zenoh.Session, *, endpoint: str, config_path: Path,

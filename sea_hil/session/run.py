@@ -25,7 +25,7 @@ from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
-from sea_hil.session.external import ExternalController
+from sea_hil.session.external import OutsideController
 from sea_hil.session.processes import end_process
 from sea_hil.report.writer import write_report_figures
 from sea_hil.report.session_summary import session_summary
@@ -64,7 +64,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
     proc: Any
     if opts.controller == "external":   # no child: wait for an outside controller (sea_hil/session/external.py)
-        proc = ExternalController(cfg, opts.cycles, session, endpoint=endpoint, config_path=cfg_path,
+        proc = OutsideController(cfg, opts.cycles, session, endpoint=endpoint, config_path=cfg_path,
                                   lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
     else:
         proc = subprocess.Popen(_controller_cmd(opts, cfg_path, endpoint), stdin=subprocess.DEVNULL)
