@@ -1,6 +1,7 @@
 """examples/can_controller on a real SocketCAN vcan0: the example process (python-can socketcan + the DBC, nothing of
 sea-hil) drives `sea-hil plant --can socketcan:vcan0 --lockstep` and tracks exactly as it does on python-can
-`virtual` (tests/test_examples.py compares that run with the built-in controller). Short (a 1 s cycle): UML is slow.
+`virtual` (tests/test_examples.py compares that run with the built-in controller). Short (0.2 s lead-in + a 0.5 s
+cycle): UML is slow.
 
     scripts/with-vcan -- python -m pytest -q tests/socketcan/test_can_controller_vcan.py
 """
@@ -18,7 +19,7 @@ from sea_hil.config import config_to_toml, load_config  # noqa: E402
 from sea_hil.session.processes import end_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[2]
-CFG = {"trajectory": {"period_s": 1.0}}
+CFG = {"trajectory": {"period_s": 0.5, "lead_in_s": 0.2}}   # 0.7 s of driver time: the guest is slow
 
 
 def test_can_example_on_vcan0_tracks_as_on_virtual(tmp_path: Path, vcan_channel: str) -> None:
@@ -39,6 +40,6 @@ def test_can_example_on_vcan0_tracks_as_on_virtual(tmp_path: Path, vcan_channel:
     assert ctrl.returncode == 0, err
     on_vcan = json.loads(out)
     on_virtual, _ = run_on_virtual(cfg)
-    assert on_vcan["done"] and on_vcan["rejected"] == 0 and on_vcan["commands"] >= 1500
+    assert on_vcan["done"] and on_vcan["rejected"] == 0 and on_vcan["commands"] >= 600
     assert on_vcan["max_abs_error_rad"] == on_virtual["max_abs_error_rad"]
     assert on_vcan["events"] == on_virtual["events"]
