@@ -7,8 +7,10 @@ from __future__ import annotations
 
 import ast
 import json
+import math
 import queue
 import runpy
+import struct
 import subprocess
 import sys
 import tomllib
@@ -164,11 +166,12 @@ def test_external_example_answers_a_resent_state_again_and_ignores_stale_and_mal
         assert again == [first[0], first[2]]                             # the same ACK and SETPOINT bytes
         node.handle(encode(StatePayload(4, 0, 0, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))   # stale
         node.handle(b"SH\x01\x01 not a state")                           # malformed
+        node.handle(state[:24] + struct.pack("<d", math.nan) + state[32:])  # a copy with NaN theta1: rejected
         ack = decode(first[0][1])
         assert isinstance(ack, AckPayload) and ack.state_seq == 5 and ack.sent and ack.setpoint_seq == 1
         assert json.loads(first[1][1])["reason"] == "INITIAL"
         assert node.counts == {**node.counts, "states": 1, "setpoints": 1, "resent_answers": 1, "ignored": 1,
-                               "rejected": 1}
+                               "rejected": 2}
     finally:
         sub.undeclare()
         session.close()

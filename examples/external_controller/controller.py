@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import queue
 import struct
 import sys
@@ -44,7 +45,7 @@ class Wire:
         self.reasons = layout["enums"]["reason"]
 
     def decode(self, data: bytes) -> tuple[str, int, dict[str, Any]] | None:
-        """(type name, seq, fields by name) or None for anything malformed (wrong magic/version/type/length)."""
+        """(type name, seq, fields by name) or None for anything malformed (magic, version, type, length, NaN)."""
         if len(data) < self.header.size:
             return None
         magic, version, type_id, seq, _ = self.header.unpack_from(data)
@@ -52,6 +53,8 @@ class Wire:
         if magic != self.magic or version != self.version or name is None or len(data) != self.msgs[name]["size"]:
             return None
         values, out = list(self.body[name].unpack_from(data, self.header.size)), {}
+        if not all(math.isfinite(v) for v in values if isinstance(v, float)):
+            return None         # NaN/inf: rejected like sea-hil's own decoder does
         for f in self.msgs[name]["fields"]:
             n = f.get("count", 1)
             out[f["name"]] = tuple(values[:n]) if n > 1 else values[0]
