@@ -14,7 +14,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                        description="Start plant and edge on the CAN bus (embedded virtual bus by default), the "
                                    "remote controller in a separate process over Zenoh, and the MCAP recorder; run "
                                    "N walking cycles; write DIR/session.mcap, DIR/summary.json and figures.")
-    p.add_argument("--controller", choices=("tt", "et"), default="et")
+    p.add_argument("--controller", choices=("tt", "et", "external"), default="et",
+                   help="external: start no controller, wait for one from outside (docs/external-controller.md)")
+    p.add_argument("--join-timeout", type=float, default=300.0, metavar="S",
+                   help="--controller external: seconds to wait for the outside controller's first answer")
     p.add_argument("--cycles", type=int, default=1, help="walking cycles (10 s each by default)")
     p.add_argument("--out", type=Path, default=Path("runs/latest"), metavar="DIR")
     p.add_argument("--lockstep", action="store_true", help="advance simulated time only when every node has handled "
@@ -42,7 +45,8 @@ def _main(args: argparse.Namespace) -> int:
     cfg = config_from_args(args, live_overrides(args))
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, listen=tuple(args.listen),
-                      progress=not args.quiet, seed=args.seed)
+                      progress=not args.quiet, seed=args.seed,
+                      join_timeout_s=args.join_timeout)
     from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
     with SessionProgress(sys.stderr) as progress:
         summary = run_session(cfg, opts, log=progress)

@@ -26,6 +26,7 @@ from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.session.external import OutsideController
 from sea_hil.session.processes import end_process
 from sea_hil.report.console import ProgressSample
 from sea_hil.report.writer import write_report_figures
@@ -45,6 +46,7 @@ class RunOptions:
     listen: tuple[str, ...] = ()
     progress: bool = True
     seed: int | None = None
+    join_timeout_s: float = 300.0   # --controller external: wall time allowed for the outside controller to join
 
 
 def _controller_cmd(opts: RunOptions, cfg_path: Path, endpoint: str) -> list[str]:
@@ -64,7 +66,12 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     session = open_session(make_config(listen=[endpoint, *opts.listen[1:]]))
     t0 = time.monotonic()
     # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-    proc = subprocess.Popen(_controller_cmd(opts, cfg_path, endpoint), stdin=subprocess.DEVNULL)
+    proc: Any
+    if opts.controller == "external":   # no child: wait for an outside controller (sea_hil/session/external.py)
+        proc = OutsideController(cfg, opts.cycles, session, endpoint=endpoint, config_path=cfg_path,
+                                  lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
+    else:
+        proc = subprocess.Popen(_controller_cmd(opts, cfg_path, endpoint), stdin=subprocess.DEVNULL)
     try:
         _host_nodes(cfg, opts, spec, session, proc, t0, log)
     finally:
@@ -81,7 +88,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     return summary
 
 
-def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, proc: subprocess.Popen[bytes],
+def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, proc: Any,
                 t0: float, log: Callable[[str], None]) -> None:
     """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
     buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
@@ -108,7 +115,8 @@ def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, pr
     for t in threads:
         t.start()
     period_s = cfg.trajectory.period_s
-    budget_s = 60.0 + 3.0 * period_s * opts.cycles + waited_s
+    budget_s = (60.0 + 3.0 * period_s * opts.cycles + waited_s
+                + (opts.join_timeout_s if opts.controller == "external" else 0.0))
     try:
         while True:
             try:

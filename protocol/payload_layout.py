@@ -1,0 +1,109 @@
+"""The machine-readable payload layout (`protocol/payloads.toml`): loading it, deriving struct formats from its field
+lists, and rendering docs/zenoh-protocol.md's payload tables from it.
+
+    python -m sea_hil.protocol.payload_layout --write docs/zenoh-protocol.md   # regenerate the tables in place
+    python -m sea_hil.protocol.payload_layout --check docs/zenoh-protocol.md   # exit 1 if they are out of date
+
+The tables sit between the `BEGIN`/`END` marker comments. tests/test_payload_layout.py checks the file against
+`sea_hil.protocol.payloads` and the docs against the file.
+"""
+from __future__ import annotations
+
+import argparse
+import struct
+import sys
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from sea_hil.errors import ConfigError
+
+LAYOUT_PATH = Path(__file__).with_name("payloads.toml")
+STRUCT_CODE = {"u8": "B", "u32": "I", "u64": "Q", "f64": "d", "bytes2": "2s"}
+BEGIN = "<!-- BEGIN payload-layout (generated from protocol/payloads.toml; do not edit by hand) -->"
+END = "<!-- END payload-layout -->"
+
+
+def load_layout(path: Path = LAYOUT_PATH) -> dict[str, Any]:
+    try:
+        return tomllib.loads(path.read_text(encoding="utf-8"))
+    except (OSError, tomllib.TOMLDecodeError) as err:
+        raise ConfigError(f"cannot read payload layout {path}: {err}") from err
+
+
+def fields_format(fields: list[dict[str, Any]]) -> str:
+    """The little-endian struct format a field list describes (e.g. `<Q8d`, runs of one type merged)."""
+    out: list[tuple[int, str]] = []
+    for f in fields:
+        code = STRUCT_CODE[f["type"]]
+        n = int(f.get("count", 1))
+        if code.endswith("s"):          # bytesN is one item of N bytes
+            out.append((1, code))
+        elif out and out[-1][1] == code:
+            out[-1] = (out[-1][0] + n, code)
+        else:
+            out.append((n, code))
+    return "<" + "".join(f"{n if n > 1 else ''}{c}" for n, c in out)
+
+
+def messages(layout: dict[str, Any]) -> dict[str, dict[str, Any]]:
+    """Message name -> its table (type_id, key, format, size, fields)."""
+    return {m["name"]: m for m in layout["message"]}
+
+
+def _type_cell(f: dict[str, Any]) -> str:
+    n = int(f.get("count", 1))
+    return f"{f['type']}[{n}]" if n > 1 else f["type"]
+
+
+def render_tables(layout: dict[str, Any]) -> str:
+    """The markdown block between the markers: header table, one table per message, the reason values."""
+    h = layout["header"]
+    lines = [BEGIN, "", f"Common header, {h['size']} bytes (`{h['format']}`):", "",
+             "| offset | type | field | meaning |", "|---|---|---|---|"]
+    off = 0
+    for f in h["fields"]:
+        lines.append(f"| {off} | {_type_cell(f)} | `{f['name']}` | {f['meaning']} |")
+        off += struct.calcsize("<" + STRUCT_CODE[f["type"]]) * int(f.get("count", 1))
+    types = ", ".join(f"{m['type_id']} = {m['name']}" for m in layout["message"])
+    lines += ["", f"Message types: {types}.", ""]
+    for m in layout["message"]:
+        lines += [f"**{m['name']}** (type {m['type_id']}, key `{m['key']}`, {m['direction']}): body `{m['format']}`, "
+                  f"{m['size']} bytes in total.", "", "| offset | type | field | meaning |", "|---|---|---|---|"]
+        off = h["size"]
+        for f in m["fields"]:
+            lines.append(f"| {off} | {_type_cell(f)} | `{f['name']}` | {f['meaning']} |")
+            off += struct.calcsize("<" + STRUCT_CODE[f["type"]]) * int(f.get("count", 1))
+        lines.append("")
+    reasons = ", ".join(f"{k} = {v}" for k, v in layout["enums"]["reason"].items())
+    lines += [f"SETPOINT `reason` values: {reasons}.", "", END]
+    return "\n".join(lines)
+
+
+def splice(doc: str, block: str) -> str:
+    """`doc` with the text between the markers (inclusive) replaced by `block`."""
+    start, end = doc.find(BEGIN), doc.find(END)
+    if start < 0 or end < start:
+        raise ConfigError("payload-layout markers not found (or out of order) in the document")
+    return doc[:start] + block + doc[end + len(END):]
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(prog="python -m sea_hil.protocol.payload_layout", description=__doc__.split("\n")[0])
+    ap.add_argument("doc", type=Path, help="markdown file holding the marker comments")
+    ap.add_argument("--write", action="store_true", help="rewrite the tables in place (default: check only)")
+    ap.add_argument("--check", action="store_true", help="exit 1 if the tables are out of date")
+    args = ap.parse_args(argv)
+    doc = args.doc.read_text(encoding="utf-8")
+    new = splice(doc, render_tables(load_layout()))
+    if args.write:
+        args.doc.write_text(new, encoding="utf-8")
+        return 0
+    if new != doc:
+        print(f"{args.doc}: payload tables differ from protocol/payloads.toml (run with --write)", file=sys.stderr)
+        return 1
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
