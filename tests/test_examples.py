@@ -70,7 +70,7 @@ def sessions(builtin, tmp_path_factory) -> tuple[dict, dict]:
     cfg_path = tmp / "config.toml"
     cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    session = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "run", "--controller", "external", "--lockstep",
+    session = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "run", "--json", "--controller", "external", "--lockstep",
                                 "--quiet", "--listen", endpoint, "--config", str(cfg_path), "--out", str(tmp / "ext"),
                                 "--join-timeout", "60"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True)
