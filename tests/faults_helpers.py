@@ -17,12 +17,12 @@ from pathlib import Path
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import DriverState
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
 from sea_hil.protocol.link import LinkCounters, LinkEmulator
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.processes import end_process as _end_process
 
 REPO = Path(__file__).resolve().parents[1]
@@ -74,7 +74,8 @@ class OutageLink(LinkEmulator):
 
 @dataclass
 class Rig:
-    """Plant + edge + recorder threads in this process; the controller is a child process over Zenoh."""
+    """Plant + edge + recorder threads in this process (composed by the `SessionBuilder`); the controller is a child
+    process over Zenoh."""
     cfg: SeaHilConfig
     cfg_path: Path
     endpoint: str
@@ -82,11 +83,7 @@ class Rig:
     edge: EdgeNode
     recorder: RecorderNode
     mcap: Path
-    _session: object
-    _buses: list
-    _rec: SessionRecorder
-    _threads: list[threading.Thread]
-    _closed: bool = False
+    _builder: SessionBuilder
 
     @classmethod
     def start(cls, tmp: Path, overrides: dict | None = None) -> "Rig":
@@ -94,18 +91,24 @@ class Rig:
         cfg_path = tmp / "config.toml"
         cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
         endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-        session = open_session(make_config(listen=[endpoint]))
-        buses = [open_bus(cfg.can.interface) for _ in range(3)]
-        rec = SessionRecorder.from_config(tmp / "session.mcap", cfg.record)
-        rec.write_session_header(cfg, seed=cfg.link.seed, argv=["test_faults"])
-        recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2])
-        plant = PlantNode(cfg, buses[0], (NODE,))
-        edge = EdgeNode(cfg, buses[1], session, NODE)
-        threads = [threading.Thread(target=plant.run, daemon=True), threading.Thread(target=edge.run, daemon=True)]
-        rig = cls(cfg, cfg_path, endpoint, plant, edge, recorder, tmp / "session.mcap", session, buses, rec, threads)
-        recorder.start()
-        for t in threads:
-            t.start()
+        b = SessionBuilder(cfg)
+        try:
+            session = b.zenoh(listen=[endpoint])
+            buses = [b.bus() for _ in range(3)]
+            rec = SessionRecorder.from_config(tmp / "session.mcap", cfg.record)
+            b.callback(rec.close)   # idempotent; normally closed with the final counters below
+            rec.write_session_header(cfg, seed=cfg.link.seed, argv=["test_faults"])
+            recorder = b.recorder(rec, session, buses[2])
+            plant = b.plant(buses[0], (NODE,))
+            edge = b.edge(buses[1], session, NODE)
+            b.callback(lambda: rec.close(final_stats=recorder.counters()))   # after plant, edge, recorder stop
+            b.callback(lambda: [n.close() for n in (plant, edge, recorder)])
+        except BaseException:
+            b.close()
+            raise
+        rig = cls(cfg, cfg_path, endpoint, plant, edge, recorder, tmp / "session.mcap", b)
+        for node in (recorder, plant, edge):
+            node.start()
         return rig
 
     def driver_state(self) -> DriverState:
@@ -119,97 +122,5 @@ class Rig:
                                 stderr=subprocess.PIPE)
 
     def close(self) -> None:
-        """Stop every thread, finalise the MCAP file, close Zenoh and the buses (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        self.plant.stop()
-        self.edge.stop_event.set()
-        for t in self._threads:
-            t.join(timeout=STOP_TIMEOUT_S)
-        self.recorder.stop()
-        self._rec.close(final_stats=self.recorder.counters())
-        self.edge.close()
-        self._session.close()  # type: ignore[attr-defined]
-        for b in self._buses:
-            b.shutdown()
-
-
-# ---- edge kill/restart across processes: udp_multicast CAN inside a private network namespace ------------------
-EDGE_GROUP = "239.74.163.17"
-
-
-def run_edge_kill_in_netns(timeout_s: float = 120.0) -> dict[str, float]:
-    """Run `python tests/faults_helpers.py edge-kill` under `unshare --net` (lo up, multicast routed to lo) and
-    return its JSON report."""
-    import json
-    import shlex
-    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(Path(__file__).resolve()))} edge-kill {EDGE_GROUP}")
-    res = subprocess.run(["unshare", "--net", "sh", "-c", script], capture_output=True, text=True, cwd=REPO,
-                         timeout=timeout_s, check=False, stdin=subprocess.DEVNULL)
-    assert res.returncode == 0, res.stdout + res.stderr
-    return json.loads(res.stdout.strip().splitlines()[-1])
-
-
-def _edge_kill_main(group: str) -> dict[str, float]:
-    """Plant, controller and edge as separate `sea-hil` processes; SIGKILL the edge, then restart it. Times from
-    the kill to the driver's FAULT heartbeat and from the restart to its RUNNING heartbeat."""
-    import signal
-    from sea_hil.protocol.can_codec import Heartbeat, SeaCodec
-    from sea_hil.errors import MalformedFrame
-    spec = f"udp_multicast:{group}"
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    codec, bus = SeaCodec([NODE]), open_bus(spec)
-    state = {"s": DriverState.INIT}
-
-    def pump_until(target: DriverState, timeout: float) -> int | None:
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            msg = bus.recv(timeout=0.05)
-            if msg is None:
-                continue
-            try:
-                f = codec.decode(msg)
-            except MalformedFrame:
-                continue
-            if isinstance(f, Heartbeat):
-                state["s"] = f.state
-                if f.state is target:
-                    return time.monotonic_ns()
-        return None
-
-    def edge() -> subprocess.Popen[bytes]:
-        return subprocess.Popen(sea_hil_cmd("edge", "--can", spec, "--connect", endpoint), cwd=REPO,
-                                stdin=subprocess.DEVNULL)
-    procs = [subprocess.Popen(sea_hil_cmd("plant", "--can", spec, "--node", str(NODE)), cwd=REPO,
-                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL),
-             subprocess.Popen(sea_hil_cmd("controller", "--listen", endpoint, "--cycles", "50"), cwd=REPO,
-                              stdin=subprocess.DEVNULL)]
-    try:
-        procs.append(edge())
-        if pump_until(DriverState.RUNNING, 60) is None:
-            raise SystemExit(f"session never RUNNING (last {state['s'].name})")
-        procs[-1].send_signal(signal.SIGKILL)
-        procs[-1].wait(timeout=STOP_TIMEOUT_S)
-        killed = time.monotonic_ns()
-        safe = pump_until(DriverState.FAULT, 10)
-        if safe is None:
-            raise SystemExit(f"no FAULT after the edge kill (last {state['s'].name})")
-        restarted = time.monotonic_ns()
-        procs.append(edge())
-        running = pump_until(DriverState.RUNNING, 60)
-        if running is None:
-            raise SystemExit(f"no RUNNING after the edge restart (last {state['s'].name})")
-        return {"safe_ms": (safe - killed) / 1e6, "resumed_ms": (running - restarted) / 1e6}
-    finally:
-        for proc in reversed(procs):
-            end_process(proc)
-        bus.shutdown()
-
-
-if __name__ == "__main__":
-    import json
-    if sys.argv[1:2] != ["edge-kill"] or len(sys.argv) != 3:
-        raise SystemExit("usage: faults_helpers.py edge-kill GROUP")
-    print(json.dumps(_edge_kill_main(sys.argv[2])))
+        """Stop every node, finalise the MCAP file, close Zenoh and the buses (idempotent)."""
+        self._builder.close()

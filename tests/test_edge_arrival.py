@@ -65,7 +65,7 @@ def test_setpoint_is_applied_on_arrival_with_the_newest_feedback(rig) -> None:
     edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)
     first = _commands(peer, codec)
     assert len(first) == 1 and edge.counters.arrival_commands == 1   # sent at once, before the next sample
-    assert first[0].seq == edge._last_fb.seq                         # computed from the newest feedback
+    assert first[0].seq == edge.last_fb.seq                         # computed from the newest feedback
     edge.on_arrival(_setpoint(2, 1, (-2e-4, 3e-4)), rx_ns=2)
     second = _commands(peer, codec)
     assert len(second) == 1 and second[0].voltage_v != first[0].voltage_v   # the new v_x changed the voltage
@@ -90,7 +90,7 @@ def test_delayed_setpoint_waits_for_its_sample(rig) -> None:
     edge, peer, drv = rig
     codec = SeaCodec([NODE])
     cfg = load_config(overrides={"link": {"downlink": {"delay_s": 0.003}}})
-    edge.downlink = type(edge.downlink)(cfg.link.downlink, "t/down")
+    edge.intake.downlink = type(edge.intake.downlink)(cfg.link.downlink, "t/down")
     for _ in range(10):
         _feed(edge, drv, codec)
     _commands(peer, codec)
@@ -100,4 +100,4 @@ def test_delayed_setpoint_waits_for_its_sample(rig) -> None:
         _feed(edge, drv, codec)
     assert edge.counters.setpoints == 1 and edge.counters.arrival_commands == 0
     cmds = _commands(peer, codec)     # no setpoint yet -> no command; then the sample that released it answers
-    assert [c.seq for c in cmds] == [edge._last_fb.seq] == [13]
+    assert [c.seq for c in cmds] == [edge.last_fb.seq] == [13]

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
 
@@ -22,17 +21,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.controller.remote import RemoteController
-    from sea_hil.protocol.zsession import open_session
+    from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args)
-    session = open_session(cfg.zenoh)
-    node = RemoteController(cfg, session, args.controller, inner=args.inner, lockstep=args.lockstep,
-                            cycles=args.cycles)
-    signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())
-    try:
-        done = node.run(args.timeout)
-    finally:
-        node.publish_stats(final=True)
-        node.close()
-        session.close()
+    with SessionBuilder(cfg, lockstep=args.lockstep) as b:
+        node = b.controller(b.zenoh(), args.controller, inner=args.inner, cycles=args.cycles)
+        done = b.serve(node, args.timeout)
     return 0 if done else 3

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import signal
-import threading
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
@@ -21,26 +20,15 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     import sys
-    from sea_hil.protocol.canbus import open_bus
-    from sea_hil.recorder.node import RecorderNode
     from sea_hil.recorder.writer import SessionRecorder
-    from sea_hil.protocol.zsession import open_session
+    from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    session = open_session(cfg.zenoh)
-    bus = open_bus(args.can) if args.can else None
-    rec = SessionRecorder.from_config(args.out, cfg.record)
-    rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
-    node = RecorderNode(rec, session, cfg.zenoh.prefix, bus)
-    node.start()
-    try:
-        stop.wait(args.duration)
-    finally:
-        node.stop()
-        rec.close(final_stats=node.counters())
-        session.close()
-        if bus is not None:
-            bus.shutdown()
+    with SessionBuilder(cfg) as b:
+        session = b.zenoh()
+        bus = b.bus(args.can) if args.can else None
+        rec = SessionRecorder.from_config(args.out, cfg.record)
+        rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
+        node = b.recorder(rec, session, bus)
+        b.callback(lambda: rec.close(final_stats=node.counters()))   # after the node has stopped its taps
+        b.serve(node, args.duration, signals=(signal.SIGINT, signal.SIGTERM))
     return 0
