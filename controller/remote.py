@@ -1,11 +1,12 @@
-"""The remote controller node: subscribes to the sampled state (newest only), runs the outer ET/TT SMC and
+"""The remote controller node: subscribes to the sampled state, runs the outer ET/TT SMC and
 publishes a setpoint only on events (TT: every sample). With `inner="remote"` it also runs the backstepping law on
 the 10 ms state and publishes voltages every sample (to be tunnelled to CAN by the edge, held for 10 ms).
 
 Per handled state it publishes one JSON tracking record on the `event` key (desired vs measured, for recording and
 reports; not a control transmission). How it meets the edge is its clock's part (`sync`): in real time the newest
-state only; in lockstep every state in order, each ACKed on the `control` key (`sea_hil.runtime.lockstep`). A heartbeat event is sent when
-no event fired for `trigger.max_inter_event_s`, so the edge keeps commanding (its setpoint timeout is twice that).
+state only; in lockstep every state in order, each ACKed on the `control` key (`sea_hil.runtime.lockstep`). A
+heartbeat event is sent when no event fired for `trigger.max_inter_event_s`, so the edge keeps commanding (its
+setpoint timeout is twice that).
 
 Time: t = 0 is the start of the measured cycles. With `trajectory.lead_in_s` > 0 the first handled state is at
 t = -lead_in_s and the desired motion until t = 0 is the `LeadIn` from that measured state onto the trajectory's start

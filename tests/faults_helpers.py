@@ -17,6 +17,7 @@ from pathlib import Path
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import DriverState
+from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
 from sea_hil.protocol.link import LinkCounters, LinkEmulator
 from sea_hil.recorder.node import RecorderNode
@@ -124,3 +125,83 @@ class Rig:
     def close(self) -> None:
         """Stop every node, finalise the MCAP file, close Zenoh and the buses (idempotent)."""
         self._builder.close()
+
+
+# ---- edge kill/restart across processes: udp_multicast CAN inside a private network namespace ------------------
+EDGE_GROUP = "239.74.163.17"
+
+
+def run_edge_kill_in_netns(timeout_s: float = 120.0) -> dict[str, float]:
+    """Run `python tests/faults_helpers.py edge-kill` under `unshare --net` (lo up, multicast routed to lo) and
+    return its JSON report."""
+    import json
+    import shlex
+    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
+              f"{shlex.quote(str(Path(__file__).resolve()))} edge-kill {EDGE_GROUP}")
+    res = subprocess.run(["unshare", "--net", "sh", "-c", script], capture_output=True, text=True, cwd=REPO,
+                         timeout=timeout_s, check=False, stdin=subprocess.DEVNULL)
+    assert res.returncode == 0, res.stdout + res.stderr
+    return json.loads(res.stdout.strip().splitlines()[-1])
+
+
+def _edge_kill_main(group: str) -> dict[str, float]:
+    """Plant, controller and edge as separate `sea-hil` processes; SIGKILL the edge, then restart it. Times from
+    the kill to the driver's FAULT heartbeat and from the restart to its RUNNING heartbeat."""
+    import signal
+    from sea_hil.protocol.can_codec import Heartbeat, SeaCodec
+    from sea_hil.errors import MalformedFrame
+    spec = f"udp_multicast:{group}"
+    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
+    codec, bus = SeaCodec([NODE]), open_bus(spec)
+    state = {"s": DriverState.INIT}
+
+    def pump_until(target: DriverState, timeout: float) -> int | None:
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            msg = bus.recv(timeout=0.05)
+            if msg is None:
+                continue
+            try:
+                f = codec.decode(msg)
+            except MalformedFrame:
+                continue
+            if isinstance(f, Heartbeat):
+                state["s"] = f.state
+                if f.state is target:
+                    return time.monotonic_ns()
+        return None
+
+    def edge() -> subprocess.Popen[bytes]:
+        return subprocess.Popen(sea_hil_cmd("edge", "--can", spec, "--connect", endpoint), cwd=REPO,
+                                stdin=subprocess.DEVNULL)
+    procs = [subprocess.Popen(sea_hil_cmd("plant", "--can", spec, "--node", str(NODE)), cwd=REPO,
+                              stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL),
+             subprocess.Popen(sea_hil_cmd("controller", "--listen", endpoint, "--cycles", "50"), cwd=REPO,
+                              stdin=subprocess.DEVNULL)]
+    try:
+        procs.append(edge())
+        if pump_until(DriverState.RUNNING, 60) is None:
+            raise SystemExit(f"session never RUNNING (last {state['s'].name})")
+        procs[-1].send_signal(signal.SIGKILL)
+        procs[-1].wait(timeout=STOP_TIMEOUT_S)
+        killed = time.monotonic_ns()
+        safe = pump_until(DriverState.FAULT, 10)
+        if safe is None:
+            raise SystemExit(f"no FAULT after the edge kill (last {state['s'].name})")
+        restarted = time.monotonic_ns()
+        procs.append(edge())
+        running = pump_until(DriverState.RUNNING, 60)
+        if running is None:
+            raise SystemExit(f"no RUNNING after the edge restart (last {state['s'].name})")
+        return {"safe_ms": (safe - killed) / 1e6, "resumed_ms": (running - restarted) / 1e6}
+    finally:
+        for proc in reversed(procs):
+            end_process(proc)
+        bus.shutdown()
+
+
+if __name__ == "__main__":
+    import json
+    if sys.argv[1:2] != ["edge-kill"] or len(sys.argv) != 3:
+        raise SystemExit("usage: faults_helpers.py edge-kill GROUP")
+    print(json.dumps(_edge_kill_main(sys.argv[2])))
