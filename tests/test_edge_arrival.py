@@ -12,11 +12,10 @@ from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import load_config
 from sea_hil.mechanics import limb_params
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
-from sea_hil.protocol.zsession import make_config, open_session
+from sea_hil.session.builder import SessionBuilder
 
 NODE = 1
 
@@ -25,18 +24,11 @@ NODE = 1
 def rig() -> Iterator[tuple[EdgeNode, can.BusABC, DriverCore]]:
     cfg = load_config()
     channel = f"virtual:arrival-{uuid.uuid4().hex[:8]}"
-    session = open_session(make_config())
-    edge_bus, peer = open_bus(channel), open_bus(channel)
-    edge = EdgeNode(cfg, edge_bus, session, NODE)
     drv = DriverCore.create(NODE, limb_params(cfg.plant), 1e-3, 0.1, cfg.sim.substeps,
                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance))
-    try:
-        yield edge, peer, drv
-    finally:
-        edge.close()
-        session.close()
-        edge_bus.shutdown()
-        peer.shutdown()
+    with SessionBuilder(cfg) as b:
+        edge = b.edge(b.bus(channel), b.zenoh(), NODE)
+        yield edge, b.bus(channel), drv
 
 
 def _feed(edge: EdgeNode, drv: DriverCore, codec: SeaCodec) -> None:

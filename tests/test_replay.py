@@ -9,28 +9,18 @@ import pytest
 
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import load_config
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
-from sea_hil.protocol.zsession import make_config, open_session
+from sea_hil.session.builder import SessionBuilder
 
 MS = 1_000_000
 
 
 @pytest.fixture
 def nodes() -> Iterator[tuple[EdgeNode, RemoteController]]:
-    cfg = load_config()
-    session = open_session(make_config())
-    bus = open_bus(f"virtual:replay-{uuid.uuid4().hex[:8]}")
-    edge = EdgeNode(cfg, bus, session, 1)
-    ctrl = RemoteController(cfg, session, "tt")
-    try:
-        yield edge, ctrl
-    finally:
-        edge.close()
-        ctrl.close()
-        session.close()
-        bus.shutdown()
+    with SessionBuilder(load_config()) as b:
+        session = b.zenoh()
+        yield b.edge(b.bus(f"virtual:replay-{uuid.uuid4().hex[:8]}"), session, 1), b.controller(session, "tt")
 
 
 def setpoint(seq: int, d1: float = 0.001, reason: TriggerReason = TriggerReason.ERROR_BOUND) -> bytes:
