@@ -290,7 +290,7 @@ class _FailingBus:
 def test_send_failure_is_counted_and_flagged_not_raised(idle_node: PlantNode) -> None:
     bus, idle_node.bus = idle_node.bus, _FailingBus()
     try:
-        idle_node._heartbeats()
+        idle_node.heartbeats()
     finally:
         idle_node.bus = bus
     assert idle_node.stats.send_failures == 1 and ErrorFlags.BUS_ERROR in idle_node.drivers[NODE].flags
