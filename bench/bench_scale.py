@@ -19,7 +19,7 @@ from benchlib import bench_args, emit, record  # noqa: E402
 from limbrig import RigResult, run_rig  # noqa: E402
 from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
 from sea_hil.config import load_config  # noqa: E402
-from sea_hil.stats.session import can_frame_bits  # noqa: E402
+from sea_hil.stats.can_bits import can_frame_bits  # noqa: E402
 
 MAX_MISS = 0.001
 GOAL_LIMBS = 4

@@ -1,6 +1,6 @@
-"""A real-time rig of N limbs in one process, as `sea_hil/session/run.py` composes them: one `PlantNode` serving node ids
-1..N on one python-can `virtual` bus, and one `EdgeNode` (inner loop at the feedback rate) per limb, each on its own
-bus handle and its own Zenoh limb key. The remote side is a setpoint echo child process (this file with
+"""A real-time rig of N limbs in one process, composed by the same `SessionBuilder` as `sea-hil run`: one `PlantNode`
+serving node ids 1..N on one python-can `virtual` bus, and one `EdgeNode` (inner loop at the feedback rate) per limb,
+each on its own bus handle and its own Zenoh limb key. The remote side is a setpoint echo child process (this file with
 `--feeder ENDPOINT`) that answers every state of every limb with a setpoint holding the measured spring deflection
 (so each edge keeps commanding; 100 setpoints/s per limb, the TT worst case). No recorder runs.
 
@@ -14,7 +14,6 @@ from __future__ import annotations
 import argparse
 import subprocess
 import sys
-import threading
 import time
 import uuid
 from dataclasses import dataclass
@@ -28,11 +27,11 @@ import zenoh  # noqa: E402
 from benchlib import stop_process, wait_ready  # noqa: E402
 from sea_hil.controller.edge import EdgeNode  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
 from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
 from sea_hil.stats.histogram import LogHistogram  # noqa: E402
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
+from sea_hil.session.builder import SessionBuilder  # noqa: E402
 
 PREFIX = "sea"
 
@@ -107,40 +106,26 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
     """Run `limbs` limbs in real time for `warmup_s` (not counted) + `duration_s` of wall time; timing statistics."""
     cfg = load_config(overrides={"can": {"feedback_rate_hz": rate_hz}})
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    session = open_session(make_config(listen=[endpoint]))
-    proc = subprocess.Popen([sys.executable, __file__, "--feeder", endpoint], stdout=subprocess.PIPE)
     channel = f"virtual:bench-rig-{uuid.uuid4().hex}"
     ids = tuple(range(1, limbs + 1))
-    plant_bus = open_bus(channel)
-    buses = [open_bus(channel) for _ in ids]
-    edges: list[EdgeNode] = []
     warm = (0, 0)
-    threads: list[threading.Thread] = []
-    try:
+    with SessionBuilder(cfg) as b:
+        session = b.zenoh(listen=[endpoint], connect=())
+        proc = subprocess.Popen([sys.executable, __file__, "--feeder", endpoint], stdout=subprocess.PIPE)
+        b.callback(stop_process, proc)
+        plant_bus = b.bus(channel)
+        buses = [b.bus(channel) for _ in ids]
         wait_ready(proc)
-        plant = PlantNode(cfg, plant_bus, ids)
-        edges = [EdgeNode(_limb_cfg(cfg, n), bus, session, n) for n, bus in zip(ids, buses)]
-        threads = [threading.Thread(target=e.run, name=f"edge{e.node_id}", daemon=True) for e in edges]
-        for t in threads:
-            t.start()
+        plant = b.plant(plant_bus, ids)
+        edges: list[EdgeNode] = [b.edge(bus, session, n, cfg=_limb_cfg(cfg, n)) for n, bus in zip(ids, buses)]
+        for e in edges:
+            e.start()
         if warmup_s > 0:    # start-up (connections, first setpoint, queued frames) is not steady-state timing
             plant.run(warmup_s)
             warm = _reset(plant, edges)
         cpu0, t0 = time.process_time(), time.monotonic()
         plant.run(duration_s)   # the schedule restarts from now; driver state carries on
         wall_s, cpu_s = time.monotonic() - t0, time.process_time() - cpu0
-    finally:
-        for e in edges:
-            e.stop_event.set()
-        for t in threads:
-            t.join(timeout=5.0)
-        for e in edges:
-            e.close()
-        stop_process(proc)
-        session.close()
-        plant_bus.shutdown()
-        for b in buses:
-            b.shutdown()
     resp = LogHistogram()
     for e in edges:
         resp.merge(e.counters.loop)

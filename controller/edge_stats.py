@@ -1,7 +1,9 @@
-"""The edge node's counters and the small pure helpers of its statistics (`controller/edge.py`)."""
+"""The edge node's counters, its stats fields (`edge_stats`) and the small pure helpers of its statistics
+(`controller/edge.py`)."""
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from sea_hil.stats.histogram import LogHistogram
 
@@ -46,3 +48,37 @@ def percentiles_us(name: str, h: LogHistogram, keys: tuple[str, ...]) -> dict[st
     """`{name}_us_{key}` in microseconds (-1 when empty) for keys of `LogHistogram.to_dict` (min, p50, p99, max)."""
     d = h.to_dict()
     return {f"{name}_us_{k}": float(d[k]) * 1e6 if d[k] is not None else -1.0 for k in keys}
+
+
+def edge_stats(edge: Any) -> dict[str, float]:
+    """The flat counters of an `EdgeNode` (the fields of its stats record; keys read by the session summary)."""
+    c, intake, pub = edge.counters, edge.intake, edge.publisher
+    lat = c.latency.to_dict()
+    up, down = pub.uplink.link.counters(), intake.downlink.counters()
+    sp_seq = intake.sp_seq
+    out: dict[str, float] = {
+        "node_id": edge.node_id, "feedback_samples": c.feedback, "rejected_frames": c.rejected_frames,
+        "rejected_samples": c.rejected_samples,
+        "uplink_msgs": c.states_sent, "uplink_bytes": c.state_bytes, "downlink_applied": c.setpoints,
+        "voltage_msgs_applied": c.voltages, "stale_setpoints": c.stale_setpoints,
+        "clear_errors_sent": c.clear_errors_sent, "lockstep_resends": c.lockstep_resends,
+        "lockstep_startup_resends": c.lockstep_startup_resends,
+        "commands_sent": c.commands_sent, "arrival_commands": c.arrival_commands,
+        "payload_rejected": edge.payloads.as_dict()["rejected_total"],
+        "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
+        "bus_errors": c.bus_errors,
+        "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": edge.inner.saturated_steps,
+        "seq_lost": sp_seq.lost, "seq_reordered": sp_seq.reordered, "seq_duplicates": sp_seq.duplicates,
+        "latency_count": lat["count"],
+        "uplink_submitted": up.submitted, "uplink_mean_added_delay_s": up.mean_added_delay_s,
+        "downlink_submitted": down.submitted, "downlink_mean_added_delay_s": down.mean_added_delay_s,
+    }
+    for k in ("p50", "p90", "p99", "max", "min", "mean"):
+        v = lat.get(k)
+        out[f"latency_{k}_us"] = (v * 1e6) if v is not None else -1.0
+    out.update(percentiles_us("sim_latency", c.sim_latency, ("min", "p50", "max")),
+               **percentiles_us("apply_latency", c.apply_latency, ("p50", "p99", "max")),
+               **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
+               loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
+               uplink_pending=pub.uplink.pending)
+    return out

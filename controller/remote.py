@@ -1,10 +1,12 @@
-"""The remote controller node: subscribes to the sampled state (newest only), runs the outer ET/TT SMC and
+"""The remote controller node: subscribes to the sampled state, runs the outer ET/TT SMC and
 publishes a setpoint only on events (TT: every sample). With `inner="remote"` it also runs the backstepping law on
 the 10 ms state and publishes voltages every sample (to be tunnelled to CAN by the edge, held for 10 ms).
 
 Per handled state it publishes one JSON tracking record on the `event` key (desired vs measured, for recording and
-reports; not a control transmission) and, in lockstep, an ACK on the `control` key. A heartbeat event is sent when
-no event fired for `trigger.max_inter_event_s`, so the edge keeps commanding (its setpoint timeout is twice that).
+reports; not a control transmission). How it meets the edge is its clock's part (`sync`): in real time the newest
+state only; in lockstep every state in order, each ACKed on the `control` key (`sea_hil.runtime.lockstep`). A
+heartbeat event is sent when no event fired for `trigger.max_inter_event_s`, so the edge keeps commanding (its
+setpoint timeout is twice that).
 
 Time: t = 0 is the start of the measured cycles. With `trajectory.lead_in_s` > 0 the first handled state is at
 t = -lead_in_s and the desired motion until t = 0 is the `LeadIn` from that measured state onto the trajectory's start
@@ -14,8 +16,6 @@ from __future__ import annotations
 
 import json
 import logging
-import queue
-import threading
 import time
 from typing import Any
 
@@ -29,17 +29,22 @@ from sea_hil.config import SeaHilConfig
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.keys import Keys
 from sea_hil.mechanics import limb_params
-from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload,
-                               StatePayload, VoltagePayload, encode)
-from sea_hil.protocol.zsession import LatestSubscriber, publisher
+from sea_hil.protocol.payloads import (PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
+                                       VoltagePayload, encode)
+from sea_hil.protocol.zsession import publisher
+from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.controller")
 
 
-class RemoteController:
+class RemoteController(Node):
+    kind = "controller"
+
     def __init__(self, cfg: SeaHilConfig, session: zenoh.Session, mode: str, *, inner: str = "edge",
-                 lockstep: bool = False, cycles: int = 1) -> None:
-        self.cfg, self.mode, self.inner_mode, self.lockstep = cfg, mode, inner, lockstep
+                 clock: Clock | None = None, cycles: int = 1) -> None:
+        super().__init__()
+        self.cfg, self.mode, self.inner_mode, self.session = cfg, mode, inner, session
         self.keys = Keys.from_config(cfg.zenoh)
         self.params = limb_params(cfg.plant)
         self.traj = make_trajectory(cfg.trajectory)
@@ -48,51 +53,39 @@ class RemoteController:
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         self._lead_in: LeadIn | None = None
-        # lockstep must see every state: FIFO fed by a callback (woken on arrival, no polling); real time: newest
-        # only (ring of depth 1, never a backlog)
-        self._states: queue.SimpleQueue[bytes] = queue.SimpleQueue()
-        self.sub = (session.declare_subscriber(self.keys.state, lambda s: self._states.put(s.payload.to_bytes()))
-                    if lockstep else LatestSubscriber(session, self.keys.state))
+        self.sync = (clock or RealTimeClock()).controller(self)
+        self.source = self.sync.state_source(session, self.keys.state)
         self.sp_pub = publisher(session, self.keys.setpoint)
         self.v_pub = publisher(session, self.keys.voltage)
-        self.ack_pub = publisher(session, self.keys.control)
         self.event_pub = publisher(session, self.keys.event, express=False,
                                    congestion_control=zenoh.CongestionControl.BLOCK)
         self.payloads = PayloadCounters()
         self.seq = SequenceTracker()
-        self.stop_event = threading.Event()
         self.t0_ns: int | None = None
         self.setpoint_seq = 0
         self.states = 0
         self.done = False
-        self._last_answer: tuple[int, list[tuple[zenoh.Publisher, bytes]]] | None = None
         self.stats_pub = publisher(session, self.keys.stats, express=False)
         self.unexpected_payloads = self.ignored_states = self.edge_restarts = self.unusable_states = 0
         self.restart_gap_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
         self._last_state_wall_ns: int | None = None
         self._last_t_ns = 0
 
-    def run(self, timeout_s: float | None = None) -> bool:
-        """Handle states until the trajectory's cycles are done (True) or stop/timeout (False)."""
-        deadline = None if timeout_s is None else time.monotonic_ns() + int(timeout_s * 1e9)
-        while not self.stop_event.is_set() and not self.done:
-            data = self._next_state()
-            if data is None:
-                if deadline is not None and time.monotonic_ns() > deadline:
-                    return False
-                continue
-            self.handle(data)
+    # ---- the node hooks -------------------------------------------------------------------------------------------
+    def _step(self) -> bool:
+        """Handle the next state, if one arrives within 50 ms."""
+        data = self.source.recv(0.05)
+        if data is None:
+            return False
+        self.handle(data)
+        return True
+
+    def finished(self) -> bool:
         return self.done
 
-    def _next_state(self) -> bytes | None:
-        """The next state payload, or None when none arrived within 50 ms."""
-        if self.lockstep:
-            try:
-                return self._states.get(timeout=0.05)
-            except queue.Empty:
-                return None
-        sample = self.sub.recv(0.05)
-        return None if sample is None else sample.payload.to_bytes()
+    def _close(self) -> None:
+        self.source.close()
+        self.sync.close()
 
     def handle(self, data: bytes, now_ns: int | None = None) -> None:
         """Handle one state payload (`now_ns`: arrival time, default now). Malformed or wrong-type payloads and
@@ -105,9 +98,7 @@ class RemoteController:
             return
         now_ns = time.monotonic_ns() if now_ns is None else now_ns
         verdict = self.seq.feed(p.seq)
-        if verdict is SeqVerdict.DUPLICATE and self.lockstep and self._last_answer and self._last_answer[0] == p.seq:
-            for pub, msg in self._last_answer[1]:   # lockstep re-send of a state we answered: answer again
-                pub.put(msg)
+        if self.sync.repeat_state(verdict, p.seq):
             return
         if verdict is not SeqVerdict.NEW and not self._edge_restarted(p, now_ns):
             self.ignored_states += 1
@@ -130,12 +121,10 @@ class RemoteController:
             return
         self.states += 1
         sent = bool(answer)
-        if self.lockstep:
-            answer.append((self.ack_pub, encode(AckPayload(p.seq, time.monotonic_ns(), p.seq,
-                                                           self.setpoint_seq if sent else 0, sent))))
+        answer += self.sync.answer_extra(p.seq, self.setpoint_seq, sent)
         for pub, msg in answer:
             pub.put(msg)
-        self._last_answer = (p.seq, answer)
+        self.sync.answered(p.seq, answer)
         self.event_pub.put(json.dumps({
             "t_s": t_ns * 1e-9, "state_seq": p.seq,
             "theta1_rad": p.theta_rad[0], "theta2_rad": p.theta_rad[1],
@@ -166,7 +155,7 @@ class RemoteController:
         """A not-newer state seq starts a new state stream only when no state arrived for the restart gap and it
         looks like a fresh sender (seq < tracker window); the trajectory then continues where it stopped."""
         silent = self._last_state_wall_ns is not None and now_ns - self._last_state_wall_ns > self.restart_gap_ns
-        if self.lockstep or not silent or p.seq >= self.seq.window:
+        if not self.sync.restart_possible(silent) or p.seq >= self.seq.window:
             return False
         self.seq.restart()
         self.seq.feed(p.seq)
@@ -175,21 +164,11 @@ class RemoteController:
         log.warning("state stream restarted at seq %d (edge restart)", p.seq)
         return True
 
-    def stats_dict(self) -> dict[str, object]:
-        """Counters of this node (published on the stats key by `publish_stats`)."""
+    def _stats(self) -> dict[str, object]:
         pc = self.payloads.as_dict()
-        return {"node": "controller", "states_handled": self.states, "setpoints_sent": self.setpoint_seq,
+        return {"states_handled": self.states, "setpoints_sent": self.setpoint_seq,
                 "payload_accepted": pc["accepted"], "payload_rejected": pc["rejected_total"],
                 **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
                 **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}}
-
-    def publish_stats(self, final: bool = False) -> None:
-        self.stats_pub.put(json.dumps({**self.stats_dict(), "final": final}).encode())
-
-    def close(self) -> None:
-        if isinstance(self.sub, LatestSubscriber):
-            self.sub.close()
-        else:
-            self.sub.undeclare()

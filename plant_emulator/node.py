@@ -1,19 +1,16 @@
-"""The SEA driver node: owns a CAN bus, serves one or more limbs (node ids) with `DriverCore`, sends feedback on a
-drift-free schedule (absolute deadlines) and heartbeats. Malformed frames are rejected, counted and logged;
-well-formed ids of nodes it does not serve are ignored like drive firmware's acceptance filter does (`is_foreign`,
-counted in `TickStats.foreign_frames`).
+"""The SEA driver node: owns a CAN bus, serves one or more limbs (node ids) with `DriverCore` (the pure firmware core),
+on the schedule of its clock (`sea_hil.runtime`), and sends heartbeats. Malformed frames are rejected, counted and
+logged; well-formed ids of nodes it does not serve are ignored like drive firmware's acceptance filter does
+(`is_foreign`, counted in `TickStats.foreign_frames`).
 
-Real-time mode: one tick per feedback period; waiting for the next deadline is done in `bus.recv(timeout)` so
-commands are handled as they arrive and act from their arrival time within the period (`DriverCore`). Lateness of
-each tick is recorded; a tick later than one period is an overrun (the schedule skips ahead, never bunches up).
-Lockstep mode: the driver integrates sample k -> k+1 only once the voltage command answering feedback k (same 8-bit
-seq) has arrived for every node; the last feedback is re-sent every `resend_s` of wall time while waiting, so a peer
-that joins late or a lost frame does not stall the session.
+Real-time clock: one tick per feedback period on a drift-free schedule (absolute deadlines); waiting for the next
+deadline is done in `bus.recv(timeout)` so commands are handled as they arrive and act from their arrival time
+within the period (`DriverCore`); lateness is recorded, a tick later than one period is an overrun. Lockstep clock
+(`sea_hil.runtime.lockstep`): a sample is integrated once every served node's command for it has arrived.
 """
 from __future__ import annotations
 
 import logging
-import threading
 import time
 from dataclasses import dataclass
 from typing import Callable, Container
@@ -24,10 +21,12 @@ from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.integrator import prepare_advance
 from sea_hil.protocol.can_codec import SeaCodec, load_database
-from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback, VoltageCmd
+from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback
 from sea_hil.protocol.canbus import send_with_retry
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import BusError, MalformedFrame
+from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.node import Node
 from sea_hil.stats.histogram import LogHistogram
 from sea_hil.mechanics import limb_params
 
@@ -59,17 +58,18 @@ def is_foreign(msg: can.Message, served: Container[int], cmd_ids: frozenset[int]
             and msg.arbitration_id & CMD_MASK in cmd_ids)
 
 
-class PlantNode:
-    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, node_ids: tuple[int, ...], *, lockstep: bool = False,
-                 resend_s: float = 0.05) -> None:
+class PlantNode(Node):
+    kind = "plant"
+
+    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, node_ids: tuple[int, ...], *,
+                 clock: Clock | None = None) -> None:
         if not node_ids:
             raise BusError("plant needs at least one node id")
+        super().__init__()
         self.cfg = cfg
         self.bus = bus
         self.codec = SeaCodec(node_ids)
         self.cmd_ids = command_ids()
-        self.lockstep = lockstep
-        self.resend_ns = int(resend_s * 1e9)
         p = limb_params(cfg.plant)
         cc = cfg.can
         self.period_ns = int(round(1e9 / cc.feedback_rate_hz))
@@ -79,8 +79,7 @@ class PlantNode:
         self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
         self.lateness = LogHistogram()
         self.stats = TickStats()
-        self.stop_event = threading.Event()
-        self._answered: set[int] = set()
+        self.pacer = (clock or RealTimeClock()).plant(self)
 
     # ---- frames -------------------------------------------------------------------------------------------------
     def _on_message(self, msg: can.Message, now_ns: int) -> None:
@@ -100,8 +99,7 @@ class PlantNode:
             return
         if not drv.handle(frame, now_ns):
             return  # feedback/heartbeat (a driver's own output, never a command to it): nothing to do
-        if self.lockstep and isinstance(frame, VoltageCmd) and frame.seq == drv.seq & 0xFF:
-            self._answered.add(frame.node_id)
+        self.pacer.on_command(frame, drv)
 
     def _send(self, msg: can.Message) -> None:
         try:
@@ -118,7 +116,7 @@ class PlantNode:
         if self.stats.bus_errors == 1 or self.stats.bus_errors % 1000 == 0:
             log.warning("%s (%d bus errors so far)", what, self.stats.bus_errors)
 
-    def _publish(self, drv: DriverCore, feedback: Feedback) -> None:
+    def publish(self, drv: DriverCore, feedback: Feedback) -> None:
         try:
             msgs = self.codec.encode_feedback(feedback, saturate=True)
         except MalformedFrame as err:   # e.g. a diverged (NaN) model: report, keep the node alive
@@ -128,23 +126,22 @@ class PlantNode:
         for m in msgs:
             self._send(m)
 
-    def _publish_sample(self, drv: DriverCore, feedback: Feedback) -> None:
+    def publish_sample(self, drv: DriverCore, feedback: Feedback) -> None:
         """Real time: the new period starts when its sample's feedback leaves (commands act from their arrival)."""
         drv.period_start_ns = time.monotonic_ns()
-        self._publish(drv, feedback)
+        self.publish(drv, feedback)
 
-    def _heartbeats(self) -> None:
+    def heartbeats(self) -> None:
         for drv in self.drivers.values():
             self._send(self.codec.encode(drv.heartbeat()))
 
-    # ---- loops --------------------------------------------------------------------------------------------------
-    def run(self, duration_s: float | None = None) -> None:
-        if not self.lockstep:   # real time: the compiled RK4 kernel (~4x cheaper per tick) is loaded before the
-            for drv in self.drivers.values():   # schedule starts, never in a period; lockstep skips it, as loading
-                prepare_advance(drv.params)     # numba (~0.6 s) costs more wall time than it saves in one cycle
-        (self._run_lockstep if self.lockstep else self._run_realtime)(duration_s)
+    def prepare_kernels(self) -> None:
+        """Load the compiled RK4 kernel (~4x cheaper per tick) before a real-time schedule starts, never in a period."""
+        for drv in self.drivers.values():
+            prepare_advance(drv.params)
 
-    def _drain_until(self, deadline_ns: int, done: Callable[[], bool] | None = None) -> None:
+    def drain_until(self, deadline_ns: int, done: Callable[[], bool] | None = None) -> None:
+        """Handle received frames until `deadline_ns` (monotonic) or until `done()`."""
         while done is None or not done():
             now = time.monotonic_ns()
             remaining = deadline_ns - now
@@ -159,59 +156,27 @@ class PlantNode:
             if msg is not None:
                 self._on_message(msg, time.monotonic_ns())
 
-    def _run_realtime(self, duration_s: float | None) -> None:
-        start = time.monotonic_ns()
-        end = None if duration_s is None else start + int(duration_s * 1e9)
-        for drv in self.drivers.values():
-            drv.last_cmd_ns = start
-            self._publish_sample(drv, drv.feedback())
-        k, next_heartbeat_k = 0, self.heartbeat_every
-        while not self.stop_event.is_set():
-            k += 1
-            deadline = start + k * self.period_ns
-            self._drain_until(deadline)
-            now = time.monotonic_ns()
-            late = now - deadline
-            self.lateness.record(max(late, 0) * 1e-9 + 1e-7)
-            missed = late // self.period_ns if late > self.period_ns else 0
-            self.stats.overruns += missed
-            k += missed
-            self.stats.ticks += 1
-            for drv in self.drivers.values():
-                if missed:
-                    drv.note_overruns(missed)
-                drv.check_watchdog(now)
-                self._publish_sample(drv, drv.step())
-            if k >= next_heartbeat_k:  # skipped ticks must not skip the heartbeat
-                self._heartbeats()
-                next_heartbeat_k = (k // self.heartbeat_every + 1) * self.heartbeat_every
-            if end is not None and now >= end:
-                break
+    # ---- the node hooks -----------------------------------------------------------------------------------------
+    def _on_start(self, duration_s: float | None) -> None:
+        self.pacer.start(duration_s)
 
-    def _run_lockstep(self, duration_s: float | None) -> None:
-        end_seq = None if duration_s is None else int(round(duration_s * 1e9 / self.period_ns))
-        while not self.stop_event.is_set():
-            self._answered.clear()
-            for drv in self.drivers.values():
-                self._publish(drv, drv.feedback())
-            while len(self._answered) < len(self.drivers) and not self.stop_event.is_set():
-                before = len(self._answered)
-                self._drain_until(time.monotonic_ns() + self.resend_ns,
-                                  lambda: len(self._answered) >= len(self.drivers))
-                if len(self._answered) == before:   # nothing new within resend_s: re-send what is missing
-                    for n, drv in self.drivers.items():
-                        if n not in self._answered:
-                            self._publish(drv, drv.feedback())
-            if self.stop_event.is_set():
-                break
-            for drv in self.drivers.values():
-                drv.last_cmd_ns = drv.sample_t_ns
-                drv.step()
-            self.stats.ticks += 1
-            if self.stats.ticks % self.heartbeat_every == 0:
-                self._heartbeats()
-            if end_seq is not None and self.stats.ticks >= end_seq:
-                break
+    def _step(self) -> bool:
+        self.pacer.tick()
+        return True
 
-    def stop(self) -> None:
-        self.stop_event.set()
+    def finished(self) -> bool:
+        return bool(self.pacer.done)
+
+    def _stats(self) -> dict[str, float]:
+        s, lat = self.stats, self.lateness.to_dict()
+        out: dict[str, float] = {"ticks": s.ticks, "overruns": s.overruns, "send_retries": s.send_retries,
+                                 "send_failures": s.send_failures, "bus_errors": s.bus_errors,
+                                 "foreign_frames": s.foreign_frames}
+        for k in ("p50", "p99", "max"):
+            out[f"lateness_us_{k}"] = lat[k] * 1e6 if lat[k] is not None else -1.0
+        for n, drv in self.drivers.items():
+            c = drv.counters
+            out.update({f"node{n}_rejected_frames": c.rejected_frames, f"node{n}_ignored_commands": c.ignored_commands,
+                        f"node{n}_commands": c.commands, f"node{n}_watchdog_trips": c.watchdog_trips,
+                        f"node{n}_state": int(drv.state)})
+        return out

@@ -3,6 +3,7 @@
 One import package. The user's folders are installed inside it: `protocol/` is `sea_hil.protocol` (the wire),
 `plant_emulator/` is `sea_hil.plant_emulator` (the emulated drive), `controller/` is `sea_hil.controller` (edge and
 remote controller). Shared below them: `sea_hil.errors`, `sea_hil.config`, `sea_hil.mechanics`, `sea_hil.jit`,
-`sea_hil.stats`. Above them: `sea_hil.recorder` (MCAP), `sea_hil.session` (multi-process sessions),
+`sea_hil.stats`, `sea_hil.runtime` (the `Node` base every node is, the real-time and lockstep clocks). Above them:
+`sea_hil.recorder` (MCAP), `sea_hil.session` (`SessionBuilder`, multi-process sessions),
 `sea_hil.offline` (offline closed loop), `sea_hil.sweep`, `sea_hil.report`, `sea_hil.commands` and `sea_hil.cli`.
 """

@@ -22,7 +22,8 @@ from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, lo
 from sea_hil.protocol.link import LinkCounters, LinkEmulator
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.processes import end_process as _end_process
 
 REPO = Path(__file__).resolve().parents[1]
@@ -74,7 +75,8 @@ class OutageLink(LinkEmulator):
 
 @dataclass
 class Rig:
-    """Plant + edge + recorder threads in this process; the controller is a child process over Zenoh."""
+    """Plant + edge + recorder threads in this process (composed by the `SessionBuilder`); the controller is a child
+    process over Zenoh."""
     cfg: SeaHilConfig
     cfg_path: Path
     endpoint: str
@@ -82,11 +84,7 @@ class Rig:
     edge: EdgeNode
     recorder: RecorderNode
     mcap: Path
-    _session: object
-    _buses: list
-    _rec: SessionRecorder
-    _threads: list[threading.Thread]
-    _closed: bool = False
+    _builder: SessionBuilder
 
     @classmethod
     def start(cls, tmp: Path, overrides: dict | None = None) -> "Rig":
@@ -94,18 +92,24 @@ class Rig:
         cfg_path = tmp / "config.toml"
         cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
         endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-        session = open_session(make_config(listen=[endpoint]))
-        buses = [open_bus(cfg.can.interface) for _ in range(3)]
-        rec = SessionRecorder.from_config(tmp / "session.mcap", cfg.record)
-        rec.write_session_header(cfg, seed=cfg.link.seed, argv=["test_faults"])
-        recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2])
-        plant = PlantNode(cfg, buses[0], (NODE,))
-        edge = EdgeNode(cfg, buses[1], session, NODE)
-        threads = [threading.Thread(target=plant.run, daemon=True), threading.Thread(target=edge.run, daemon=True)]
-        rig = cls(cfg, cfg_path, endpoint, plant, edge, recorder, tmp / "session.mcap", session, buses, rec, threads)
-        recorder.start()
-        for t in threads:
-            t.start()
+        b = SessionBuilder(cfg)
+        try:
+            session = b.zenoh(listen=[endpoint])
+            buses = [b.bus() for _ in range(3)]
+            rec = SessionRecorder.from_config(tmp / "session.mcap", cfg.record)
+            b.callback(rec.close)   # idempotent; normally closed with the final counters below
+            rec.write_session_header(cfg, seed=cfg.link.seed, argv=["test_faults"])
+            recorder = b.recorder(rec, session, buses[2])
+            plant = b.plant(buses[0], (NODE,))
+            edge = b.edge(buses[1], session, NODE)
+            b.callback(lambda: rec.close(final_stats=recorder.counters()))   # after plant, edge, recorder stop
+            b.callback(lambda: [n.close() for n in (plant, edge, recorder)])
+        except BaseException:
+            b.close()
+            raise
+        rig = cls(cfg, cfg_path, endpoint, plant, edge, recorder, tmp / "session.mcap", b)
+        for node in (recorder, plant, edge):
+            node.start()
         return rig
 
     def driver_state(self) -> DriverState:
@@ -119,20 +123,8 @@ class Rig:
                                 stderr=subprocess.PIPE)
 
     def close(self) -> None:
-        """Stop every thread, finalise the MCAP file, close Zenoh and the buses (idempotent)."""
-        if self._closed:
-            return
-        self._closed = True
-        self.plant.stop()
-        self.edge.stop_event.set()
-        for t in self._threads:
-            t.join(timeout=STOP_TIMEOUT_S)
-        self.recorder.stop()
-        self._rec.close(final_stats=self.recorder.counters())
-        self.edge.close()
-        self._session.close()  # type: ignore[attr-defined]
-        for b in self._buses:
-            b.shutdown()
+        """Stop every node, finalise the MCAP file, close Zenoh and the buses (idempotent)."""
+        self._builder.close()
 
 
 # ---- edge kill/restart across processes: udp_multicast CAN inside a private network namespace ------------------

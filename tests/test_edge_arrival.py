@@ -12,11 +12,10 @@ from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import load_config
 from sea_hil.mechanics import limb_params
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
-from sea_hil.protocol.zsession import make_config, open_session
+from sea_hil.session.builder import SessionBuilder
 
 NODE = 1
 
@@ -25,18 +24,11 @@ NODE = 1
 def rig() -> Iterator[tuple[EdgeNode, can.BusABC, DriverCore]]:
     cfg = load_config()
     channel = f"virtual:arrival-{uuid.uuid4().hex[:8]}"
-    session = open_session(make_config())
-    edge_bus, peer = open_bus(channel), open_bus(channel)
-    edge = EdgeNode(cfg, edge_bus, session, NODE)
     drv = DriverCore.create(NODE, limb_params(cfg.plant), 1e-3, 0.1, cfg.sim.substeps,
                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance))
-    try:
-        yield edge, peer, drv
-    finally:
-        edge.close()
-        session.close()
-        edge_bus.shutdown()
-        peer.shutdown()
+    with SessionBuilder(cfg) as b:
+        edge = b.edge(b.bus(channel), b.zenoh(), NODE)
+        yield edge, b.bus(channel), drv
 
 
 def _feed(edge: EdgeNode, drv: DriverCore, codec: SeaCodec) -> None:
@@ -65,7 +57,7 @@ def test_setpoint_is_applied_on_arrival_with_the_newest_feedback(rig) -> None:
     edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)
     first = _commands(peer, codec)
     assert len(first) == 1 and edge.counters.arrival_commands == 1   # sent at once, before the next sample
-    assert first[0].seq == edge._last_fb.seq                         # computed from the newest feedback
+    assert first[0].seq == edge.last_fb.seq                         # computed from the newest feedback
     edge.on_arrival(_setpoint(2, 1, (-2e-4, 3e-4)), rx_ns=2)
     second = _commands(peer, codec)
     assert len(second) == 1 and second[0].voltage_v != first[0].voltage_v   # the new v_x changed the voltage
@@ -90,7 +82,7 @@ def test_delayed_setpoint_waits_for_its_sample(rig) -> None:
     edge, peer, drv = rig
     codec = SeaCodec([NODE])
     cfg = load_config(overrides={"link": {"downlink": {"delay_s": 0.003}}})
-    edge.downlink = type(edge.downlink)(cfg.link.downlink, "t/down")
+    edge.intake.downlink = type(edge.intake.downlink)(cfg.link.downlink, "t/down")
     for _ in range(10):
         _feed(edge, drv, codec)
     _commands(peer, codec)
@@ -100,4 +92,4 @@ def test_delayed_setpoint_waits_for_its_sample(rig) -> None:
         _feed(edge, drv, codec)
     assert edge.counters.setpoints == 1 and edge.counters.arrival_commands == 0
     cmds = _commands(peer, codec)     # no setpoint yet -> no command; then the sample that released it answers
-    assert [c.seq for c in cmds] == [edge._last_fb.seq] == [13]
+    assert [c.seq for c in cmds] == [edge.last_fb.seq] == [13]

@@ -124,7 +124,7 @@ def edge_input(draw: st.DrawFn, codec: SeaCodec, edge_t_us: Callable[[], int]) -
 
 
 def _fresh_setpoint(edge: EdgeNode) -> None:
-    seq = (edge.sp_seq.last or 0) + 1
+    seq = (edge.intake.sp_seq.last or 0) + 1
     assert edge.on_downlink(encode(SetpointPayload(seq, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME)))
 
 
@@ -141,7 +141,7 @@ def test_edge_frame_handler_survives_counts_and_still_commands() -> None:
 
         @settings(max_examples=EDGE_CASES, deadline=None, database=None, derandomize=True,
                   suppress_health_check=[HealthCheck.too_slow])
-        @given(msgs=edge_input(oracle, lambda: edge._t_us_full))
+        @given(msgs=edge_input(oracle, lambda: edge.t_us_full))
         def run(msgs: list[can.Message]) -> None:
             for msg in msgs:
                 before, samples = edge.counters.rejected_frames, edge.counters.feedback
@@ -163,7 +163,7 @@ def test_edge_frame_handler_survives_counts_and_still_commands() -> None:
         while peer.recv(0) is not None:     # forget what the fuzzing made the edge send
             pass
         last = edge.counters.feedback
-        t_us = (edge._t_us_full + 1000) & 0xFFFF   # the sample after the newest one seen
+        t_us = (edge.t_us_full + 1000) & 0xFFFF   # the sample after the newest one seen
         for msg in oracle.encode_feedback(Feedback(NODE, 200, t_us, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))):
             edge.on_can(msg, time.monotonic_ns())
         assert edge.counters.feedback == last + 1

@@ -107,7 +107,7 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
         pc = edge.payloads.as_dict()
         assert calls["n"] >= CASES and pc["accepted"] + pc["rejected_total"] == calls["n"]
         assert pc["rejected_total"] == calls["malformed"] and edge.stats_dict()["payload_rejected"] == calls["malformed"]
-        nxt = ((edge.sp_seq.last or 0) + 1) & U32_MAX
+        nxt = ((edge.intake.sp_seq.last or 0) + 1) & U32_MAX
         assert edge.on_downlink(encode(SetpointPayload(nxt, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME)))
         print(f"\nedge: {calls['n']} payloads, {calls['malformed']} malformed, "
               f"{edge.counters.unexpected_payloads} wrong type, {edge.counters.stale_setpoints} stale")

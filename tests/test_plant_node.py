@@ -20,6 +20,7 @@ from hypothesis import strategies as st
 
 from sea_hil.plant_emulator.dynamics import initial_state
 from sea_hil.plant_emulator.integrator import advance
+from sea_hil.session.builder import SessionBuilder
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import (ClearErrors, DriverState, ErrorFlags, Feedback, FeedbackAngle, FeedbackAssembler,
                                 FEEDBACK_PARTS, Heartbeat, SeaCodec, VoltageCmd, load_database)
@@ -66,8 +67,9 @@ def running_plants(cfg: SeaHilConfig, served: tuple[tuple[int, ...], ...], *,
                    lockstep: bool) -> Iterator[tuple[list[PlantNode], Peer]]:
     """One running `PlantNode` per entry of `served` (its node ids), all on one fresh virtual bus, and a peer."""
     channel = f"virtual:plant-test-{uuid.uuid4().hex}"
-    buses = [open_bus(channel) for _ in range(len(served) + 1)]
-    nodes = [PlantNode(cfg, bus, ids, lockstep=lockstep) for bus, ids in zip(buses, served)]
+    builder = SessionBuilder(cfg, lockstep=lockstep)
+    buses = [builder.bus(channel) for _ in range(len(served) + 1)]
+    nodes = [builder.plant(bus, ids) for bus, ids in zip(buses, served)]
     errors: list[BaseException] = []
 
     def target(node: PlantNode) -> None:
@@ -86,8 +88,7 @@ def running_plants(cfg: SeaHilConfig, served: tuple[tuple[int, ...], ...], *,
             node.stop()
         for thread in threads:
             thread.join(timeout=5.0)
-        for bus in buses:
-            bus.shutdown()
+        builder.close()
     assert not any(t.is_alive() for t in threads), "PlantNode.run did not return after stop()"
     assert not errors, f"PlantNode.run raised {errors[0]!r}"
 
@@ -289,7 +290,7 @@ class _FailingBus:
 def test_send_failure_is_counted_and_flagged_not_raised(idle_node: PlantNode) -> None:
     bus, idle_node.bus = idle_node.bus, _FailingBus()
     try:
-        idle_node._heartbeats()
+        idle_node.heartbeats()
     finally:
         idle_node.bus = bus
     assert idle_node.stats.send_failures == 1 and ErrorFlags.BUS_ERROR in idle_node.drivers[NODE].flags

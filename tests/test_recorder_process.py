@@ -170,7 +170,7 @@ def test_stopping_tap_records_what_is_still_queued(tmp_path: Path) -> None:
                 for f in frames[1:]:
                     sender.send(can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=False))
             finally:
-                node.stop()
+                node.close()
             counters = node.counters()
     finally:
         tap_bus.shutdown()
@@ -197,7 +197,7 @@ def test_idle_child_runs_on_idle_cpu_time_only(tmp_path: Path) -> None:
     rec = RecorderProcess(tmp_path / "idle.mcap", load_config().record, idle=True)
     try:
         assert rec._proc.args[-2:] == ["1", "wall"]          # the flags reach the child
-        rec.record("/stats", 1, 1, {"final": True})
+        rec.record("/stats", 1, 1, {"node": "edge", "final": True, "t_ns": 1})
     finally:
         rec.close()
     assert read_session(tmp_path / "idle.mcap").complete

@@ -35,7 +35,7 @@ SAMPLES = {
     "/zenoh/voltage": {"t_ns": 6, "seq": 9, "u1_v": 1.0, "u2_v": 2.0},
     "/controller/event": {"t_ns": 7, "event_index": 3, "reason": "threshold", "inter_event_s": 0.05,
                           "error_norm": 0.21, "threshold": 0.2},
-    "/stats": {"t_ns": 8, "stream_state_tx_msgs_per_s": 100.0, "can_load_pct_window": 13.5},
+    "/stats": {"node": "edge", "final": False, "t_ns": 8, "uplink_msgs": 100, "loop_us_p99": 13.5},
     "/tracking": {"t_ns": 9, "theta1_d_rad": 0.3, "theta1_rad": 0.29, "e1_rad": 0.01, "e2_rad": -0.02},
     "/log/events": log_message(10, LogLevel.INFO, "controller", "trigger event ERROR_BOUND"),
     "/log/faults": log_message(10, LogLevel.ERROR, "driver1", "driver 1: FAULT"),
@@ -95,8 +95,10 @@ def test_bad_input_is_rejected_with_recording_error(tmp_path: Path) -> None:
         rec.record("/can/raw", 0, 0, {"can_id": 1})
     with pytest.raises(RecordingError, match="flat scalar"):
         rec.record("/tracking", 0, 0, {"e1_rad": [1.0, 2.0]})
-    with pytest.raises(RecordingError, match="flat scalar"):
+    with pytest.raises(RecordingError, match="misses"):
         rec.record("/stats", 0, 0, {"name": "text"})
+    with pytest.raises(RecordingError, match="finite number"):
+        rec.record("/stats", 0, 0, {"node": "edge", "final": True, "t_ns": 0, "name": "text"})
     with pytest.raises(RecordingError, match="compression"):
         SessionRecorder(tmp_path / "c.mcap", compression="gzip")
     rec.close()

@@ -9,28 +9,18 @@ import pytest
 
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import load_config
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
-from sea_hil.protocol.zsession import make_config, open_session
+from sea_hil.session.builder import SessionBuilder
 
 MS = 1_000_000
 
 
 @pytest.fixture
 def nodes() -> Iterator[tuple[EdgeNode, RemoteController]]:
-    cfg = load_config()
-    session = open_session(make_config())
-    bus = open_bus(f"virtual:replay-{uuid.uuid4().hex[:8]}")
-    edge = EdgeNode(cfg, bus, session, 1)
-    ctrl = RemoteController(cfg, session, "tt")
-    try:
-        yield edge, ctrl
-    finally:
-        edge.close()
-        ctrl.close()
-        session.close()
-        bus.shutdown()
+    with SessionBuilder(load_config()) as b:
+        session = b.zenoh()
+        yield b.edge(b.bus(f"virtual:replay-{uuid.uuid4().hex[:8]}"), session, 1), b.controller(session, "tt")
 
 
 def setpoint(seq: int, d1: float = 0.001, reason: TriggerReason = TriggerReason.ERROR_BOUND) -> bytes:
@@ -42,8 +32,8 @@ def state(seq: int, sample_t_ns: int) -> bytes:
 
 
 def apply(edge: EdgeNode, now_ns: int) -> None:
-    edge._sample_t_ns = now_ns
-    edge._take_downlink(now_ns)
+    edge.sample_t_ns = now_ns
+    edge.take_downlink(now_ns)
 
 
 def test_edge_ignores_and_counts_duplicated_and_older_setpoints(nodes: tuple[EdgeNode, RemoteController]) -> None:
@@ -63,21 +53,21 @@ def test_edge_voltage_stream_shares_the_replay_guard(nodes: tuple[EdgeNode, Remo
     v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
     assert [edge.on_downlink(x) for x in v] == [True, False, False, True]
     apply(edge, 0)
-    assert edge.counters.voltages == 2 and edge._voltage == (11.0, 0.0) and edge.counters.stale_setpoints == 2
+    assert edge.counters.voltages == 2 and edge.command_path.voltage == (11.0, 0.0) and edge.counters.stale_setpoints == 2
 
 
 def test_restarted_controller_is_accepted_only_after_the_stream_timed_out(
         nodes: tuple[EdgeNode, RemoteController]) -> None:
     edge, _ = nodes
-    edge._sample_t_ns = 1000 * MS
+    edge.sample_t_ns = 1000 * MS
     for s in range(1, 101):
         assert edge.on_downlink(setpoint(s))
     apply(edge, 1000 * MS)
-    timeout_ms = edge.timeout_ns // MS
-    edge._sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a replayed seq 1 is refused
+    timeout_ms = edge.intake.timeout_ns // MS
+    edge.sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a replayed seq 1 is refused
     assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))
-    edge._sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): an old seq >= window
-    assert not edge.on_downlink(setpoint(edge.sp_seq.window))   # is still refused, a fresh sender's seq is not
+    edge.sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): an old seq >= window
+    assert not edge.on_downlink(setpoint(edge.intake.sp_seq.window))   # is still refused, a fresh sender's seq is not
     assert edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))
     assert not edge.on_downlink(setpoint(1))                     # and the new stream is guarded again
     assert edge.on_downlink(setpoint(2))

@@ -10,7 +10,6 @@ puts are followed on the same link by an allowed put, and waited for.
 from __future__ import annotations
 
 import argparse
-import threading
 import time
 from collections.abc import Callable
 from contextlib import ExitStack
@@ -21,7 +20,6 @@ import pytest
 import zenoh
 
 from sea_hil.protocol.can_codec import FeedbackAssembler, FEEDBACK_PARTS, SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import ZenohConfig, load_config
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.keys import Keys
@@ -236,25 +234,14 @@ class _CanWatch:
 
 def _start_limb(stack: ExitStack, cfg: Any) -> tuple[Any, zenoh.Session, _CanWatch]:
     """Plant (emulated driver) + EdgeNode (remote inner loop: voltages go straight to CAN) on a virtual bus."""
-    from sea_hil.controller.edge import EdgeNode
-    from sea_hil.plant_emulator.node import PlantNode
-    buses = [open_bus(cfg.can.interface) for _ in range(3)]
-    for b in buses:
-        stack.callback(b.shutdown)
+    from sea_hil.session.builder import SessionBuilder
     session = _open(stack, cfg.zenoh)
-    plant = PlantNode(cfg, buses[0], (1,))
-    edge = EdgeNode(cfg, buses[1], session, 1, inner="remote")
-    stack.callback(edge.close)
-    threads = [threading.Thread(target=n.run, daemon=True) for n in (plant, edge)]
-
-    def stop() -> None:
-        plant.stop()
-        edge.stop_event.set()
-        for t in threads:
-            t.join(timeout=10)
-    stack.callback(stop)
-    for t in threads:
-        t.start()
+    b = stack.enter_context(SessionBuilder(cfg))   # closed first: nodes stop before the session goes
+    buses = [b.bus() for _ in range(3)]
+    plant = b.plant(buses[0], (1,))
+    edge = b.edge(buses[1], session, 1, inner="remote")
+    plant.start()
+    edge.start()
     return edge, session, _CanWatch(buses[2])
 
 

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
 from sea_hil.live.cli import add_live_args, live_overrides
@@ -24,19 +23,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.controller.remote import RemoteController
-    from sea_hil.protocol.zsession import open_session
     from sea_hil.live.child import start_live_child
+    from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
-    session = open_session(cfg.zenoh)
-    start_live_child(args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view, ended at exit
-    node = RemoteController(cfg, session, args.controller, inner=args.inner, lockstep=args.lockstep,
-                            cycles=args.cycles)
-    signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())
-    try:
-        done = node.run(args.timeout)
-    finally:
-        node.publish_stats(final=True)
-        node.close()
-        session.close()
+    with SessionBuilder(cfg, lockstep=args.lockstep) as b:
+        session = b.zenoh()
+        live = start_live_child(args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view
+        if live is not None:
+            b.callback(live.close)
+        node = b.controller(session, args.controller, inner=args.inner, cycles=args.cycles)
+        done = b.serve(node, args.timeout)
     return 0 if done else 3

@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 
 from sea_hil.commands.common import add_config_args, add_link_args, add_zenoh_args, config_from_args
 from sea_hil.live.cli import add_live_args, live_overrides
@@ -22,28 +21,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.controller.edge import EdgeNode
-    from sea_hil.protocol.canbus import open_bus
-    from sea_hil.protocol.zsession import open_session
     from sea_hil.live.child import start_live_child
+    from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
-    session = open_session(cfg.zenoh)
-    start_live_child(args, cfg, cfg.can.interface)   # --foxglove: a `sea-hil record` child serves the live view, ended at exit
-    bus = None
-    try:
-        bus = open_bus(cfg.can.interface)
-        node = EdgeNode(cfg, bus, session, args.node, inner=args.inner, lockstep=args.lockstep)
-    except BaseException:
-        if bus is not None:
-            bus.shutdown()
-        session.close()
-        raise
-    signal.signal(signal.SIGTERM, lambda *_: node.stop_event.set())
-    try:
-        node.run()
-    finally:
-        node.publish_stats(final=True)
-        node.close()
-        session.close()
-        bus.shutdown()
+    with SessionBuilder(cfg, lockstep=args.lockstep) as b:
+        session = b.zenoh()
+        live = start_live_child(args, cfg, cfg.can.interface)   # --foxglove: a `sea-hil record` child serves it
+        if live is not None:
+            b.callback(live.close)
+        b.serve(b.edge(b.bus(), session, args.node, inner=args.inner))
     return 0

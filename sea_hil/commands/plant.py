@@ -2,7 +2,6 @@
 from __future__ import annotations
 
 import argparse
-import signal
 
 from sea_hil.commands.common import add_config_args, config_from_args
 
@@ -23,18 +22,13 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.plant_emulator.node import PlantNode
-    from sea_hil.protocol.canbus import open_bus
+    from sea_hil.session.builder import SessionBuilder
     can_ov = {k: v for k, v in (("feedback_rate_hz", args.rate), ("watchdog_timeout_s", args.watchdog))
               if v is not None}
     cfg = config_from_args(args, {"can": can_ov} if can_ov else None)
-    bus = open_bus(cfg.can.interface)
-    try:
-        node = PlantNode(cfg, bus, tuple(args.node or cfg.can.node_ids), lockstep=args.lockstep)
-        signal.signal(signal.SIGTERM, lambda *_: node.stop())
-        node.run(args.duration)
-    finally:
-        bus.shutdown()
+    with SessionBuilder(cfg, lockstep=args.lockstep) as b:
+        node = b.plant(b.bus(), tuple(args.node or cfg.can.node_ids))
+        b.serve(node, args.duration)
     print(f"ticks {node.stats.ticks} overruns {node.stats.overruns} "
           f"lateness p99 {node.lateness.percentile(99) * 1e6:.0f} us")
     return 0

@@ -3,7 +3,6 @@ from __future__ import annotations
 
 import argparse
 import signal
-import threading
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
@@ -28,38 +27,28 @@ def _main(args: argparse.Namespace) -> int:
     import os
     import sys
     from sea_hil.errors import ConfigError
-    from sea_hil.protocol.canbus import open_bus
-    from sea_hil.recorder.node import RecorderNode
-    from sea_hil.recorder.writer import SessionRecorder
-    from sea_hil.protocol.zsession import open_session
     from sea_hil.live.child import live_child_overrides
+    from sea_hil.recorder.writer import SessionRecorder
+    from sea_hil.session.builder import SessionBuilder
     # started by `edge`/`controller --foxglove`: a Zenoh client of that node, ended with it
     cfg = config_from_args(args, live_overrides(args, live_child_overrides()))
     if args.out is None and not cfg.live.enabled:
         raise ConfigError("record needs --out FILE.mcap (or --foxglove for a live view without a file)")
     out = args.out if args.out is not None else Path(os.devnull)
-    stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
-    session = open_session(cfg.zenoh)
-    bus = open_bus(args.can) if args.can else None
-    if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
-        from sea_hil.live.link import await_live
-        from sea_hil.recorder.process import RecorderProcess
-        rec = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base,
-                              live=(cfg.live, cfg.can.bitrate_bps))
-        await_live(rec.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
-    else:
-        rec = SessionRecorder.from_config(out, cfg.record)
-    rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
-    node = RecorderNode(rec, session, cfg.zenoh.prefix, bus, time_base=args.time_base)
-    node.start()
-    try:
-        stop.wait(args.duration)
-    finally:
-        node.stop()
-        rec.close(final_stats=node.counters())
-        session.close()
-        if bus is not None:
-            bus.shutdown()
+    with SessionBuilder(cfg) as b:
+        session = b.zenoh()
+        bus = b.bus(args.can) if args.can else None
+        if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
+            from sea_hil.live.link import await_live
+            from sea_hil.recorder.process import RecorderProcess
+            rec = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base,
+                                  live=(cfg.live, cfg.can.bitrate_bps))
+            b.callback(rec.close)      # idempotent: closes the file if waiting for the live view failed
+            await_live(rec.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
+        else:
+            rec = SessionRecorder.from_config(out, cfg.record)
+        rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
+        node = b.recorder(rec, session, bus, time_base=args.time_base)
+        b.callback(lambda: rec.close(final_stats=node.counters()))   # after the node has stopped its taps
+        b.serve(node, args.duration, signals=(signal.SIGINT, signal.SIGTERM))
     return 0

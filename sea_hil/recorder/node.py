@@ -29,6 +29,8 @@ from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
+from sea_hil.runtime.node import Node
+from sea_hil.stats.schema import StatsError
 
 __all__ = ["RecorderNode", "enlarge_rx_buffer", "zenoh_record"]
 
@@ -57,30 +59,62 @@ def enlarge_rx_buffer(bus: can.BusABC, size_bytes: int = RX_BUFFER_BYTES) -> int
     return granted
 
 
-class RecorderNode:
+class RecorderNode(Node):
+    """A `Node` whose `run` keeps two taps (Zenoh, CAN) running until stopped; `close()` stops them (the CAN tap
+    first records what is still queued on its socket, up to `tap_timeout_s`) and releases the subscriber."""
+
+    kind = "recorder"
+    join_timeout_s = None   # `_on_stop` bounds the taps' drain (`tap_timeout_s`); its counters must be final
+
     def __init__(self, recorder: SessionRecorder | RecorderProcess, session: zenoh.Session | None, prefix: str,
                  bus: can.BusABC | None = None, *, tap_batch_s: float = 0.0,
-                 rx_buffer_bytes: int = RX_BUFFER_BYTES, time_base: TimeBase = "wall") -> None:
+                 rx_buffer_bytes: int = RX_BUFFER_BYTES, tap_timeout_s: float = 10.0,
+                 time_base: TimeBase = "wall") -> None:
+        super().__init__()
         self.rec = recorder
         self.tap_batch_s = tap_batch_s
+        self.tap_timeout_s = tap_timeout_s
         self.payloads = PayloadCounters()
         self.tap = CanTap(SeaCodec(), time_base)   # with a RecorderProcess, the child's tap (same time base) decodes
         self.ztap = ZenohTap(self.payloads, time_base)
-        self.stop_event = threading.Event()
         self.can_forwarded = 0   # frames shipped raw to a RecorderProcess (which counts and decodes them)
         self.can_tap_unfinished = False   # stop() gave up on a CAN backlog (frames not seen, not counted)
         self.zenoh_msgs = 0
+        self.stats_rejected = 0  # stats records from the wire that break the stats schema
         self.rx_buffer_bytes = enlarge_rx_buffer(bus, rx_buffer_bytes) if bus is not None else None
         self._sub = session.declare_subscriber(everything(prefix), zenoh.handlers.FifoChannel(65536)) \
             if session is not None else None
         self._bus = bus
-        self._threads = [threading.Thread(target=self._zenoh_loop, name="rec-zenoh", daemon=True)]
-        if bus is not None:
-            self._threads.append(threading.Thread(target=self._can_loop, name="rec-can", daemon=True))
+        self._threads: list[threading.Thread] = []
 
-    def start(self) -> None:
+    # ---- the node hooks -------------------------------------------------------------------------------------------
+    def _on_start(self, duration_s: float | None) -> None:
+        self._threads = [threading.Thread(target=self._zenoh_loop, name="rec-zenoh", daemon=True)]
+        if self._bus is not None:
+            self._threads.append(threading.Thread(target=self._can_loop, name="rec-can", daemon=True))
         for t in self._threads:
             t.start()
+
+    def _step(self) -> bool:
+        self.stop_event.wait(0.1)   # the taps do the work
+        return False
+
+    def _on_stop(self) -> None:
+        """Wait for the taps; the CAN tap first records what is still queued on its socket."""
+        self.stop_event.set()
+        for t in self._threads:
+            t.join(timeout=self.tap_timeout_s)
+        self.can_tap_unfinished = any(t.is_alive() for t in self._threads if t.name == "rec-can")
+        if self.can_tap_unfinished:
+            log.warning("CAN tap still draining its backlog after %.0f s: the rest is not recorded",
+                        self.tap_timeout_s)
+
+    def _close(self) -> None:
+        if self._sub is not None:
+            self._sub.undeclare()
+
+    def _stats(self) -> dict[str, Any]:
+        return {k: v for k, v in self.counters().items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
 
     def _zenoh_loop(self) -> None:
         while self._sub is not None:
@@ -89,7 +123,12 @@ class RecorderNode:
                 if self.stop_event.wait(max(0.001, self.tap_batch_s)):   # idle: wait, then drain the batch
                     return
                 continue
-            recs = self.ztap.records(str(s.key_expr), s.payload.to_bytes(), time.time_ns())
+            try:
+                recs = self.ztap.records(str(s.key_expr), s.payload.to_bytes(), time.time_ns())
+            except StatsError as err:   # bad input from the wire: counted, logged, not recorded
+                self.stats_rejected += 1
+                log.warning("stats message not recorded: %s", err)
+                continue
             self.zenoh_msgs += bool(recs)
             for r in recs:
                 self.rec.submit(*r)
@@ -124,17 +163,6 @@ class RecorderNode:
         for r in self.tap.records(frame):
             self.rec.submit(*r)
 
-    def stop(self, timeout_s: float = 10.0) -> None:
-        """Stop the taps; the CAN tap first records what is still queued on its socket (up to `timeout_s`)."""
-        self.stop_event.set()
-        for t in self._threads:
-            t.join(timeout=timeout_s)
-        self.can_tap_unfinished = any(t.is_alive() for t in self._threads if t.name == "rec-can")
-        if self.can_tap_unfinished:
-            log.warning("CAN tap still draining its backlog after %.0f s: the rest is not recorded", timeout_s)
-        if self._sub is not None:
-            self._sub.undeclare()
-
     def counters(self) -> dict[str, Any]:
         """Final-stats counters; with a `RecorderProcess` its child's CAN counts replace these in the file."""
         can_counts = self.tap.counters()
@@ -142,4 +170,5 @@ class RecorderNode:
             can_counts["can_frames"] = self.can_forwarded
         rx = {} if self.rx_buffer_bytes is None else {"can_rx_buffer_bytes": self.rx_buffer_bytes}
         return {**can_counts, **rx, "can_tap_unfinished": int(self.can_tap_unfinished), "zenoh_msgs": self.zenoh_msgs,
+                "stats_rejected": self.stats_rejected,
                 **{f"payload_{k}": v for k, v in self.payloads.as_dict().items() if not isinstance(v, dict)}}

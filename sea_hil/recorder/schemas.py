@@ -2,9 +2,10 @@
 
 Every sea-hil channel message is one flat JSON object of scalars so Foxglove can plot each numeric field. Listed
 properties document the expected fields; further flat scalar fields are allowed (`additionalProperties` is a
-scalar). The Foxglove well-known channels (`/log`, `/joint_states`) keep Foxglove's own nested schemas
+scalar). The Foxglove well-known channels (`/log/*`, `/joint_states`) keep Foxglove's own nested schemas
 (`sea_hil.recorder.well_known`). `validate_payload` is the cheap check the recorder applies (required keys present,
-every value a scalar; the well-known channels: their structure).
+every value a scalar; the well-known channels: their structure); `/stats` follows the one stats schema of every
+node (`sea_hil.stats.schema`: `node`, `final`, `t_ns`, then numbers only).
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ from typing import Any
 
 from sea_hil.errors import RecordingError
 from sea_hil.recorder.well_known import WELL_KNOWN, validate_well_known
+from sea_hil.stats.schema import ENVELOPE, STATS_JSON_SCHEMA, STATS_PROPERTIES, StatsError, validate_stats
 
 SCALAR_TYPES = ["number", "integer", "boolean", "string", "null"]
 _NUM = {"type": ["number", "null"]}  # null: a non-finite float is written as null
@@ -50,13 +52,11 @@ _CHANNELS: dict[str, tuple[str, str, dict[str, Any], list[str]]] = {
     "/controller/event": ("sea_hil.TriggerEvent", "One trigger event of the event-triggered SMC.",
                           {"t_ns": _INT, "event_index": _INT, "reason": _STR, "inter_event_s": _NUM,
                            "error_norm": _NUM, "threshold": _NUM}, ["reason"]),
-    "/stats": ("sea_hil.Stats", "Periodic flat statistics (SessionStats.to_flat_dict); all values numeric.",
-               {"t_ns": _INT}, []),
+    "/stats": ("sea_hil.Stats", STATS_JSON_SCHEMA["description"], STATS_PROPERTIES, list(ENVELOPE)),
     "/tracking": ("sea_hil.Tracking", "Desired vs actual joint angles and tracking errors.",
                   {"t_ns": _INT, "theta1_d_rad": _NUM, "theta2_d_rad": _NUM, "theta1_rad": _NUM,
                    "theta2_rad": _NUM, "e1_rad": _NUM, "e2_rad": _NUM}, []),
 }
-_NUMERIC_ONLY = {"/stats"}
 
 TOPICS: tuple[str, ...] = (*_CHANNELS, *WELL_KNOWN)
 
@@ -69,7 +69,9 @@ def schema_for(topic: str) -> dict[str, Any]:
         title, desc, props, required = _CHANNELS[topic]
     except KeyError:
         raise RecordingError(f"unknown recording topic {topic!r}; known: {', '.join(TOPICS)}") from None
-    extra = {"type": ["number", "null"]} if topic in _NUMERIC_ONLY else {"type": SCALAR_TYPES}
+    if topic == "/stats":
+        return dict(STATS_JSON_SCHEMA)
+    extra = {"type": SCALAR_TYPES}
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title, "description": desc,
             "type": "object", "properties": props, "required": required, "additionalProperties": extra}
 
@@ -91,16 +93,18 @@ def validate_payload(topic: str, payload: Mapping[str, Any]) -> None:
     if topic in WELL_KNOWN:
         validate_well_known(topic, payload)
         return
+    if topic == "/stats":
+        try:
+            validate_stats(payload)
+        except StatsError as err:
+            raise RecordingError(f"/stats: {err}") from err
+        return
     missing = [k for k in _CHANNELS[topic][3] if k not in payload]
     if missing:
         raise RecordingError(f"{topic}: missing required field(s) {missing}")
-    numeric_only = topic in _NUMERIC_ONLY
     for k, v in payload.items():
         if not isinstance(k, str):
             raise RecordingError(f"{topic}: field names must be strings, got {k!r}")
-        if numeric_only:
-            ok = v is None or isinstance(v, numbers.Real)
-        else:
-            ok = v is None or isinstance(v, (numbers.Real, str))
+        ok = v is None or isinstance(v, (numbers.Real, str))
         if not ok:
             raise RecordingError(f"{topic}.{k}: value must be a flat scalar, got {type(v).__name__}")

@@ -15,6 +15,7 @@ from sea_hil.protocol.payloads import AckPayload, PayloadCounters, SetpointPaylo
 from sea_hil.recorder.can_tap import Record
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
+from sea_hil.stats.schema import validate_stats
 
 
 def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str, dict[str, Any]] | None:
@@ -28,8 +29,9 @@ def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str,
             return None
         if not isinstance(obj, dict):
             return None
-        if channel == "stats":
-            return "/stats", {k: v for k, v in obj.items() if isinstance(v, (int, float, bool))}
+        if channel == "stats":   # one schema for every node's stats (`StatsError` if a record breaks it)
+            validate_stats(obj)
+            return "/stats", obj
         flat = {k: v for k, v in obj.items() if isinstance(v, (int, float, str, bool)) or v is None}
         flat["key"] = key
         return "/tracking", flat

@@ -68,7 +68,8 @@ def _tracking(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[float]]:
 
 
 def final_edge_stats(data: SessionData) -> dict[str, Any]:
-    finals = [m.payload for m in data.messages.get("/stats", []) if m.payload.get("final")]
+    finals = [m.payload for m in data.messages.get("/stats", [])
+              if m.payload.get("final") and m.payload.get("node", "edge") == "edge"]
     return finals[-1] if finals else {}
 
 
@@ -104,7 +105,7 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
         "max_abs_voltage_v": [float(v[0]), float(v[1])],
         "latency_us": {k: float(edge.get(f"latency_{k}_us", -1.0)) for k in ("min", "p50", "p90", "p99", "max")},
         "latency_samples": int(edge.get("latency_count", 0)),
-        "edge": {k: edge[k] for k in sorted(edge) if not k.startswith("latency") and k not in ("key", "final")},
+        "edge": {k: edge[k] for k in sorted(edge) if not k.startswith("latency") and k not in ("key", "final", "node", "t_ns")},
     }
     return summary
 

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData, read_session
-from sea_hil.stats.session import can_frame_bits
+from sea_hil.stats.can_bits import can_frame_bits
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.session_summary import session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary

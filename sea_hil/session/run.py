@@ -2,36 +2,34 @@
 
 This process hosts the plant (driver node) and the edge on the CAN bus (embedded `virtual` bus by default, or
 `socketcan:vcan0`), plus the recorder; the remote controller runs in a separate process and reaches them over Zenoh
-(this process listens on a free loopback port, the controller connects). When the controller has finished its
-cycles everything is stopped, the MCAP file is closed and summary.json and figures are written from it.
+(this process listens on a free loopback port, the controller connects). Both use `[zenoh]` of the config (mode,
+TLS, ACL); only the endpoints are the session's own (`tls/` when TLS is enabled). When the controller has finished
+its cycles everything is stopped (`SessionBuilder`, in reverse order of creation), the MCAP file is closed and
+summary.json and figures are written from it.
 """
 from __future__ import annotations
 
 import json
 import subprocess
 import sys
-import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from sea_hil.controller.edge import EdgeNode
-from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.errors import SeaHilError
 from sea_hil.live.link import await_live
-from sea_hil.recorder.node import RecorderNode
+from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
-from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
-from sea_hil.session.external import OutsideController
-from sea_hil.session.processes import end_process
 from sea_hil.report.console import ProgressSample
-from sea_hil.report.writer import write_report_figures
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
+from sea_hil.report.writer import write_report_figures
+from sea_hil.session.builder import SessionBuilder
+from sea_hil.session.external import OutsideController
+from sea_hil.session.processes import end_process
 
 
 @dataclass(frozen=True)
@@ -49,34 +47,45 @@ class RunOptions:
     join_timeout_s: float = 300.0   # --controller external: wall time allowed for the outside controller to join
 
 
-def _controller_cmd(opts: RunOptions, cfg_path: Path, endpoint: str) -> list[str]:
-    cmd = [sys.executable, "-m", "sea_hil.cli", "controller", "--config", str(cfg_path), "--connect", endpoint,
+def _controller_cmd(opts: RunOptions, cfg_path: Path) -> list[str]:
+    cmd = [sys.executable, "-m", "sea_hil.cli", "controller", "--config", str(cfg_path),
            "--controller", opts.controller, "--cycles", str(opts.cycles), "--inner", opts.inner]
     return cmd + (["--lockstep"] if opts.lockstep else [])
 
 
-def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] = print) -> dict[str, Any]:
+def listen_endpoints(cfg: SeaHilConfig, opts: RunOptions) -> tuple[str, ...]:
+    """The endpoints this process listens on: `--listen`, else a free loopback port (`tls/` with TLS)."""
+    if opts.listen:
+        return opts.listen
+    return (f"{'tls' if cfg.zenoh.tls.enabled else 'tcp'}/127.0.0.1:{free_tcp_port()}",)
+
+
+def controller_config(cfg: SeaHilConfig, endpoint: str) -> SeaHilConfig:
+    """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only."""
+    z = type(cfg.zenoh).model_validate({**cfg.zenoh.model_dump(), "listen": (), "connect": (endpoint,)})
+    return cfg.model_copy(update={"zenoh": z})
+
+
+def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = print) -> dict[str, Any]:
     opts.out.mkdir(parents=True, exist_ok=True)
+    # the live view is served from this process's recorder: a controller started from these files must not
+    quiet = cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})
     cfg_path = opts.out / "config.toml"
-    # the live view is served from this process's recorder: the controller started from this file must not
-    cfg_path.write_text(config_to_toml(cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})),
-                        encoding="utf-8")
-    endpoint = opts.listen[0] if opts.listen else f"tcp/127.0.0.1:{free_tcp_port()}"
-    spec = opts.can or cfg.can.interface
-    session = open_session(make_config(listen=[endpoint, *opts.listen[1:]]))
+    cfg_path.write_text(config_to_toml(quiet), encoding="utf-8")
+    listen = listen_endpoints(cfg, opts)
     t0 = time.monotonic()
-    # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-    proc: Any
-    if opts.controller == "external":   # no child: wait for an outside controller (sea_hil/session/external.py)
-        proc = OutsideController(cfg, opts.cycles, session, endpoint=endpoint, config_path=cfg_path,
-                                  lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
-    else:
-        proc = subprocess.Popen(_controller_cmd(opts, cfg_path, endpoint), stdin=subprocess.DEVNULL)
-    try:
-        _host_nodes(cfg, opts, spec, session, proc, t0, log)
-    finally:
-        end_process(proc)
-        session.close()
+    with SessionBuilder(cfg, lockstep=opts.lockstep) as b:
+        session = b.zenoh(listen=listen, connect=())
+        proc: Any
+        if opts.controller == "external":   # no child: wait for an outside controller (sea_hil/session/external.py)
+            proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
+                                     lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
+        else:   # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
+            child_path = opts.out / "controller.toml"
+            child_path.write_text(config_to_toml(controller_config(quiet, listen[0])), encoding="utf-8")
+            proc = subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL)
+        b.callback(end_process, proc)
+        _host_nodes(b, opts, session, proc, t0, log)
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
     summary = session_summary(data, opts.controller)
@@ -88,67 +97,73 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[[str], None] 
     return summary
 
 
-def _host_nodes(cfg: SeaHilConfig, opts: RunOptions, spec: str, session: Any, proc: Any,
-                t0: float, log: Callable[[str], None]) -> None:
-    """Plant, edge and recorder in this process until the controller process `proc` has finished its cycles."""
-    buses = [open_bus(spec), open_bus(spec), open_bus(spec)]
+def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0: float,
+                log: Callable[..., None]) -> None:
+    """Plant, edge and recorder in this process until the controller `proc` (a child process, or the outside
+    controller's watch) has finished its cycles. Closing (the builder's stack, last in first out): the controller
+    ends, plant and edge stop, the recorder's taps stop, the edge's final stats are recorded and the MCAP file is
+    closed, then buses go."""
+    cfg = b.cfg
+    spec = opts.can or cfg.can.interface
+    buses = [b.bus(spec), b.bus(spec), b.bus(spec)]
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
                           live=(cfg.live, cfg.can.bitrate_bps) if cfg.live.enabled else None)
+    b.callback(rec.close)   # idempotent: closes the file if building the nodes failed
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec})
-    try:   # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
-        waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
-    except BaseException:
-        rec.close()
-        for b in buses:
-            b.shutdown()
-        raise
-    recorder = RecorderNode(rec, session, cfg.zenoh.prefix, buses[2], tap_batch_s=0.002, time_base=time_base)
-    plant = PlantNode(cfg, buses[0], (opts.node_id,), lockstep=opts.lockstep)
-    edge = EdgeNode(cfg, buses[1], session, opts.node_id, inner=opts.inner, lockstep=opts.lockstep)
-    threads = [threading.Thread(target=plant.run, name="plant", daemon=True),
-               threading.Thread(target=edge.run, name="edge", daemon=True)]
+    # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
+    waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
+    recorder = b.recorder(rec, session, buses[2], tap_batch_s=0.002, time_base=time_base)
+    plant = b.plant(buses[0], (opts.node_id,))
+    edge = b.edge(buses[1], session, opts.node_id, inner=opts.inner)
+    b.callback(_finish, rec, plant, edge, recorder, opts.lockstep)
+    b.callback(end_process, proc)
     recorder.start()
-    for t in threads:
-        t.start()
+    plant.start()
+    edge.start()
+    extra_s = waited_s + (opts.join_timeout_s if opts.controller == "external" else 0.0)
+    _wait_for_controller(proc, edge, opts, cfg, t0, extra_s, log)
+
+
+def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConfig, t0: float, extra_s: float,
+                         log: Callable[..., None]) -> None:
     period_s = cfg.trajectory.period_s
-    budget_s = (60.0 + 3.0 * period_s * opts.cycles + waited_s
-                + (opts.join_timeout_s if opts.controller == "external" else 0.0))
-    try:
-        while True:
-            try:
-                proc.wait(timeout=1.0)      # returns as soon as the controller has finished
-                break
-            except subprocess.TimeoutExpired:
-                pass
-            now = time.monotonic() - t0
-            if now > budget_s:
-                raise SeaHilError(f"session did not finish within {budget_s:.0f} s")
-            if opts.progress:
-                c = edge.counters
-                lat = c.latency.to_dict()
-                log(ProgressSample(now, edge._sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
-                                   c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
-        if proc.returncode != 0:
-            raise SeaHilError(f"controller process exited with status {proc.returncode}")
-    finally:
-        end_process(proc)
-        plant.stop()
-        edge.stop_event.set()
-        for t in threads:
-            t.join(timeout=10)
-        recorder.stop()
-        now_ns = edge._sample_t_ns if opts.lockstep else time.time_ns()
-        rec.record("/stats", now_ns, now_ns, {**edge.stats_dict(), "final": True})
-        rec.add_metadata("sea-hil.edge", {k: str(v) for k, v in edge.stats_dict().items()})
-        rec.close(final_stats={"plant_overruns": plant.stats.overruns, "plant_ticks": plant.stats.ticks,
-                               **recorder.counters()})
-        edge.close()
-        for b in buses:
-            b.shutdown()
+    budget_s = 60.0 + 3.0 * period_s * opts.cycles + extra_s
+    while True:
+        try:
+            proc.wait(timeout=1.0)      # returns as soon as the controller has finished
+            break
+        except subprocess.TimeoutExpired:
+            pass
+        now = time.monotonic() - t0
+        if now > budget_s:
+            raise SeaHilError(f"session did not finish within {budget_s:.0f} s")
+        if opts.progress:
+            c = edge.counters
+            lat = c.latency.to_dict()
+            log(ProgressSample(now, edge.sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
+                               c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
+    if proc.returncode != 0:
+        raise SeaHilError(f"controller process exited with status {proc.returncode}")
+
+
+def _finish(rec: RecorderProcess, plant: Any, edge: Any, recorder: Any, lockstep: bool) -> None:
+    """Stop plant and edge, then the recorder's taps; record the edge's final stats (`/stats`, metadata; in lockstep
+    at the edge's sample time, the recording's clock), close the MCAP file with the plant's and recorder's counters."""
+    for node in (plant, edge):
+        node.stop()
+    for node in (plant, edge):
+        node.join()
+    recorder.stop()
+    recorder.join()
+    now_ns = edge.sample_t_ns if lockstep else time.time_ns()
+    rec.record("/stats", now_ns, now_ns, edge.stats_record(final=True))
+    rec.add_metadata("sea-hil.edge", {k: str(v) for k, v in edge.stats_dict().items()})
+    rec.close(final_stats={"plant_overruns": plant.stats.overruns, "plant_ticks": plant.stats.ticks,
+                           **recorder.counters()})
 
 
 def print_summary(summary: dict[str, Any]) -> None:

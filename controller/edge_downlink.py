@@ -1,0 +1,85 @@
+"""The edge's setpoint intake: setpoint/voltage payloads from Zenoh are checked (malformed, wrong type, stale or
+duplicated seqs are counted and dropped; a controller restart is detected when the clock allows it), pass the
+downlink link emulator, and are applied when it releases them (`take`)."""
+from __future__ import annotations
+
+import logging
+import time
+from typing import Any
+
+from sea_hil.protocol.link import DelayQueue, LinkEmulator
+from sea_hil.protocol.payloads import (PayloadCounters, SequenceTracker, SeqVerdict, SetpointPayload,
+                                       VoltagePayload)
+
+log = logging.getLogger("sea_hil.edge")
+SETPOINT_BYTES = 53
+
+
+class SetpointIntake:
+    def __init__(self, downlink: LinkEmulator, counters: Any, payloads: PayloadCounters, timeout_ns: int,
+                 sync: Any) -> None:
+        self.downlink = downlink
+        self.counters = counters
+        self.payloads = payloads
+        self.timeout_ns = timeout_ns
+        self.sync = sync
+        self.sp_seq = SequenceTracker()
+        self.pending: DelayQueue[object] = DelayQueue()
+        self.seen_setpoints: set[int] = set()
+        self.last_rx_ns = 0                       # sample time of the newest accepted setpoint/voltage
+        self.last_setpoint_ns: int | None = None  # sample time of the newest applied one
+
+    def submit(self, data: bytes, sample_t_ns: int, sent_at: dict[int, int], rx_ns: int | None) -> bool:
+        """One payload at sample time `sample_t_ns`; True if it entered the downlink emulator. Closed-loop latency
+        (`latency`) = arrival - publication of the state it answers, plus the delay the downlink emulator adds."""
+        p = self.payloads.try_decode(data)
+        if p is None:
+            return False
+        if not isinstance(p, (SetpointPayload, VoltagePayload)):
+            self.counters.unexpected_payloads += 1
+            return False
+        if self.sp_seq.feed(p.seq) is not SeqVerdict.NEW:
+            if not self._controller_restarted(p.seq, sample_t_ns):
+                self.counters.stale_setpoints += 1
+                return False
+        self.seen_setpoints.add(p.seq)
+        self.last_rx_ns = sample_t_ns
+        at = self.downlink.submit(sample_t_ns, len(data))
+        if at is not None:
+            self.pending.push(at, p)
+            sent = sent_at.get(p.state_seq)
+            if sent is not None and rx_ns is not None:
+                self.counters.latency.record((max(rx_ns - sent, 0) + max(at - sample_t_ns, 0)) * 1e-9)
+        return True
+
+    def _controller_restarted(self, seq: int, sample_t_ns: int) -> bool:
+        """A not-newer seq starts a new setpoint stream only after the old one timed out (the driver is then in its
+        safe state) and only if it looks like a fresh sender (seq < the tracker window); counted."""
+        timed_out = sample_t_ns - self.last_rx_ns > self.timeout_ns
+        if not self.sync.restart_possible(timed_out) or seq >= self.sp_seq.window:
+            return False
+        self.sp_seq.restart()
+        self.sp_seq.feed(seq)
+        self.seen_setpoints.clear()
+        self.counters.controller_restarts += 1
+        log.warning("setpoint stream restarted at seq %d (controller restart)", seq)
+        return True
+
+    def fresh(self, now_ns: int) -> bool:
+        return self.last_setpoint_ns is not None and now_ns - self.last_setpoint_ns <= self.timeout_ns
+
+    def take(self, now_ns: int, sent_at: dict[int, int], sampled_at: dict[int, int], apply: Any) -> bool:
+        """Apply (`apply(payload)`) what the downlink emulator releases by sample time `now_ns`; True if any."""
+        applied = False
+        for p in self.pending.pop_due(now_ns):
+            applied = True
+            t = time.monotonic_ns()
+            sent = sent_at.get(p.state_seq)   # type: ignore[attr-defined]
+            if sent is not None:
+                self.counters.apply_latency.record(max(t - sent, 1000) * 1e-9)
+            sampled = sampled_at.get(p.state_seq)   # type: ignore[attr-defined]
+            if sampled is not None:
+                self.counters.sim_latency.record((now_ns - sampled) * 1e-9)
+            self.last_setpoint_ns = now_ns
+            apply(p)
+        return applied

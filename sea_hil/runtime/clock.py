@@ -1,0 +1,188 @@
+"""Clocks: what paces a node and how it meets its peers. A node asks its clock for its part (`plant(node)`,
+`edge(node)`, `controller(node)`) once, when it is built; the node's logic never asks which clock it has.
+
+- `RealTimeClock` (this module): the driver keeps a drift-free schedule of absolute deadlines; the edge applies a
+  setpoint on arrival and stops commanding when setpoints stop (the driver's watchdog then acts); the controller
+  takes the newest state only; stream restarts (a restarted controller or edge) are detected.
+- `LockstepClock` (`sea_hil.runtime.lockstep`, the one module with all lockstep logic: ACKs, waits, re-sends):
+  simulated time advances only when every node has handled the step; deterministic, as fast as possible.
+
+`clock_for(lockstep)` is the one place the choice is made from an option.
+"""
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from typing import Any
+
+import zenoh
+
+from sea_hil.protocol.payloads import AckPayload
+from sea_hil.protocol.zsession import LatestSubscriber
+
+
+class Clock:
+    """Factory of the per-node parts of one pacing scheme."""
+
+    name = "clock"
+
+    def plant(self, node: Any) -> Any:
+        raise NotImplementedError
+
+    def edge(self, node: Any) -> Any:
+        raise NotImplementedError
+
+    def controller(self, node: Any) -> Any:
+        raise NotImplementedError
+
+
+class RealTimeClock(Clock):
+    name = "realtime"
+
+    def plant(self, node: Any) -> RealTimePacer:
+        return RealTimePacer(node)
+
+    def edge(self, node: Any) -> RealTimeEdgeSync:
+        return RealTimeEdgeSync(node)
+
+    def controller(self, node: Any) -> RealTimeControllerSync:
+        return RealTimeControllerSync(node)
+
+
+def clock_for(lockstep: bool) -> Clock:
+    from sea_hil.runtime.lockstep import LockstepClock
+    return LockstepClock() if lockstep else RealTimeClock()
+
+
+class RealTimePacer:
+    """The driver's real-time schedule: one tick per feedback period; waiting for the next deadline is done in the
+    bus receive, so commands act from their arrival time. Lateness of each tick is recorded; a tick later than one
+    period is an overrun (the schedule skips ahead, never bunches up)."""
+
+    def __init__(self, node: Any) -> None:
+        self.node = node
+        self.done = False
+
+    def start(self, duration_s: float | None) -> None:
+        n = self.node
+        n.prepare_kernels()
+        self.start_ns = time.monotonic_ns()
+        self.end_ns = None if duration_s is None else self.start_ns + int(duration_s * 1e9)
+        for drv in n.drivers.values():
+            drv.last_cmd_ns = self.start_ns
+            n.publish_sample(drv, drv.feedback())
+        self.k, self.next_heartbeat_k, self.done = 0, n.heartbeat_every, False
+
+    def tick(self) -> None:
+        n = self.node
+        self.k += 1
+        deadline = self.start_ns + self.k * n.period_ns
+        n.drain_until(deadline)
+        now = time.monotonic_ns()
+        late = now - deadline
+        n.lateness.record(max(late, 0) * 1e-9 + 1e-7)
+        missed = late // n.period_ns if late > n.period_ns else 0
+        n.stats.overruns += missed
+        self.k += missed
+        n.stats.ticks += 1
+        for drv in n.drivers.values():
+            if missed:
+                drv.note_overruns(missed)
+            drv.check_watchdog(now)
+            n.publish_sample(drv, drv.step())
+        if self.k >= self.next_heartbeat_k:  # skipped ticks must not skip the heartbeat
+            n.heartbeats()
+            self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
+        if self.end_ns is not None and now >= self.end_ns:
+            self.done = True
+
+    def on_command(self, frame: object, drv: Any) -> None:
+        """A command the driver accepted: nothing to wait for in real time."""
+
+
+class RealTimeEdgeSync:
+    """Edge in real time: setpoints/voltages are handled as they arrive (`EdgeNode.on_arrival`); nothing waits."""
+
+    def __init__(self, edge: Any) -> None:
+        self.edge = edge
+
+    def downlink_callback(self) -> Callable[[zenoh.Sample], None]:
+        on_arrival = self.edge.on_arrival
+        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns())
+
+    def control_callback(self) -> Callable[[zenoh.Sample], None]:
+        def on_control(s: zenoh.Sample) -> None:
+            with self.edge.lock:
+                self.on_ack(s.payload.to_bytes())
+        return on_control
+
+    def on_ack(self, data: bytes) -> bool:
+        """A payload on the control key: an ACK means nothing in real time; anything else is counted, dropped."""
+        return control_payload(self.edge, data) is not None
+
+    def repeat_feedback(self, fb: Any) -> bool:
+        return False
+
+    def state_sent(self, at_ns: int, seq: int, data: bytes) -> None:
+        pass
+
+    def sync(self, now_ns: int) -> None:
+        pass
+
+    def drain(self) -> bool:
+        return False
+
+    def gate(self, fresh: bool) -> tuple[bool, bool]:
+        """(command at all, clear a driver fault): only with a fresh setpoint; a stale one lets the watchdog act."""
+        return fresh, fresh
+
+    def restart_possible(self, timed_out: bool) -> bool:
+        return timed_out
+
+
+def control_payload(edge: Any, data: bytes) -> AckPayload | None:
+    """Decode a control-key payload; a non-ACK is counted (`unexpected_payloads`) and dropped."""
+    p = edge.payloads.try_decode(data)
+    if p is None:
+        return None
+    if not isinstance(p, AckPayload):
+        edge.counters.unexpected_payloads += 1
+        return None
+    return p
+
+
+class RealTimeControllerSync:
+    """Controller in real time: the newest state only (a ring of depth 1, never a backlog), no ACKs."""
+
+    def __init__(self, ctrl: Any) -> None:
+        self.ctrl = ctrl
+
+    def state_source(self, session: zenoh.Session, key: str) -> LatestStates:
+        return LatestStates(LatestSubscriber(session, key))
+
+    def repeat_state(self, verdict: Any, seq: int) -> bool:
+        return False
+
+    def answer_extra(self, state_seq: int, setpoint_seq: int, sent: bool) -> list[tuple[Any, bytes]]:
+        return []
+
+    def answered(self, seq: int, answer: list[tuple[Any, bytes]]) -> None:
+        pass
+
+    def restart_possible(self, silent: bool) -> bool:
+        return silent
+
+    def close(self) -> None:
+        pass
+
+
+class LatestStates:
+    def __init__(self, sub: LatestSubscriber) -> None:
+        self.sub = sub
+
+    def recv(self, timeout_s: float) -> bytes | None:
+        sample = self.sub.recv(timeout_s)
+        return None if sample is None else sample.payload.to_bytes()
+
+    def close(self) -> None:
+        self.sub.close()

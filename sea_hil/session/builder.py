@@ -1,0 +1,113 @@
+"""The one session builder: every composition of nodes (the `sea-hil plant|edge|controller|record|run` commands,
+the benchmark rig, the tests) goes through `SessionBuilder`.
+
+It opens CAN buses and Zenoh sessions from the frozen config, builds nodes that share one clock (`lockstep` picks
+the lockstep clock, `sea_hil.runtime`), and owns every resource it made in an `ExitStack`: `close()` (or leaving
+the `with` block) stops and closes the nodes, then the sessions and buses, in reverse order of creation, once.
+`serve(node)` is the lifecycle of a node run on its own: SIGTERM stops it, it runs, its final stats record
+is published. A later public API (`Session(...)`, `EmulatedDriver(...)`) wraps these calls.
+"""
+from __future__ import annotations
+
+import signal
+import threading
+from collections.abc import Callable, Iterable
+from contextlib import ExitStack
+from typing import Any, TypeVar
+
+import can
+import zenoh
+
+from sea_hil.config import SeaHilConfig
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.zsession import open_session
+from sea_hil.runtime.clock import clock_for
+from sea_hil.runtime.node import Node
+
+N = TypeVar("N", bound=Node)
+
+
+class SessionBuilder:
+    def __init__(self, cfg: SeaHilConfig, *, lockstep: bool = False) -> None:
+        self.cfg = cfg
+        self.lockstep = lockstep
+        self.clock = clock_for(lockstep)
+        self._stack = ExitStack()
+
+    # ---- resources ------------------------------------------------------------------------------------------------
+    def zenoh(self, *, listen: Iterable[str] | None = None, connect: Iterable[str] | None = None) -> zenoh.Session:
+        """A Zenoh session from `cfg.zenoh` (mode, TLS, ACL), its endpoints replaced where given."""
+        z = self.cfg.zenoh
+        update = {k: tuple(v) for k, v in (("listen", listen), ("connect", connect)) if v is not None}
+        if update:
+            z = z.model_validate({**z.model_dump(), **update})
+        session = open_session(z)
+        self._stack.callback(session.close)
+        return session
+
+    def bus(self, spec: str | None = None) -> can.BusABC:
+        """A CAN bus handle (`spec`, default `cfg.can.interface`), shut down on close."""
+        bus = open_bus(spec or self.cfg.can.interface)
+        self._stack.callback(bus.shutdown)
+        return bus
+
+    def callback(self, fn: Callable[..., Any], *args: Any) -> None:
+        """Run `fn(*args)` on close (after everything added later, before everything added earlier)."""
+        self._stack.callback(fn, *args)
+
+    def add(self, node: N) -> N:
+        """Own `node`: it is closed (stopped, joined, released) on close."""
+        self._stack.callback(node.close)
+        return node
+
+    # ---- nodes ----------------------------------------------------------------------------------------------------
+    def plant(self, bus: can.BusABC, node_ids: tuple[int, ...], cfg: SeaHilConfig | None = None) -> Any:
+        from sea_hil.plant_emulator.node import PlantNode
+        return self.add(PlantNode(cfg or self.cfg, bus, node_ids, clock=self.clock))
+
+    def edge(self, bus: can.BusABC, session: zenoh.Session, node_id: int, *, inner: str = "edge",
+             cfg: SeaHilConfig | None = None) -> Any:
+        from sea_hil.controller.edge import EdgeNode
+        return self.add(EdgeNode(cfg or self.cfg, bus, session, node_id, inner=inner, clock=self.clock))
+
+    def controller(self, session: zenoh.Session, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
+        from sea_hil.controller.remote import RemoteController
+        return self.add(RemoteController(self.cfg, session, mode, inner=inner, clock=self.clock, cycles=cycles))
+
+    def recorder(self, rec: Any, session: zenoh.Session | None, bus: can.BusABC | None = None,
+                 **kw: Any) -> Any:
+        from sea_hil.recorder.node import RecorderNode
+        return self.add(RecorderNode(rec, session, self.cfg.zenoh.prefix, bus, **kw))
+
+    # ---- lifecycle ------------------------------------------------------------------------------------------------
+    def serve(self, node: Node, duration_s: float | None = None,
+              signals: tuple[signal.Signals, ...] = (signal.SIGTERM,)) -> bool:
+        """Run `node` in this thread until it finishes, `duration_s` passes or one of `signals` stops it; then publish
+        its final stats record. The node's result (`Node.run`)."""
+        restore = _stop_on_signals(node, signals)
+        try:
+            return node.run(duration_s)
+        finally:
+            restore()
+            node.publish_stats(final=True)
+
+    def close(self) -> None:
+        self._stack.close()
+
+    def __enter__(self) -> SessionBuilder:
+        return self
+
+    def __exit__(self, *_exc: object) -> None:
+        self.close()
+
+
+def _stop_on_signals(node: Node, signals: tuple[signal.Signals, ...]) -> Callable[[], None]:
+    """`signals` stop `node` (main thread only); returns a function restoring the old handlers."""
+    if threading.current_thread() is not threading.main_thread():
+        return lambda: None
+    old = {sig: signal.signal(sig, lambda *_: node.stop()) for sig in signals}
+
+    def restore() -> None:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+    return restore
