@@ -15,6 +15,7 @@ import can
 
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.runtime.clock import clock_for
 
 CAN_EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "can_controller"
 
@@ -29,7 +30,7 @@ def run_on_virtual(cfg: SeaHilConfig, cycles: int = 1, timeout_s: float = 120.0)
     example = load_example()
     channel = f"byoc-{uuid.uuid4().hex}"
     plant_bus, ctrl_bus = can.Bus(interface="virtual", channel=channel), can.Bus(interface="virtual", channel=channel)
-    plant = PlantNode(cfg, plant_bus, (1,), lockstep=True)
+    plant = PlantNode(cfg, plant_bus, (1,), clock=clock_for(True))
     thread = threading.Thread(target=plant.run, daemon=True)
     ctrl = example["CanController"](tomllib.loads(config_to_toml(cfg)), example["load_dbc"](example["DEFAULT_DBC"]),
                                     ctrl_bus, node_id=1, cycles=cycles)

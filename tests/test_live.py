@@ -135,6 +135,7 @@ def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
     from sea_hil.config import load_config
     from sea_hil.controller.edge import EdgeNode
     from sea_hil.plant_emulator.node import PlantNode
+    from sea_hil.runtime.clock import clock_for
     from sea_hil.protocol.canbus import open_bus
     from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
     (tmp_path / "short.toml").write_text("[trajectory]\nperiod_s = 1.0\n", encoding="utf-8")
@@ -151,15 +152,16 @@ def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
         url = _served_url(lines)
         session = open_session(make_config(connect=[endpoint]))
         buses = [open_bus("virtual:live-test"), open_bus("virtual:live-test")]
-        plant = PlantNode(cfg, buses[0], (1,), lockstep=True)
-        edge = EdgeNode(cfg, buses[1], session, 1, lockstep=True)
+        clock = clock_for(True)
+        plant = PlantNode(cfg, buses[0], (1,), clock=clock)
+        edge = EdgeNode(cfg, buses[1], session, 1, clock=clock)
         nodes = [threading.Thread(target=plant.run, daemon=True), threading.Thread(target=edge.run, daemon=True)]
         for t in nodes:
             t.start()
         got = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=240))
         assert ctl.wait(timeout=120) == 0
         plant.stop()
-        edge.stop_event.set()
+        edge.stop()
         for t in nodes:
             t.join(timeout=10)
         edge.close()

@@ -16,7 +16,7 @@ from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
 from sea_hil.protocol.payloads import TriggerReason
 from sea_hil.stats.histogram import LogHistogram
-from sea_hil.stats.session import BusLoad, SlidingRate, StreamStats
+from sea_hil.stats.streams import BusLoad, SlidingRate, StreamStats
 
 NS_PER_S = 1_000_000_000
 RTT_STATES_KEPT = 4096   # states remembered for matching their setpoint (the controller answers within a few)
