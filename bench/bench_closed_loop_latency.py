@@ -48,11 +48,12 @@ def main(argv: list[str] | None = None) -> int:
         base = args.workdir or Path(tmp)
         for i in range(runs):
             s = sea_hil_run(base / f"run{i + 1}", controller=args.controller)
-            lat = s["latency_us"]
-            details.append({"run": i + 1, "samples": s["latency_samples"], **{f"{k}_us": v for k, v in lat.items()},
-                            "wall_s": s["wall_s"], "downlink_msgs": s["transmissions"]["downlink_msgs"]})
+            lat = s["timing"]["latency_us"]
+            details.append({"run": i + 1, "samples": s["timing"]["latency_samples"],
+                            **{f"{k}_us": v for k, v in lat.items()}, "wall_s": s["timing"]["wall_s"],
+                            "downlink_msgs": s["transmissions"]["downlink_msgs"]})
             print(f"run {i + 1}/{runs}: p50 {lat['p50']:.0f} us  p99 {lat['p99']:.0f} us  max {lat['max']:.0f} us  "
-                  f"({s['latency_samples']} samples)", flush=True)
+                  f"({s['timing']['latency_samples']} samples)", flush=True)
     rec = latency_record(details, args.controller, command_line())
     emit([rec], args.json)
     return 0
