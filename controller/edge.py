@@ -58,7 +58,7 @@ class EdgeNode(LockstepPlane):
         p = limb_params(cfg.plant)
         self.inner = InnerLoop(cfg, p, tuple(cfg.plant.initial_theta_rad))
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
-        self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
+        self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.timeout_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
         self.resend_ns = int(resend_s * 1e9)
         seed = cfg.link.seed

@@ -19,7 +19,7 @@ from session_nodes import NodeSession, run_node_session, sea_hil_cmd, write_clie
 from socketcan_helpers import CanDump
 
 DURATION_S = 1.0
-STATE_PERIOD_S = 0.01           # default zenoh.state_period_s
+STATE_PERIOD_S = 0.01           # default controller.sample_period_s
 VIRTUAL_RUN_TIMEOUT_S = 400.0
 
 
