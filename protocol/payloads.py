@@ -74,8 +74,8 @@ def _uint(name: str, v: int, hi: int) -> int:
 def _pair(name: str, v: object) -> tuple[float, float]:
     try:
         a, b = (float(x) for x in v)  # type: ignore[union-attr]
-    except (TypeError, ValueError):
-        raise PayloadRejected(RejectReason.RANGE, f"{name}={v!r} is not a pair of floats") from None
+    except (TypeError, ValueError) as err:
+        raise PayloadRejected(RejectReason.RANGE, f"{name}={v!r} is not a pair of floats") from err
     if not (math.isfinite(a) and math.isfinite(b)):
         raise PayloadRejected(RejectReason.NONFINITE, f"{name}={(a, b)!r} is not finite")
     return (a, b)
@@ -123,8 +123,8 @@ class SetpointPayload(_Payload):
         _uint("state_seq", self.state_seq, U32_MAX)
         try:
             object.__setattr__(self, "reason", TriggerReason(self.reason))
-        except ValueError:
-            raise PayloadRejected(RejectReason.ENUM, f"trigger reason {self.reason!r} is unknown") from None
+        except ValueError as err:
+            raise PayloadRejected(RejectReason.ENUM, f"trigger reason {self.reason!r} is unknown") from err
 
 
 @dataclass(frozen=True)
@@ -199,8 +199,8 @@ def decode(b: bytes) -> Payload:
         raise PayloadRejected(RejectReason.VERSION, f"version {version} not supported ({sorted(SUPPORTED_VERSIONS)})")
     try:
         mt = MsgType(mtype)
-    except ValueError:
-        raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from None
+    except ValueError as err:
+        raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from err
     if len(b) != PAYLOAD_SIZE[mt]:
         raise PayloadRejected(RejectReason.LENGTH, f"{mt.name} must be {PAYLOAD_SIZE[mt]} bytes, got {len(b)}")
     f = _BODY[mt].unpack_from(b, HEADER_SIZE)

@@ -26,7 +26,7 @@ class CanConfig(_Frozen):
         try:
             parse_can_spec(v)
         except ConfigError as err:
-            raise ValueError(str(err)) from None
+            raise ValueError(str(err)) from err
         return v
 
     @field_validator("node_ids")
@@ -86,7 +86,7 @@ class ZenohConfig(_Frozen):
         try:
             return validate_prefix(v) if info.field_name == "prefix" else validate_limb(v)
         except ConfigError as err:
-            raise ValueError(str(err)) from None
+            raise ValueError(str(err)) from err
 
 
 class LinkDirectionConfig(_Frozen):

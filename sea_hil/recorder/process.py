@@ -92,10 +92,10 @@ class RecorderProcess:
                 pass
         try:
             code = self._proc.wait(timeout=self.close_timeout_s)
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired as err:
             self._proc.kill()
             self._proc.wait()
-            raise RecordingError(f"recorder process did not finish {self.path} in {self.close_timeout_s} s") from None
+            raise RecordingError(f"recorder process did not finish {self.path} in {self.close_timeout_s} s") from err
         if code != 0:
             raise RecordingError(f"recorder process for {self.path} exited with status {code}")
 

@@ -61,8 +61,8 @@ def schema_for(topic: str) -> dict[str, Any]:
     """The JSON schema (as a dict) of `topic`; `RecordingError` for an unknown topic."""
     try:
         title, desc, props, required = _CHANNELS[topic]
-    except KeyError:
-        raise RecordingError(f"unknown recording topic {topic!r}; known: {', '.join(TOPICS)}") from None
+    except KeyError as err:
+        raise RecordingError(f"unknown recording topic {topic!r}; known: {', '.join(TOPICS)}") from err
     extra = {"type": ["number", "null"]} if topic in _NUMERIC_ONLY else {"type": SCALAR_TYPES}
     return {"$schema": "https://json-schema.org/draft/2020-12/schema", "title": title, "description": desc,
             "type": "object", "properties": props, "required": required, "additionalProperties": extra}

@@ -31,8 +31,8 @@ def parse_axis(name: str, text: str) -> tuple[float, ...]:
     for p in parts:
         try:
             v = float(p)
-        except ValueError:
-            raise ConfigError(f"--{name}: {p!r} is not a number") from None
+        except ValueError as err:
+            raise ConfigError(f"--{name}: {p!r} is not a number") from err
         if not math.isfinite(v):
             raise ConfigError(f"--{name}: {p!r} is not finite")
         if v < lo or (v == lo and not lo_ok) or (hi is not None and v > hi):
