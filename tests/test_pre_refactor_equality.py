@@ -19,11 +19,13 @@ from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import pytest
 
 from sea_hil.cli import main
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
 from sea_hil.report.summary import deterministic
+from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 
 pytestmark = pytest.mark.slow
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "pre_refactor"
@@ -32,11 +34,12 @@ LINKS = {"ideal": [], "d5": ["--uplink", "delay=5ms", "--downlink", "delay=5ms"]
 RUNS = [(c, link) for c in ("et", "tt") for link in LINKS]
 JOBS = max(1, min(len(RUNS), (os.cpu_count() or 1) // 2))   # a lockstep session keeps ~2 cores busy
 TIMEOUT_S = 600.0
-# fields of the old session summaries that derive from wall-clock time (the rest is deterministic in lockstep)
+# fields of the old session summaries that derive from wall-clock time (the rest is deterministic in lockstep):
+# latency, loop and apply times, overruns, lockstep re-sends (100 ms wall timer) and the duplicate answers they draw
 OLD_TIMING = ("wall_s", "latency_us", "latency_samples")
 OLD_EDGE_TIMING = ("apply_latency_us_max", "apply_latency_us_p50", "apply_latency_us_p99", "loop_us_max",
                    "loop_us_p50", "loop_us_p99", "loop_overruns", "lockstep_resends", "lockstep_startup_resends",
-                   "arrival_commands")
+                   "arrival_commands", "seq_duplicates", "stale_setpoints")
 # old edge /stats key -> its current name (add an entry when a counter is renamed; never drop one)
 EDGE_RENAMED: dict[str, str] = {}
 SAMPLE_PERIOD_S = 0.01
@@ -94,6 +97,7 @@ def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, li
     old = _load(FIXTURES / f"run_{controller}_{link}.summary.json")
     expected, timing_keys, edge_timing_keys = old_session_as_new(old)
     new = lockstep_runs[(controller, link)]
+    jsonschema.validate(new, SUMMARY_SCHEMA)
     assert set(new["timing"]) == timing_keys and set(new["timing"]["edge"]) == edge_timing_keys
     got = deterministic(new)
     assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
@@ -107,6 +111,7 @@ def test_offline_simulate_equals_pre_refactor(tmp_path: Path) -> None:
         (FIXTURES / "sim_compare.md").read_text(encoding="utf-8")
     for mode in ("et", "tt"):
         new = _load(tmp_path / mode / "summary.json")
+        jsonschema.validate(new, SUMMARY_SCHEMA)
         assert set(new["timing"]) == {"cpu_s"}
         for old in (f"sim_{mode}", f"sim_compare_{mode}"):   # `simulate --controller` and `--compare` agreed
             assert deterministic(new) == old_offline_as_new(_load(FIXTURES / f"{old}.summary.json")), old

@@ -59,7 +59,7 @@ def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_
     published = summary["edge"]["uplink_msgs"]      # the edge's own count (the recorder may join a state late)
     assert samples <= published <= samples + 2, summary["edge"]
     assert 0 < tx["downlink_msgs"] < published, (tx, published)
-    assert summary["latency_samples"] == tx["downlink_msgs"], summary
+    assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
     assert json.loads((out / "summary.json").read_text())["tracking"] == summary["tracking"]
 
     # frames really crossed vcan0. The lockstep plant (its own process) advances a sample only on the edge's
