@@ -23,7 +23,7 @@ def _row(s: dict[str, Any], timing: str, run: int) -> dict[str, Any]:
             "downlink_bytes": tx["downlink_bytes"], "uplink_msgs": tx["uplink_msgs"],
             "max_err_hip_rad": tr["max_abs_error_rad"][0], "max_err_knee_rad": tr["max_abs_error_rad"][1],
             "rms_err_hip_rad": tr["rms_error_rad"][0], "rms_err_knee_rad": tr["rms_error_rad"][1],
-            "duration_s": s["duration_s"], "wall_s": s["wall_s"]}
+            "duration_s": s["duration_s"], "wall_s": s["timing"]["wall_s"]}
 
 
 def _record(timing: str, fig: str, rows: list[dict[str, Any]], runs: int, command: str) -> dict[str, Any]:

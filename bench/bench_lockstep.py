@@ -28,7 +28,7 @@ def one_run(controller: str, cycles: int, out: Path, config: str | None) -> tupl
     subprocess.run(cmd, cwd=ROOT, check=True, stdout=subprocess.DEVNULL, timeout=600)
     proc_s = (time.monotonic_ns() - t0) * 1e-9
     summary = json.loads((out / "summary.json").read_text(encoding="utf-8"))
-    return float(summary["wall_s"]), proc_s
+    return float(summary["timing"]["wall_s"]), proc_s
 
 
 def _stats(values: list[float], cycles: int) -> dict[str, float]:

@@ -59,7 +59,7 @@ def main(argv: list[str] | None = None) -> int:
     med = statistics.median(cpu_s)
     path = "numba kernel" if kernel is not None else "plain Python"
     print(f"closed_loop.simulate(cfg, {args.mode!r}) [{path}]: {duration_s:.1f} s simulated "
-          f"(inner {cfg.controller.inner_rate_hz:.0f} Hz, {cfg.sim.substeps} RK4 sub-steps), {runs} runs")
+          f"(inner {cfg.can.feedback_rate_hz:.0f} Hz, {cfg.sim.substeps} RK4 sub-steps), {runs} runs")
     if stats is not None:
         print(f"warm-up (first call: numba import + {'compile' if sum(stats.cache_misses.values()) else 'cache load'})"
               f": {warmup_s:.3f} CPU s, of which beyond a steady run {warmup_s - med:.3f} s")

@@ -85,7 +85,7 @@ def parse_lockstep(text: str, cmd: str, runs: int) -> list[dict[str, Any]]:
     for i, (ctl, v) in enumerate((k, v) for k, v in data.items() if isinstance(v, dict)):
         st = v["session_wall_s_per_cycle"]
         out.append(record(f"1{chr(ord('b') + i)}", f"lockstep session wall time per cycle, {ctl}",
-                          runs=data.get("runs", runs), metric="summary.json wall_s per walking cycle "
+                          runs=data.get("runs", runs), metric="summary.json timing.wall_s per walking cycle "
                           f"(process wall incl. start-up: median {v['process_wall_s_per_cycle']['median']} s)",
                           unit="s/cycle", per_run=[st["min"], st["max"]], median=st["median"], p99=float("nan"),
                           goal="(informative)", command=cmd))

@@ -39,7 +39,6 @@ def run(link: str, mode: str, opts: EngineOptions, period_ms: int) -> tuple[int,
     if LINKS[link]:
         ov["link"].update(uplink=parse_link_spec(LINKS[link]), downlink=parse_link_spec(LINKS[link]))
     if period_ms != 10:   # the outer sample period on the wire (the inner loop stays at 1 kHz)
-        ov["zenoh"] = {"state_period_s": period_ms / 1000}
         ov["controller"] = {"sample_period_s": period_ms / 1000}
     s = session_summary(run_engine(load_config(None, ov), mode, opts=opts).data, mode)
     t = s["transmissions"]

@@ -58,7 +58,7 @@ class EdgeNode(Node):
         self.keys = Keys.from_config(cfg.zenoh)
         self.inner = InnerLoop(cfg, limb_params(cfg.plant), tuple(cfg.plant.initial_theta_rad))
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
-        self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
+        self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()
         self.payloads = PayloadCounters()
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)

@@ -122,13 +122,13 @@ def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:
                 raise TrajectoryError(f"{path}: missing column(s) {sorted(missing)}; need t, theta1, theta2")
             rows = [{k.strip(): v for k, v in row.items() if k is not None} for row in reader]
     except (OSError, UnicodeDecodeError) as err:
-        raise TrajectoryError(f"cannot read trajectory {path}: {err}") from None
+        raise TrajectoryError(f"cannot read trajectory {path}: {err}") from err
     if len(rows) < 4:
         raise TrajectoryError(f"{path}: need at least 4 rows, got {len(rows)}")
     try:
         data = np.array([[float(r["t"]), float(r["theta1"]), float(r["theta2"])] for r in rows])
     except (TypeError, ValueError) as err:
-        raise TrajectoryError(f"{path}: non-numeric value ({err})") from None
+        raise TrajectoryError(f"{path}: non-numeric value ({err})") from err
     if not np.all(np.isfinite(data)):
         bad = int(np.argwhere(~np.isfinite(data))[0][0]) + 2
         raise TrajectoryError(f"{path}: NaN or infinite value on line {bad}")

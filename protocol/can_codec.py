@@ -108,7 +108,7 @@ class SeaCodec:
                 _check_encodable(s, v)
             data = lay.message.encode(values, strict=True)  # cantools range checks (strict), no name lookup
         except (EncodeError, TypeError, ValueError, OverflowError, KeyError) as err:
-            raise MalformedFrame(f"cannot encode {lay.message.name} for node {node_id}: {err}") from None
+            raise MalformedFrame(f"cannot encode {lay.message.name} for node {node_id}: {err}") from err
         msg = can.Message(arbitration_id=node_id << CMD_BITS | lay.cmd_id, data=data, is_extended_id=False)
         msg.data = data  # type: ignore[assignment]  # immutable bytes: python-can's virtual bus deep-copies the
         return msg       # message once per receiver, and a deepcopy of bytes is free (of a bytearray it is not)
@@ -140,7 +140,7 @@ class SeaCodec:
         try:
             raw = lay.message.decode(data, decode_choices=False, allow_excess=False)
         except (DecodeError, ValueError) as err:
-            raise MalformedFrame(f"{lay.message.name} node {node_id}: {err}") from None
+            raise MalformedFrame(f"{lay.message.name} node {node_id}: {err}") from err
         values = {}
         for s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain in lay.plan:
             v = raw[name]

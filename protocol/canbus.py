@@ -66,7 +66,7 @@ def open_bus(spec: str, *, receive_own_messages: bool = False, fd: bool = False)
         return can.Bus(interface=interface, channel=channel, **kwargs)
     except (can.CanError, OSError, ValueError, ImportError, NotImplementedError) as err:
         hint = " (is the interface up? e.g. scripts/with-vcan)" if interface == "socketcan" else ""
-        raise BusError(f"cannot open CAN bus {spec!r}: {err}{hint}") from None
+        raise BusError(f"cannot open CAN bus {spec!r}: {err}{hint}") from err
 
 
 class FastVirtualBus(VirtualBus):
@@ -148,6 +148,6 @@ def send_with_retry(bus: can.BusABC, msg: can.Message, retries: int, backoff_s: 
             return attempt
         except (can.CanError, OSError) as err:
             if not is_buffer_full(err):
-                raise BusError(f"CAN send of id 0x{msg.arbitration_id:X} failed: {err}") from None
+                raise BusError(f"CAN send of id 0x{msg.arbitration_id:X} failed: {err}") from err
             last = err
     raise BusError(f"CAN transmit queue still full after {retries} retries (id 0x{msg.arbitration_id:X}): {last}")

@@ -178,8 +178,8 @@ _BOOLS = {"on": True, "true": True, "yes": True, "1": True, "off": False, "false
 def _number(text: str, what: str) -> float:
     try:
         v = float(text)
-    except ValueError:
-        raise ConfigError(f"link spec: {what} {text!r} is not a number") from None
+    except ValueError as err:
+        raise ConfigError(f"link spec: {what} {text!r} is not a number") from err
     if v != v or v in (float("inf"), float("-inf")) or v < 0:
         raise ConfigError(f"link spec: {what} {text!r} must be a finite number >= 0")
     return v
@@ -244,5 +244,5 @@ def parse_link_spec(spec: str) -> dict[str, object]:
         LinkDirectionConfig(**out)
     except ValidationError as err:
         msg = "; ".join(f"{'.'.join(map(str, e['loc']))}: {e['msg']}" for e in err.errors())
-        raise ConfigError(f"link spec {spec!r}: {msg}") from None
+        raise ConfigError(f"link spec {spec!r}: {msg}") from err
     return out

@@ -1,4 +1,4 @@
-"""Versioned binary Zenoh payloads (little-endian `struct`), their decoder, counters and sequence tracking.
+"""Versioned binary Zenoh payloads (little-endian `struct`): layouts, encoder, decoder and decode counters.
 
 Common 16-byte header: magic `b"SH"` (2 bytes), version (u8), msg type (u8), seq (u32), t_ns (u64, monotonic ns of
 the sender at send time). Bodies (floats are float64 so lockstep runs are bit-reproducible):
@@ -10,23 +10,31 @@ the sender at send time). Bodies (floats are float64 so lockstep runs are bit-re
 
 Versioning: `VERSION` is bumped on any change of an existing layout; a decoder rejects every version it does not
 know. New message types may be added without a bump (old decoders reject them as unknown type). Lengths are exact.
+
+Also importable from here (their own modules): field validation and `PayloadRejected` (payload_fields.py), sequence
+tracking (sequence.py), the wire-size estimate (wire_size.py).
 """
 from __future__ import annotations
 
-import math
 import struct
 from collections import Counter
 from dataclasses import dataclass
-from enum import IntEnum, StrEnum
+from enum import IntEnum
 from typing import ClassVar, Union
 
-from sea_hil.errors import MalformedPayload
+from sea_hil.protocol.payload_fields import (U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field,
+                                             uint_field)
+from sea_hil.protocol.sequence import SeqVerdict, SequenceTracker
+from sea_hil.protocol.wire_size import estimate_wire_bytes
+
+__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",
+           "AckPayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected", "RejectReason", "SeqVerdict",
+           "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason", "VoltagePayload", "decode",
+           "encode", "estimate_wire_bytes"]
 
 MAGIC = b"SH"
 VERSION = 1
 SUPPORTED_VERSIONS = frozenset({VERSION})
-U32_MAX = 0xFFFF_FFFF
-U64_MAX = 0xFFFF_FFFF_FFFF_FFFF
 _HEADER = struct.Struct("<2sBBIQ")
 HEADER_SIZE = _HEADER.size  # 16
 
@@ -47,49 +55,15 @@ class TriggerReason(IntEnum):
     INITIAL = 4         # first setpoint of a session
 
 
-class RejectReason(StrEnum):
-    LENGTH = "length"
-    MAGIC = "magic"
-    VERSION = "version"
-    TYPE = "type"
-    NONFINITE = "nonfinite"
-    ENUM = "enum"
-    RANGE = "range"
-
-
-class PayloadRejected(MalformedPayload):
-    """A `MalformedPayload` carrying a machine-readable `reason` (for counters)."""
-
-    def __init__(self, reason: RejectReason, detail: str) -> None:
-        super().__init__(f"malformed payload ({reason.value}): {detail}")
-        self.reason = reason
-
-
-def _uint(name: str, v: int, hi: int) -> int:
-    if isinstance(v, bool) or not isinstance(v, int) or not 0 <= v <= hi:
-        raise PayloadRejected(RejectReason.RANGE, f"{name}={v!r} is not an integer in [0, {hi}]")
-    return v
-
-
-def _pair(name: str, v: object) -> tuple[float, float]:
-    try:
-        a, b = (float(x) for x in v)  # type: ignore[union-attr]
-    except (TypeError, ValueError):
-        raise PayloadRejected(RejectReason.RANGE, f"{name}={v!r} is not a pair of floats") from None
-    if not (math.isfinite(a) and math.isfinite(b)):
-        raise PayloadRejected(RejectReason.NONFINITE, f"{name}={(a, b)!r} is not finite")
-    return (a, b)
-
-
 class _Payload:
     """Mixin validating the common fields and float pairs (named in `_pairs`) after construction."""
     _pairs: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
-        _uint("seq", self.seq, U32_MAX)  # type: ignore[attr-defined]
-        _uint("t_ns", self.t_ns, U64_MAX)  # type: ignore[attr-defined]
+        uint_field("seq", self.seq, U32_MAX)  # type: ignore[attr-defined]
+        uint_field("t_ns", self.t_ns, U64_MAX)  # type: ignore[attr-defined]
         for name in self._pairs:
-            object.__setattr__(self, name, _pair(name, getattr(self, name)))
+            object.__setattr__(self, name, pair_field(name, getattr(self, name)))
 
 
 @dataclass(frozen=True)
@@ -105,7 +79,7 @@ class StatePayload(_Payload):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _uint("sample_t_ns", self.sample_t_ns, U64_MAX)
+        uint_field("sample_t_ns", self.sample_t_ns, U64_MAX)
 
 
 @dataclass(frozen=True)
@@ -120,11 +94,11 @@ class SetpointPayload(_Payload):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _uint("state_seq", self.state_seq, U32_MAX)
+        uint_field("state_seq", self.state_seq, U32_MAX)
         try:
             object.__setattr__(self, "reason", TriggerReason(self.reason))
-        except ValueError:
-            raise PayloadRejected(RejectReason.ENUM, f"trigger reason {self.reason!r} is unknown") from None
+        except ValueError as err:
+            raise PayloadRejected(RejectReason.ENUM, f"trigger reason {self.reason!r} is unknown") from err
 
 
 @dataclass(frozen=True)
@@ -137,7 +111,7 @@ class VoltagePayload(_Payload):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _uint("state_seq", self.state_seq, U32_MAX)
+        uint_field("state_seq", self.state_seq, U32_MAX)
 
 
 @dataclass(frozen=True)
@@ -152,8 +126,8 @@ class AckPayload(_Payload):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        _uint("state_seq", self.state_seq, U32_MAX)
-        _uint("setpoint_seq", self.setpoint_seq, U32_MAX)
+        uint_field("state_seq", self.state_seq, U32_MAX)
+        uint_field("setpoint_seq", self.setpoint_seq, U32_MAX)
         object.__setattr__(self, "sent", bool(self.sent))
 
 
@@ -199,8 +173,8 @@ def decode(b: bytes) -> Payload:
         raise PayloadRejected(RejectReason.VERSION, f"version {version} not supported ({sorted(SUPPORTED_VERSIONS)})")
     try:
         mt = MsgType(mtype)
-    except ValueError:
-        raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from None
+    except ValueError as err:
+        raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from err
     if len(b) != PAYLOAD_SIZE[mt]:
         raise PayloadRejected(RejectReason.LENGTH, f"{mt.name} must be {PAYLOAD_SIZE[mt]} bytes, got {len(b)}")
     f = _BODY[mt].unpack_from(b, HEADER_SIZE)
@@ -237,94 +211,3 @@ class PayloadCounters:
     def as_dict(self) -> dict[str, object]:
         return {"accepted": self.accepted, "rejected": dict(self.rejected),
                 "rejected_total": sum(self.rejected.values())}
-
-
-class SeqVerdict(IntEnum):
-    NEW = 0        # newer than every accepted message: use it
-    DUPLICATE = 1  # already seen
-    STALE = 2      # older than the newest accepted (arrived late / reordered): ignore it
-
-
-class SequenceTracker:
-    """Newest-wins tracking of one u32 stream (RFC 1982 serial arithmetic, so seq may wrap).
-
-    `lost` counts skipped sequence numbers; a skipped number that still arrives within the last `window` numbers
-    is moved from `lost` to `reordered`. Older arrivals cannot be classified and count as `reordered`. Call
-    `restart()` when the sender restarts its sequence (`reset()` also clears the counters).
-    """
-
-    def __init__(self, window: int = 64) -> None:
-        if window < 1:
-            raise ValueError("window must be >= 1")
-        self.window = window
-        self.reset()
-
-    def reset(self) -> None:
-        self.last: int | None = None
-        self._seen = 0  # bit i set = (last - i) was seen
-        self._span = 0  # how many numbers back from `last` the bitmap covers (<= window; stops at the first)
-        self.accepted = self.lost = self.reordered = self.duplicates = 0
-
-    def restart(self) -> None:
-        """The sender restarted its sequence: forget the window, keep the counters (the next seq is NEW)."""
-        self.last, self._seen, self._span = None, 0, 0
-
-    def feed(self, seq: int) -> SeqVerdict:
-        seq = _uint("seq", seq, U32_MAX)
-        mask = (1 << self.window) - 1
-        if self.last is None:
-            self.last, self._seen, self._span, self.accepted = seq, 1, 1, self.accepted + 1
-            return SeqVerdict.NEW
-        ahead = (seq - self.last) & U32_MAX
-        if ahead == 0:
-            self.duplicates += 1
-            return SeqVerdict.DUPLICATE
-        if ahead < 1 << 31:
-            self.lost += ahead - 1
-            self._seen = ((self._seen << ahead) | 1) & mask if ahead < self.window else 1
-            self._span = min(self._span + ahead, self.window)
-            self.last = seq
-            self.accepted += 1
-            return SeqVerdict.NEW
-        back = (self.last - seq) & U32_MAX
-        if back < self._span:
-            if self._seen >> back & 1:
-                self.duplicates += 1
-                return SeqVerdict.DUPLICATE
-            self._seen |= 1 << back
-            self.lost -= 1
-        self.reordered += 1
-        return SeqVerdict.STALE
-
-    def as_dict(self) -> dict[str, int]:
-        return {"accepted": self.accepted, "lost": self.lost, "reordered": self.reordered,
-                "duplicates": self.duplicates}
-
-
-# --- wire-size estimate (documented in docs/zenoh-protocol.md) ---------------------------------------------------
-# Per express put (no batching): frame header + sn (VLE), push header, mapped key id, QoS ext, put header, payload
-# length (VLE). Calibrated with zenoh 1.10.2 through a counting TCP proxy: 88 -> 103, 37 -> 52, 200 -> 216 bytes.
-ZENOH_MSG_OVERHEAD = 13
-TCP_BATCH_PREFIX = 2      # zenoh's u16 length prefix of each batch on stream links
-L3L4 = {"tcp": 20 + 32, "udp": 20 + 8}  # IPv4 + TCP with timestamps option (32) / UDP (8)
-ETHERNET = 14 + 4 + 8 + 12  # header + FCS + preamble/SFD + inter-frame gap
-
-
-def estimate_wire_bytes(payload_len: int, transport: str = "tcp", *, key_len: int | None = None,
-                        ethernet: bool = True) -> int:
-    """Estimated bytes on the wire for one express (unbatched) zenoh put of `payload_len` bytes.
-
-    `key_len`: if the key expression is not mapped to a numeric id, its length is sent instead of the 2-byte id.
-    `ethernet=False` omits the Ethernet framing (e.g. for loopback or IP-level accounting). TCP ACKs in the
-    reverse direction are not included.
-    """
-    if transport not in L3L4:
-        raise ValueError(f"transport must be one of {sorted(L3L4)}, got {transport!r}")
-    if payload_len < 0:
-        raise ValueError("payload_len must be >= 0")
-    n = payload_len + ZENOH_MSG_OVERHEAD + (payload_len >= 128)  # payload length VLE takes 2 bytes from 128
-    if key_len is not None:
-        n += key_len + 1 - 2
-    if transport == "tcp":
-        n += TCP_BATCH_PREFIX
-    return n + L3L4[transport] + (ETHERNET if ethernet else 0)

@@ -89,6 +89,6 @@ def check_tls_files(tls: ZenohTlsConfig) -> None:
         try:
             data = path.read_bytes()
         except OSError as err:
-            raise ConfigError(f"zenoh.tls.{name}: cannot read {path}: {err.strerror or err}") from None
+            raise ConfigError(f"zenoh.tls.{name}: cannot read {path}: {err.strerror or err}") from err
         if b"-----BEGIN " not in data:
             raise ConfigError(f"zenoh.tls.{name}: {path} is not a PEM file")

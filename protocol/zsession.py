@@ -36,7 +36,7 @@ def _insert(cfg: zenoh.Config, key: str, value: Any) -> None:
     try:
         cfg.insert_json5(key, json.dumps(value))
     except zenoh.ZError as err:
-        raise ConfigError(f"zenoh config {key}={value!r} rejected: {err}") from None
+        raise ConfigError(f"zenoh config {key}={value!r} rejected: {err}") from err
 
 
 def make_config(*, listen: list[str] | tuple[str, ...] = (), connect: list[str] | tuple[str, ...] = (),
@@ -73,7 +73,7 @@ def open_session(cfg: zenoh.Config | ZenohConfig) -> zenoh.Session:
     try:
         return zenoh.open(cfg)
     except zenoh.ZError as err:
-        raise ConfigError(f"cannot open zenoh session: {err}") from None
+        raise ConfigError(f"cannot open zenoh session: {err}") from err
 
 
 def publisher(session: zenoh.Session, key: str, *, express: bool = True,

@@ -85,8 +85,8 @@ def _summary(controller: str, downlink: int) -> dict:
     return {"controller": controller, "transmissions": {"downlink_msgs": downlink, "downlink_bytes": 53 * downlink,
                                                         "uplink_msgs": 1000},
             "tracking": {"max_abs_error_rad": [0.01, 0.02], "rms_error_rad": [0.001, 0.002]},
-            "duration_s": 10.0, "wall_s": 11.0,
-            "latency_us": {"min": 500.0, "p50": 900.0, "p90": 1500.0, "p99": 2500.0, "max": 4000.0}}
+            "duration_s": 10.0, "timing": {"wall_s": 11.0, "latency_us": {"min": 500.0, "p50": 900.0, "p90": 1500.0,
+                                                                         "p99": 2500.0, "max": 4000.0}}}
 
 
 def test_bandwidth_and_latency_records():

@@ -39,7 +39,7 @@ def test_compiled_kernel_reproduces_the_plain_python_path(overrides: dict, mode:
 
 @pytest.mark.parametrize("use_jit", [True, False])
 def test_divergence_is_a_seahil_error_on_both_paths(use_jit: bool) -> None:
-    cfg = _cfg({"controller": {"inner_rate_hz": 20.0, "sample_period_s": 0.05}, "sim": {"substeps": 1}})
+    cfg = _cfg({"can": {"feedback_rate_hz": 20.0}, "controller": {"sample_period_s": 0.05}, "sim": {"substeps": 1}})
     with pytest.raises(SeaHilError, match="diverged at t = 0.200 s"):
         simulate(cfg, "et", jit=use_jit)
 

@@ -26,7 +26,7 @@ from sea_hil.sweep.output import fronts_by_link, write_outputs
 ROOT = Path(__file__).resolve().parents[1]
 RUN_SUMMARY = {"transmissions": {"downlink_msgs": 304, "downlink_bytes": 16112, "uplink_msgs": 1001},
                "tracking": {"max_abs_error_rad": [0.0082, 0.0037], "rms_error_rad": [0.0012, 0.0019]},
-               "latency_us": {"p50": 790.0, "p99": 1700.0}, "latency_samples": 304}
+               "timing": {"latency_us": {"p50": 790.0, "p99": 1700.0}, "latency_samples": 304}}
 ET = GridPoint(3, "et", LinkCondition(5.0, 2.0, 0.05), 0.5, 0.2)
 TT = GridPoint(2, "tt", LinkCondition(5.0, 2.0, 0.05))
 
@@ -100,8 +100,10 @@ def test_csv_row_from_run_summary():
 
 
 def test_csv_row_offline_and_failed():
-    off = csv_row(TT, {"transmissions": 997, "tracking": RUN_SUMMARY["tracking"]}, cycles=1, seed=0, wall_s=1.0)
-    assert (off["downlink_msgs"], off["downlink_bytes"], off["latency_p99_us"], off["eta"]) == (997, "", "", "")
+    offline_tx = {"downlink_msgs": 997, "downlink_bytes": 997 * 53, "uplink_msgs": 1000, "uplink_bytes": 88_000}
+    off = csv_row(TT, {"transmissions": offline_tx, "tracking": RUN_SUMMARY["tracking"], "timing": {"cpu_s": 0.1}},
+                  cycles=1, seed=0, wall_s=1.0)
+    assert (off["downlink_msgs"], off["downlink_bytes"], off["latency_p99_us"], off["eta"]) == (997, 52841, "", "")
     bad = csv_row(ET, None, cycles=1, seed=0, wall_s=2.0, status="error", error="exit 2:\n  boom")
     assert (bad["status"], bad["error"], bad["downlink_msgs"], bad["max_err_rad"]) == ("error", "exit 2: boom", "", "")
 

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A controller on the CAN bus of sea-hil's emulated SEA driver, as a user's embedded controller would run it: python-can
 and the DBC (cantools) only, no edge, nothing of sea-hil's Python. Per driver sample (the three FEEDBACK frames of
-one `seq`): the ET-SMC outer loop every `zenoh.state_period_s` (../external_controller/etsmc.py: gait, lead-in,
+one `seq`): the ET-SMC outer loop every `controller.sample_period_s` (../external_controller/etsmc.py: gait, lead-in,
 trigger, SMC), the backstepping inner loop (can_backstepping.py) every sample, one VOLTAGE_CMD carrying the sample's
 `seq`. Heartbeats are watched: a FAULT (e.g. the watchdog tripped) is cleared with CLEAR_ERRORS.
 
@@ -44,7 +44,7 @@ class CanController:
         self.inner = InnerLoop(cfg, self.outer.limb)
         rate = cfg["can"]["feedback_rate_hz"]
         self.period_ns = int(round(1e9 / rate))
-        self.outer_every = max(1, int(round(cfg["zenoh"]["state_period_s"] * rate)))
+        self.outer_every = max(1, int(round(cfg["controller"]["sample_period_s"] * rate)))
         self.cmd = db.get_message_by_name("VOLTAGE_CMD")
         self.clear = db.get_message_by_name("CLEAR_ERRORS")
         self._parts: dict[str, dict[str, float]] = {}

@@ -49,9 +49,9 @@ def _crypto():  # local import: `cryptography` is only needed to generate certif
         from cryptography.hazmat.primitives import hashes, serialization
         from cryptography.hazmat.primitives.asymmetric import ec
         from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
-    except ImportError:
+    except ImportError as err:
         raise ConfigError("generating certificates needs the 'cryptography' package (pip install cryptography)") \
-            from None
+            from err
     return x509, hashes, serialization, ec, ExtendedKeyUsageOID, NameOID
 
 

@@ -13,11 +13,11 @@ class CanConfig(_Frozen):
     interface: str = "virtual:sea-hil"
     bitrate_bps: int = Field(1_000_000, gt=0)
     node_ids: tuple[int, ...] = (1,)
-    feedback_rate_hz: float = Field(1000.0, gt=0)
+    feedback_rate_hz: float = Field(1000.0, gt=0, description="drive feedback rate = the inner (backstepping) loop "
+                                    "rate, offline and in sessions")
     heartbeat_rate_hz: float = Field(10.0, gt=0)
     watchdog_timeout_s: float = Field(0.1, gt=0)
     send_retries: int = Field(5, ge=0)
-    send_backoff_s: float = Field(0.0002, ge=0, description="pause between send retries when the tx queue is full")
 
     @field_validator("interface")
     @classmethod
@@ -26,7 +26,7 @@ class CanConfig(_Frozen):
         try:
             parse_can_spec(v)
         except ConfigError as err:
-            raise ValueError(str(err)) from None
+            raise ValueError(str(err)) from err
         return v
 
     @field_validator("node_ids")
@@ -67,7 +67,6 @@ class ZenohConfig(_Frozen):
     mode: Literal["peer", "client"] = "peer"
     connect: tuple[str, ...] = ()
     listen: tuple[str, ...] = ()
-    state_period_s: float = Field(0.01, gt=0)
     tls: ZenohTlsConfig = ZenohTlsConfig()
     acl: ZenohAclConfig = ZenohAclConfig()
 
@@ -87,7 +86,7 @@ class ZenohConfig(_Frozen):
         try:
             return validate_prefix(v) if info.field_name == "prefix" else validate_limb(v)
         except ConfigError as err:
-            raise ValueError(str(err)) from None
+            raise ValueError(str(err)) from err
 
 
 class LinkDirectionConfig(_Frozen):
@@ -121,6 +120,5 @@ class LinkConfig(_Frozen):
 class RecordConfig(_Frozen):
     compression: Literal["zstd", "lz4", "none"] = "zstd"
     chunk_size_bytes: int = Field(1 << 20, gt=0)
-    stats_period_s: float = Field(1.0, gt=0)
     queue_limit: int = Field(100_000, gt=0)
     flush_period_s: float = Field(1.0, ge=0, description="close the open chunk at least this often; 0 = only when full")

@@ -8,6 +8,7 @@ from typing import Any
 
 from pydantic import ValidationError
 
+from sea_hil.config.legacy import migrate_layer
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError
 
@@ -38,25 +39,26 @@ def config_from_dict(data: dict[str, Any]) -> SeaHilConfig:
     try:
         return SeaHilConfig.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(f"invalid config: {_one_line(err)}") from None
+        raise ConfigError(f"invalid config: {_one_line(err)}") from err
 
 
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
-    """Embedded defaults, overlaid with the TOML file at `path` (if any), then `overrides` (nested dict)."""
+    """Embedded defaults, overlaid with the TOML file at `path` (if any), then `overrides` (nested dict). Keys of
+    older files are moved to their one source or dropped, with a warning (sea_hil/config/legacy.py)."""
     data = tomllib.loads(default_toml_text())
     if path is not None:
         p = Path(path)
         try:
             user = tomllib.loads(p.read_text(encoding="utf-8"))
-        except FileNotFoundError:
-            raise ConfigError(f"config file not found: {p}") from None
+        except FileNotFoundError as err:
+            raise ConfigError(f"config file not found: {p}") from err
         except tomllib.TOMLDecodeError as err:
-            raise ConfigError(f"config file {p} is not valid TOML: {err}") from None
+            raise ConfigError(f"config file {p} is not valid TOML: {err}") from err
         except (OSError, UnicodeDecodeError) as err:
-            raise ConfigError(f"cannot read config file {p}: {err}") from None
-        data = _merge(data, user)
+            raise ConfigError(f"cannot read config file {p}: {err}") from err
+        data = _merge(data, migrate_layer(user, f"config file {p}"))
     if overrides:
-        data = _merge(data, overrides)
+        data = _merge(data, migrate_layer(overrides, "config overrides"))
     return config_from_dict(data)
 
 

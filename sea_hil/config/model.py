@@ -56,8 +56,8 @@ class ControllerConfig(_Frozen):
     kp1: float = Field(gt=0)
     kp2: float = Field(gt=0)
     boundary_layer: float = Field(0.0, ge=0, description="0 = sign(s) as in the paper; >0 = sat(s/phi)")
-    sample_period_s: float = Field(0.01, gt=0)
-    inner_rate_hz: float = Field(1000.0, gt=0)
+    sample_period_s: float = Field(0.01, gt=0, description="outer loop: the edge publishes the state and the "
+                                   "controller samples it every sample_period_s (inner loop: can.feedback_rate_hz)")
     cross_term_scale: Literal["normalized", "paper", "off"] = "normalized"
     cross_term_bandwidth_rad_s: float = Field(30.0, gt=0, description="omega_c of the normalized Eq. 27 cross term")
 

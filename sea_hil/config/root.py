@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import math
 
-from pydantic import field_validator
+from pydantic import field_validator, model_validator
 
 from sea_hil.config.base import _Frozen
 from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfig
@@ -33,3 +33,13 @@ class SeaHilConfig(_Frozen):
             if any(isinstance(x, float) and not math.isfinite(x) for x in vals):
                 raise ValueError(f"plant.{name} must be finite")
         return v
+
+    @model_validator(mode="after")
+    def _rates(self) -> SeaHilConfig:
+        """One outer sample = a whole number (>= 1) of inner steps, offline and in sessions."""
+        ratio = self.controller.sample_period_s * self.can.feedback_rate_hz
+        if abs(ratio - round(ratio)) > 1e-9 or round(ratio) < 1:
+            raise ValueError(f"controller.sample_period_s ({self.controller.sample_period_s} s) must be a whole number "
+                             f"(>= 1) of inner-loop periods (1 / can.feedback_rate_hz = "
+                             f"{1.0 / self.can.feedback_rate_hz} s)")
+        return self

@@ -151,7 +151,7 @@ class _Env:
         self.params, self.c, self.rho, self.boundary_layer = p, cc.c, cc.rho, cc.boundary_layer
         self.traj = make_trajectory(cfg.trajectory)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
-        self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
+        self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         # the controller stops at its first state after the cycles; lost states delay that by a few samples only

@@ -9,23 +9,32 @@ import numpy as np
 
 from sea_hil.config import SeaHilConfig
 from sea_hil.offline.closed_loop import SimResult, simulate
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, TriggerReason
 from sea_hil.report.figures import inter_event_figure, tracking_figure
-from sea_hil.report.summary import compare_table, inter_event_block, tracking_block, write_summary
+from sea_hil.report.summary import TIMING_KEY, compare_table, inter_event_block, tracking_block, write_summary
+
+
+def offline_transmissions(res: SimResult) -> dict[str, int]:
+    """What the networked session would send for this loop, counted the session's way: one SetpointPayload per
+    event (downlink) and one StatePayload per outer sample (uplink), bytes = payload sizes of protocol/payloads.py
+    (Zenoh, TCP and IP overhead not included; no lead-in, no lockstep ACKs)."""
+    down, up = len(res.event_t_s), len(res.t_s)
+    return {"downlink_msgs": down, "downlink_bytes": down * PAYLOAD_SIZE[MsgType.SETPOINT],
+            "uplink_msgs": up, "uplink_bytes": up * PAYLOAD_SIZE[MsgType.STATE]}
 
 
 def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:
     reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True))}
-    from sea_hil.controller.trigger import TriggerReason
     return {
         "controller": res.mode,
         "duration_s": res.duration_s,
-        "transmissions": int(len(res.event_t_s)),
+        "transmissions": offline_transmissions(res),
         "events_by_reason": {TriggerReason(k).name: v for k, v in sorted(reasons.items())},
         "tracking": tracking_block(res.theta_rad, res.desired_rad),
         "inter_event_s": inter_event_block(res.event_t_s),
         "max_abs_voltage_v": [float(v) for v in np.abs(res.voltage_v).max(axis=0)],
         "saturated_steps": res.saturated_steps,
-        "cpu_s": cpu_s,
+        TIMING_KEY: {"cpu_s": cpu_s},
     }
 
 

@@ -110,10 +110,10 @@ class RecorderProcess:
             code = self._proc.wait(timeout=self.close_timeout_s)
             if self.live is not None:
                 self.live.close()
-        except subprocess.TimeoutExpired:
+        except subprocess.TimeoutExpired as err:
             self._proc.kill()
             self._proc.wait()
-            raise RecordingError(f"recorder process did not finish {self.path} in {self.close_timeout_s} s") from None
+            raise RecordingError(f"recorder process did not finish {self.path} in {self.close_timeout_s} s") from err
         if code != 0:
             raise RecordingError(f"recorder process for {self.path} exited with status {code}")
 

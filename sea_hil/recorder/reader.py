@@ -3,14 +3,53 @@ from __future__ import annotations
 
 import json
 import os
+import struct
 from dataclasses import dataclass, field
-from typing import Any, NamedTuple
+from typing import Any, BinaryIO, Iterator, NamedTuple
 
+from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import MCAP0_MAGIC
 
 from sea_hil.errors import RecordingError
+
+
+def _codec_errors() -> tuple[type[BaseException], ...]:
+    """What the chunk decompressors raise on a cut or corrupt chunk (zstd: ZstdError; lz4: RuntimeError)."""
+    errors: list[type[BaseException]] = [RuntimeError]
+    try:
+        import zstandard
+        errors.append(zstandard.ZstdError)
+    except ImportError:
+        pass
+    return tuple(errors)
+
+
+# what the MCAP parser raises past the last good record of a torn or truncated file: end of data, a record length or
+# magic that is garbage (McapError), a CRC mismatch (CRCValidationError is a ValueError), an undecodable string or
+# field (ValueError, struct.error), a cut compressed chunk, a garbage length inside a record (MemoryError: the
+# parser allocates it before reading)
+TORN_TAIL_ERRORS: tuple[type[BaseException], ...] = (McapError, ValueError, struct.error, EOFError, MemoryError,
+                                                     *_codec_errors())
+
+
+def _records(f: BinaryIO, out: SessionData) -> Iterator[Any]:
+    """Every record of the file, chunks broken up (all-or-nothing per chunk, CRC checked). Stops at the first torn
+    record and notes why in `out.tail_error`; exceptions of the caller's loop body are not caught here."""
+    size = os.fstat(f.fileno()).st_size          # no record is longer than the file: a garbage length is an error,
+    it = iter(StreamReader(f, emit_chunks=True, record_size_limit=size).records)   # not a huge allocation
+    while True:
+        try:
+            rec = next(it)
+            inner = breakup_chunk(rec, validate_crc=True) if isinstance(rec, Chunk) else [rec]
+        except StopIteration:
+            return
+        except TORN_TAIL_ERRORS as err:
+            out.tail_error = f"{type(err).__name__}: {err}"
+            return
+        out.chunks += isinstance(rec, Chunk)
+        yield from inner
 
 
 class RecordedMessage(NamedTuple):
@@ -56,7 +95,10 @@ def read_session(path: str | os.PathLike[str]) -> SessionData:
             out.encodings[rec.topic] = (sch.encoding if sch else "", rec.message_encoding)
             out.messages.setdefault(rec.topic, [])
             if sch is not None and sch.encoding == "jsonschema":
-                out.schemas[rec.topic] = json.loads(sch.data)
+                try:
+                    out.schemas[rec.topic] = json.loads(sch.data)
+                except (ValueError, UnicodeDecodeError):    # a corrupt schema record (not CRC-protected outside
+                    out.undecodable += 1                     # chunks): the topic's messages are still read
         elif isinstance(rec, Message):
             ch = channels.get(rec.channel_id)
             try:
@@ -79,19 +121,10 @@ def read_session(path: str | os.PathLike[str]) -> SessionData:
             if f.read(len(MCAP0_MAGIC)) != MCAP0_MAGIC:
                 raise RecordingError(f"{path} is not an MCAP file (bad magic)")
             f.seek(0)
-            try:
-                for rec in StreamReader(f, emit_chunks=True).records:
-                    if isinstance(rec, Chunk):
-                        inner = breakup_chunk(rec, validate_crc=True)  # all-or-nothing per chunk
-                        out.chunks += 1
-                        for r in inner:
-                            on_record(r)
-                    else:
-                        on_record(rec)
-            except Exception as err:  # noqa: BLE001 - any failure past the last good record is the torn tail
-                out.tail_error = f"{type(err).__name__}: {err}"
+            for rec in _records(f, out):
+                on_record(rec)
     except OSError as err:
-        raise RecordingError(f"cannot read recording {path}: {err}") from None
+        raise RecordingError(f"cannot read recording {path}: {err}") from err
     out.complete = bool(footer_seen) and out.tail_error is None
     for msgs in out.messages.values():
         msgs.sort(key=lambda m: m.log_time_ns)

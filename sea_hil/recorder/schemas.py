@@ -67,8 +67,8 @@ def schema_for(topic: str) -> dict[str, Any]:
         return {"$schema": "https://json-schema.org/draft/2020-12/schema", **WELL_KNOWN[topic][1]}
     try:
         title, desc, props, required = _CHANNELS[topic]
-    except KeyError:
-        raise RecordingError(f"unknown recording topic {topic!r}; known: {', '.join(TOPICS)}") from None
+    except KeyError as err:
+        raise RecordingError(f"unknown recording topic {topic!r}; known: {', '.join(TOPICS)}") from err
     if topic == "/stats":
         return dict(STATS_JSON_SCHEMA)
     extra = {"type": SCALAR_TYPES}

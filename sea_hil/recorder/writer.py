@@ -70,7 +70,7 @@ class SessionRecorder:
         try:
             self._sink = _Sink(path)
         except OSError as err:
-            raise RecordingError(f"cannot create recording {path}: {err}") from None
+            raise RecordingError(f"cannot create recording {path}: {err}") from err
         self.path = os.fspath(path)
         self._writer = Writer(self._sink, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
         self._writer.start(profile="", library="sea-hil")

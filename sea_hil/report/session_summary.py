@@ -5,7 +5,11 @@ Phases, by the controller's time t of the state a message carries or answers (t 
 `transmissions`, `tracking`, events and inter-event times cover the cycles (0 <= t <= the last handled state), as in
 `sea-hil simulate`; `lead_in` the same counts and tracking for the lead-in (t < 0, `trajectory.lead_in_s`);
 `uplink_outside_msgs` counts states published before the controller handled its first one or after its last
-(start-up and shut-down of the nodes)."""
+(start-up and shut-down of the nodes).
+
+Everything is deterministic in lockstep except the block under `timing` (sea_hil/report/summary.py): the closed-loop
+latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIMING_KEYS`, `EDGE_TIMING_PREFIXES`);
+the edge's other final `/stats` counters are under `edge`."""
 from __future__ import annotations
 
 from typing import Any, Callable
@@ -13,7 +17,14 @@ from typing import Any, Callable
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData
-from sea_hil.report.summary import inter_event_block, tracking_block
+from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block
+
+# edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
+# re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
+# extra commands on real-time setpoint arrival (`latency_*` go to timing.latency_us)
+EDGE_TIMING_PREFIXES = ("latency_", "apply_latency_us_", "loop_us_")
+EDGE_TIMING_KEYS = frozenset({"loop_overruns", "lockstep_resends", "lockstep_startup_resends", "arrival_commands",
+                              "seq_duplicates", "stale_setpoints"})
 
 
 def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
@@ -73,6 +84,21 @@ def final_edge_stats(data: SessionData) -> dict[str, Any]:
     return finals[-1] if finals else {}
 
 
+def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
+    """The edge's final /stats record -> (deterministic counters, wall-time-derived ones without `latency_*`)."""
+    det: dict[str, Any] = {}
+    timing: dict[str, Any] = {}
+    for k in sorted(edge):
+        if k in ("key", "final", "node", "t_ns"):   # the stats record's envelope (t_ns: the writer's clock)
+            continue
+        if k in EDGE_TIMING_KEYS or k.startswith(EDGE_TIMING_PREFIXES):
+            if not k.startswith("latency_"):
+                timing[k] = edge[k]
+        else:
+            det[k] = edge[k]
+    return det, timing
+
+
 def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     tr = tracking_arrays(data)
     phase = _phase_of(data, _unique(data.messages.get("/tracking", []), "state_seq"))
@@ -87,6 +113,7 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     volts = [(m.payload.get("u1_v", 0.0), m.payload.get("u2_v", 0.0)) for m in data.messages.get("/can/command", [])]
     v = np.abs(np.array(volts, dtype=float)).max(axis=0) if volts else np.zeros(2)
     edge = final_edge_stats(data)
+    edge_det, edge_timing = split_edge_stats(edge)
     reasons: dict[str, int] = {}
     for r in tr["reasons"]:
         reasons[str(r)] = reasons.get(str(r), 0) + 1
@@ -103,11 +130,11 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
         "tracking": _tracking(tr["theta_rad"], tr["desired_rad"]),
         "inter_event_s": inter_event_block(tr["event_t_s"]),
         "max_abs_voltage_v": [float(v[0]), float(v[1])],
-        "latency_us": {k: float(edge.get(f"latency_{k}_us", -1.0)) for k in ("min", "p50", "p90", "p99", "max")},
-        "latency_samples": int(edge.get("latency_count", 0)),
-        "edge": {k: edge[k] for k in sorted(edge) if not k.startswith("latency") and k not in ("key", "final", "node", "t_ns")},
+        "edge": edge_det,
+        TIMING_KEY: {
+            "latency_us": {k: float(edge.get(f"latency_{k}_us", -1.0)) for k in ("min", "p50", "p90", "p99", "max")},
+            "latency_samples": int(edge.get("latency_count", 0)),
+            "edge": edge_timing,
+        },
     }
     return summary
-
-
-TIMING_FIELDS = ("latency_us", "latency_samples", "wall_s", "edge")  # vary with wall-clock timing

@@ -1,4 +1,11 @@
-"""summary.json: the numbers users compare between runs (same keys for `simulate`, `run` and `report`)."""
+"""summary.json: the numbers users compare between runs, one schema for `simulate`, `run`, `report` and `sweep`.
+
+Common keys: `controller`, `duration_s`, `transmissions` (an object everywhere: `downlink_msgs`, `downlink_bytes`,
+`uplink_msgs`, `uplink_bytes`), `events_by_reason`, `tracking`, `inter_event_s`, `max_abs_voltage_v`, and `timing`:
+every field derived from wall-clock or CPU time (offline `cpu_s`; sessions `wall_s`, `latency_us`,
+`latency_samples` and the edge's timing counters). Everything outside `timing` is deterministic (offline always, a
+session in lockstep), so two runs compare with `deterministic(a) == deterministic(b)`. docs/session.md lists the keys.
+"""
 from __future__ import annotations
 
 import json
@@ -6,6 +13,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+TIMING_KEY = "timing"
 
 PAPER = {"tt": {"transmissions": 997, "max_abs_error_rad": 0.07},
          "et": {"transmissions": 305, "max_abs_error_rad": 0.075}}
@@ -24,6 +33,11 @@ def inter_event_block(event_t_s: np.ndarray) -> dict[str, float]:
     return {"min": float(gaps.min()), "median": float(np.median(gaps)), "max": float(gaps.max())}
 
 
+def deterministic(summary: dict[str, Any]) -> dict[str, Any]:
+    """The summary without its `timing` block: what must be identical between two lockstep (or offline) runs."""
+    return {k: v for k, v in summary.items() if k != TIMING_KEY}
+
+
 def write_summary(path: Path, summary: dict[str, Any]) -> None:
     path.write_text(json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8")
 
@@ -31,8 +45,7 @@ def write_summary(path: Path, summary: dict[str, Any]) -> None:
 def compare_table(tt: dict[str, Any], et: dict[str, Any]) -> str:
     """Markdown table TT vs ET next to the paper's numbers."""
     def tx(s: dict[str, Any]) -> int:
-        t = s["transmissions"]
-        return int(t["downlink_msgs"]) if isinstance(t, dict) else int(t)
+        return int(s["transmissions"]["downlink_msgs"])
 
     def mx(s: dict[str, Any]) -> float:
         return max(s["tracking"]["max_abs_error_rad"])

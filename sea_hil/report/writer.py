@@ -74,7 +74,7 @@ def _lead_in_rows(summary: dict[str, Any]) -> list[str]:
 
 def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     tx = summary["transmissions"]
-    lat = summary["latency_us"]
+    lat = summary["timing"]["latency_us"]
     lines = ["# sea-hil session report", "",
              f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
              f"file complete: {data.complete}, messages: {data.message_count}", "",

@@ -89,7 +89,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
     summary = session_summary(data, opts.controller)
-    summary["wall_s"] = wall_s
+    summary["timing"]["wall_s"] = wall_s
     summary["lockstep"] = opts.lockstep
     summary["inner"] = opts.inner
     write_summary(opts.out / "summary.json", summary)

@@ -126,7 +126,7 @@ class LogHistogram:
             if h.count:
                 h.min, h.max = float(data["min"]), float(data["max"])
         except (KeyError, TypeError, ValueError) as err:
-            raise MalformedPayload(f"bad compact histogram: {err}") from None
+            raise MalformedPayload(f"bad compact histogram: {err}") from err
         if sum(h._counts) != h.count:
             raise MalformedPayload("histogram bucket counts do not add up to n")
         return h

@@ -32,8 +32,8 @@ def parse_axis(name: str, text: str) -> tuple[float, ...]:
     for p in parts:
         try:
             v = float(p)
-        except ValueError:
-            raise ConfigError(f"--{name}: {p!r} is not a number") from None
+        except ValueError as err:
+            raise ConfigError(f"--{name}: {p!r} is not a number") from err
         if not math.isfinite(v):
             raise ConfigError(f"--{name}: {p!r} is not finite")
         if v < lo or (v == lo and not lo_ok) or (hi is not None and v > hi):
@@ -125,10 +125,8 @@ def point_command(point: GridPoint, mode: str, cfg_path: Path, out: Path, cycles
 
 
 def _tx(summary: dict[str, Any]) -> tuple[Any, Any, Any]:
-    t = summary.get("transmissions")
-    if isinstance(t, dict):
-        return t.get("downlink_msgs", ""), t.get("downlink_bytes", ""), t.get("uplink_msgs", "")
-    return (t if t is not None else ""), "", ""      # an old `simulate` summary: an event count only
+    t = summary.get("transmissions") or {}
+    return t.get("downlink_msgs", ""), t.get("downlink_bytes", ""), t.get("uplink_msgs", "")
 
 
 def csv_row(point: GridPoint, summary: dict[str, Any] | None, *, cycles: int, seed: int, wall_s: float,
@@ -148,8 +146,9 @@ def csv_row(point: GridPoint, summary: dict[str, Any] | None, *, cycles: int, se
         row.update(max_err_hip_rad=mx[0], max_err_knee_rad=mx[1], max_err_rad=max(mx))
     if rms:
         row.update(rms_err_hip_rad=rms[0], rms_err_knee_rad=rms[1], rms_err_rad=max(rms))
-    lat = summary.get("latency_us")
-    if isinstance(lat, dict) and summary.get("latency_samples", 0) > 0:
+    timing = summary.get("timing") or {}
+    lat = timing.get("latency_us")
+    if isinstance(lat, dict) and timing.get("latency_samples", 0) > 0:
         row.update(latency_p50_us=lat.get("p50", ""), latency_p99_us=lat.get("p99", ""))
     return row
 

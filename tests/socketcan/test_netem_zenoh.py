@@ -49,10 +49,10 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     assert summary["duration_s"] == pytest.approx(DURATION_S, abs=0.01)
     tx = summary["transmissions"]
     assert 0 < tx["downlink_msgs"] < summary["edge"]["uplink_msgs"], (tx, summary["edge"])
-    assert summary["latency_samples"] == tx["downlink_msgs"], summary
+    assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
 
     # closed loop (edge): every setpoint crossed the veth twice
-    latency_us = summary["latency_us"]
+    latency_us = summary["timing"]["latency_us"]
     assert latency_us["min"] >= 2 * DELAY_MS * US_PER_MS, latency_us
     assert latency_us["p50"] >= 2 * DELAY_MS * US_PER_MS, latency_us
     # one way: edge publishes state k -> controller sends the setpoint for k (uplink crossing only)

@@ -19,7 +19,7 @@ from session_nodes import NodeSession, run_node_session, sea_hil_cmd, write_clie
 from socketcan_helpers import CanDump
 
 DURATION_S = 1.0
-STATE_PERIOD_S = 0.01           # default zenoh.state_period_s
+STATE_PERIOD_S = 0.01           # default controller.sample_period_s
 VIRTUAL_RUN_TIMEOUT_S = 400.0
 
 
@@ -59,7 +59,7 @@ def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_
     published = summary["edge"]["uplink_msgs"]      # the edge's own count (the recorder may join a state late)
     assert samples <= published <= samples + 2, summary["edge"]
     assert 0 < tx["downlink_msgs"] < published, (tx, published)
-    assert summary["latency_samples"] == tx["downlink_msgs"], summary
+    assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
     assert json.loads((out / "summary.json").read_text())["tracking"] == summary["tracking"]
 
     # frames really crossed vcan0. The lockstep plant (its own process) advances a sample only on the edge's

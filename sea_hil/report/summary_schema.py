@@ -1,0 +1,57 @@
+"""The JSON Schema (draft 2020-12) of summary.json, the same for `simulate`, `run` and `report` (docs/session.md).
+
+A key that is not listed here is an error, so a new field has to be placed deliberately: deterministic ones at the
+top level (or in `edge`), anything derived from wall-clock or CPU time under `timing`. Tests validate every summary
+they produce against it (with the `jsonschema` package of the dev extra; nothing at run time needs it).
+"""
+from __future__ import annotations
+
+from typing import Any
+
+_NUMBER = {"type": "number"}
+_COUNT = {"type": "integer", "minimum": 0}
+_PAIR = {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2}
+
+
+def _object(props: dict[str, Any], required: tuple[str, ...] | None = None) -> dict[str, Any]:
+    """A closed object: exactly `props` (all required unless `required` says which)."""
+    return {"type": "object", "properties": props, "required": list(props if required is None else required),
+            "additionalProperties": False}
+
+
+TRANSMISSIONS = _object({k: _COUNT for k in ("downlink_msgs", "downlink_bytes", "uplink_msgs", "uplink_bytes")})
+TRACKING = _object({"max_abs_error_rad": _PAIR, "rms_error_rad": _PAIR})
+TIMING = _object({
+    "cpu_s": _NUMBER,                                                        # offline
+    "wall_s": _NUMBER,                                                       # `run` (not `report`)
+    "latency_us": _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")}),
+    "latency_samples": _COUNT,
+    "edge": {"type": "object", "additionalProperties": _NUMBER},             # wall-time-derived edge counters
+}, required=())
+
+SUMMARY_SCHEMA: dict[str, Any] = {
+    "$schema": "https://json-schema.org/draft/2020-12/schema",
+    "title": "sea-hil summary.json",
+    **_object({
+        "controller": {"enum": ["et", "tt"]},
+        "duration_s": _NUMBER,
+        "transmissions": TRANSMISSIONS,
+        "events_by_reason": {"type": "object", "additionalProperties": _COUNT},
+        "tracking": TRACKING,
+        "inter_event_s": _object({k: _NUMBER for k in ("min", "median", "max")}),
+        "max_abs_voltage_v": _PAIR,
+        "timing": TIMING,
+        # offline only
+        "saturated_steps": _COUNT,
+        "quantised": {"type": "boolean"},
+        # sessions only
+        "lead_in": _object({"duration_s": _NUMBER, **TRANSMISSIONS["properties"], "tracking": TRACKING}),
+        "uplink_outside_msgs": _COUNT,
+        "edge": {"type": "object", "additionalProperties": _NUMBER},         # deterministic edge counters
+        "lockstep": {"type": "boolean"},                                     # `run` only
+        "inner": {"enum": ["edge", "remote"]},                               # `run` only
+    }, required=("controller", "duration_s", "transmissions", "events_by_reason", "tracking", "inter_event_s",
+                 "max_abs_voltage_v", "timing")),
+    "anyOf": [{"required": ["saturated_steps", "quantised"]},                  # offline
+              {"required": ["lead_in", "uplink_outside_msgs", "edge"]}],       # session
+}

@@ -1,0 +1,117 @@
+"""The restructuring (issue 12) changed no behaviour: lockstep sessions (ET and TT, ideal link and 5 ms each way) and
+the offline simulation give summaries identical in every deterministic field to the ones recorded with the code
+before it (tests/fixtures/pre_refactor/, README there).
+
+Each old fixture is mapped onto the current summary.json schema (`transmissions` an object, wall-time-derived fields
+under `timing`) and compared with `==` after a JSON round trip: bit-identical floats, no field left out, no new
+deterministic field unaccounted for. Every run uses the overlay `paper_path.toml`, which selects the old behaviour
+where a later default differs. Cost: four 10 s lockstep sessions (~8 s wall each on an idle machine, run
+`JOBS` at a time) and one `simulate --compare`.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from concurrent.futures import ThreadPoolExecutor
+from pathlib import Path
+from typing import Any
+
+import jsonschema
+import pytest
+
+from sea_hil.cli import main
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
+from sea_hil.report.summary import deterministic
+from sea_hil.report.summary_schema import SUMMARY_SCHEMA
+
+pytestmark = pytest.mark.slow
+FIXTURES = Path(__file__).resolve().parent / "fixtures" / "pre_refactor"
+PAPER_PATH = FIXTURES / "paper_path.toml"
+LINKS = {"ideal": [], "d5": ["--uplink", "delay=5ms", "--downlink", "delay=5ms"]}
+RUNS = [(c, link) for c in ("et", "tt") for link in LINKS]
+JOBS = max(1, min(len(RUNS), (os.cpu_count() or 1) // 2))   # a lockstep session keeps ~2 cores busy
+TIMEOUT_S = 600.0
+# fields of the old session summaries that derive from wall-clock time (the rest is deterministic in lockstep):
+# latency, loop and apply times, overruns, lockstep re-sends (100 ms wall timer) and the duplicate answers they draw
+OLD_TIMING = ("wall_s", "latency_us", "latency_samples")
+OLD_EDGE_TIMING = ("apply_latency_us_max", "apply_latency_us_p50", "apply_latency_us_p99", "loop_us_max",
+                   "loop_us_p50", "loop_us_p99", "loop_overruns", "lockstep_resends", "lockstep_startup_resends",
+                   "arrival_commands", "seq_duplicates", "stale_setpoints")
+# old edge /stats key -> its current name (add an entry when a counter is renamed; never drop one)
+EDGE_RENAMED: dict[str, str] = {}
+SAMPLE_PERIOD_S = 0.01
+
+
+def _load(path: Path) -> dict[str, Any]:
+    return json.loads(path.read_text(encoding="utf-8"))
+
+
+def _session_run(out: Path, controller: str, link: str) -> dict[str, Any]:
+    cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--controller", controller, "--cycles", "1",
+           "--seed", "1", "--quiet", "--config", str(PAPER_PATH), *LINKS[link], "--out", str(out)]
+    out.mkdir(parents=True)
+    with (out / "run.log").open("w", encoding="utf-8") as log:
+        proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
+                                start_new_session=True)
+        try:
+            rc = proc.wait(timeout=TIMEOUT_S)
+        finally:
+            if proc.poll() is None:
+                os.killpg(proc.pid, signal.SIGKILL)   # the run and its controller child: its own process group
+                proc.wait()
+    assert rc == 0, (out / "run.log").read_text(encoding="utf-8")[-2000:]
+    return _load(out / "summary.json")
+
+
+@pytest.fixture(scope="session")
+def lockstep_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, str], dict[str, Any]]:
+    """The four recorded lockstep sessions, re-run with the current code (summary.json as written)."""
+    tmp = tmp_path_factory.mktemp("pre_refactor")
+    with ThreadPoolExecutor(max_workers=JOBS) as pool:
+        futures = {run: pool.submit(_session_run, tmp / f"run_{run[0]}_{run[1]}", *run) for run in RUNS}
+        return {run: fut.result() for run, fut in futures.items()}
+
+
+def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]:
+    """An old session summary in the current layout: (deterministic part, timing keys, timing.edge keys)."""
+    new = {k: v for k, v in old.items() if k not in OLD_TIMING}
+    new["edge"] = {EDGE_RENAMED.get(k, k): v for k, v in old["edge"].items() if k not in OLD_EDGE_TIMING}
+    edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
+    return new, {*OLD_TIMING, "edge"}, edge_timing
+
+
+def old_offline_as_new(old: dict[str, Any]) -> dict[str, Any]:
+    """An old offline summary in the current layout: the event count becomes the transmissions object (setpoints
+    down, one state per outer sample up, payload sizes); cpu_s moves under timing (dropped here)."""
+    down, up = old["transmissions"], round(old["duration_s"] / SAMPLE_PERIOD_S)
+    tx = {"downlink_msgs": down, "downlink_bytes": down * PAYLOAD_SIZE[MsgType.SETPOINT],
+          "uplink_msgs": up, "uplink_bytes": up * PAYLOAD_SIZE[MsgType.STATE]}
+    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": tx}
+
+
+@pytest.mark.parametrize("controller,link", RUNS, ids=[f"{c}-{lk}" for c, lk in RUNS])
+def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, link: str) -> None:
+    old = _load(FIXTURES / f"run_{controller}_{link}.summary.json")
+    expected, timing_keys, edge_timing_keys = old_session_as_new(old)
+    new = lockstep_runs[(controller, link)]
+    jsonschema.validate(new, SUMMARY_SCHEMA)
+    assert set(new["timing"]) == timing_keys and set(new["timing"]["edge"]) == edge_timing_keys
+    got = deterministic(new)
+    assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
+    diff = {k: (got[k], expected[k]) for k in expected if got[k] != expected[k]}
+    assert not diff, diff
+
+
+def test_offline_simulate_equals_pre_refactor(tmp_path: Path) -> None:
+    assert main(["simulate", "--compare", "--config", str(PAPER_PATH), "--out", str(tmp_path)]) == 0
+    assert (tmp_path / "compare.md").read_text(encoding="utf-8") == \
+        (FIXTURES / "sim_compare.md").read_text(encoding="utf-8")
+    for mode in ("et", "tt"):
+        new = _load(tmp_path / mode / "summary.json")
+        jsonschema.validate(new, SUMMARY_SCHEMA)
+        assert set(new["timing"]) == {"cpu_s"}
+        for old in (f"sim_{mode}", f"sim_compare_{mode}"):   # `simulate --controller` and `--compare` agreed
+            assert deterministic(new) == old_offline_as_new(_load(FIXTURES / f"{old}.summary.json")), old
