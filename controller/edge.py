@@ -38,7 +38,7 @@ from sea_hil.config import SeaHilConfig
 from sea_hil.errors import BusError, MalformedFrame
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.mechanics import limb_params
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SequenceTracker, SeqVerdict, SetpointPayload,
                                StatePayload, VoltagePayload, encode)
 from sea_hil.protocol.zsession import LinkedPublisher, publisher
@@ -55,8 +55,8 @@ class EdgeNode(LockstepPlane):
         self.codec = SeaCodec([node_id])
         self.assembler = FeedbackAssembler()
         self.keys = Keys.from_config(cfg.zenoh)
-        p = limb_params(cfg.plant)
-        self.inner = InnerLoop(cfg, p, tuple(cfg.plant.initial_theta_rad))
+        self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
+                               1.0 / cfg.can.feedback_rate_hz)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
         self.timeout_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))

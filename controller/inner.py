@@ -56,7 +56,7 @@ def observer_bandwidth(bandwidth_rad_s: float, period_s: float) -> float:
     """The configured observer pole, capped at MAX_OBSERVER_POLE_STEP / period_s (e.g. the 10 ms remote placement)."""
     cap = MAX_OBSERVER_POLE_STEP / period_s
     if bandwidth_rad_s > cap:
-        log.warning("observer bandwidth %.0f rad/s capped at %.0f rad/s for a %.4f s inner period",
+        log.info("observer bandwidth %.0f rad/s capped at %.0f rad/s for a %.4f s inner period",
                     bandwidth_rad_s, cap, period_s)
         return cap
     return bandwidth_rad_s

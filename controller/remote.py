@@ -28,7 +28,7 @@ from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.keys import Keys
-from sea_hil.mechanics import limb_params
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.protocol.payloads import (AckPayload, PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload,
                                StatePayload, VoltagePayload, encode)
 from sea_hil.protocol.zsession import LatestSubscriber, publisher
@@ -41,10 +41,10 @@ class RemoteController:
                  lockstep: bool = False, cycles: int = 1) -> None:
         self.cfg, self.mode, self.inner_mode, self.lockstep = cfg, mode, inner, lockstep
         self.keys = Keys.from_config(cfg.zenoh)
-        self.params = limb_params(cfg.plant)
+        self.params = nominal_params(cfg)
         self.traj = make_trajectory(cfg.trajectory)
         self.outer = OuterController(cfg, self.params, mode)
-        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad))
+        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.zenoh.state_period_s)
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         self._lead_in: LeadIn | None = None

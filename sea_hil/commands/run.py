@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_link_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_scenario_args, add_link_args, config_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,6 +28,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--quiet", action="store_true", help="no progress display")
     add_link_args(p)
     add_config_args(p)
+    add_scenario_args(p)
     p.set_defaults(func=_main)
 
 

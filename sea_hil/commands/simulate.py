@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_scenario_args, config_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,6 +20,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="round measurements and voltages to their CAN frame resolutions (docs/can-protocol.md)")
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
     add_config_args(p)
+    add_scenario_args(p)
     p.set_defaults(func=_main)
 
 

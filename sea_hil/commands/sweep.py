@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+from sea_hil.commands.common import add_scenario_args
 from sea_hil.errors import ConfigError
 from sea_hil.sweep.grid import DIRECTIONS, expand_grid, parse_axis
 
@@ -34,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--mode", choices=("lockstep", "offline"), default="lockstep",
                    help="lockstep = `sea-hil run --lockstep` per point; offline = `sea-hil simulate` (no network, "
                         "so delay/jitter/loss must be 0)")
+    add_scenario_args(p)
     p.set_defaults(func=_main)
 
 
@@ -43,6 +45,8 @@ def _command_line(args: argparse.Namespace) -> str:
              "--delay-ms", args.delay_ms, "--jitter-ms", args.jitter_ms, "--loss", args.loss, "--link", args.link,
              "--jobs", str(args.jobs), "--cycles", str(args.cycles)]
     parts += ["--config", args.config] if args.config else []
+    parts += ["--disturbance", args.disturbance] if args.disturbance else []
+    parts += ["--mismatch", args.mismatch] if args.mismatch else []
     return shlex.join(parts + (["--seed", str(args.seed)] if args.seed is not None else []))
 
 
@@ -59,7 +63,8 @@ def _main(args: argparse.Namespace) -> int:
         raise ConfigError("--mode offline has no network: --delay-ms, --jitter-ms and --loss must be 0")
     points = expand_grid(axes["eta"], axes["r"], axes["delay-ms"], axes["jitter-ms"], axes["loss"])
     opts = SweepOptions(out=args.out, config=Path(args.config) if args.config else None, mode=args.mode,
-                        cycles=args.cycles, seed=args.seed, jobs=args.jobs, direction=args.link)
+                        cycles=args.cycles, seed=args.seed, jobs=args.jobs, direction=args.link,
+                        disturbance=args.disturbance, mismatch=args.mismatch)
     configs = build_configs(points, opts)
     command = _command_line(args)
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731

@@ -20,7 +20,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from sea_hil.config import SeaHilConfig, config_to_toml, load_config
+from sea_hil.config import SeaHilConfig, config_to_toml
+from sea_hil.config.shorthand import scenario_config
 from sea_hil.sweep.grid import GridPoint, csv_row, point_command, point_overrides
 
 GRACE_S = 10.0
@@ -35,6 +36,8 @@ class SweepOptions:
     seed: int | None = None
     jobs: int = 1
     direction: str = "both"
+    disturbance: str | None = None  # --disturbance / --mismatch shorthands (sea_hil/config/shorthand.py)
+    mismatch: str | None = None
 
 
 def point_config(opts: SweepOptions, point: GridPoint) -> SeaHilConfig:
@@ -43,7 +46,7 @@ def point_config(opts: SweepOptions, point: GridPoint) -> SeaHilConfig:
     if opts.seed is not None:
         ov["link"]["seed"] = opts.seed
         ov["disturbance"] = {"seed": opts.seed}
-    return load_config(opts.config, ov)
+    return scenario_config(str(opts.config) if opts.config else None, ov, opts.disturbance, opts.mismatch)
 
 
 def point_timeout_s(cfg: SeaHilConfig, cycles: int) -> float:
