@@ -13,7 +13,7 @@ from typing import NoReturn
 
 from sea_hil.errors import SeaHilError
 
-COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep", "certs")
+COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "sweep", "robustness", "certs")
 
 
 class OneLineParser(argparse.ArgumentParser):
