@@ -11,11 +11,11 @@ import math
 
 from sea_hil.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry
 
-ObserverState = tuple[float, float, float, float, float, float, float, float, float, float]
-"""(xi1, xi2, d_hat1, d_hat2, d_hat_dot1, d_hat_dot2, e1, e2, f1, f2): predicted momentum (N m s), the lumped-torque
-estimate (N m) and its rate (N m/s), the last momentum error and model torque. NaN xi = not started."""
+ObserverState = tuple[float, float, float, float, float, float]
+"""(xi1, xi2, d_hat1, d_hat2, d_hat_dot1, d_hat_dot2): momentum estimate (N m s), the lumped-torque estimate (N m)
+and its rate (N m/s). NaN xi = not started."""
 
-OBSERVER_UNSTARTED: ObserverState = (math.nan, math.nan, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+OBSERVER_UNSTARTED: ObserverState = (math.nan, math.nan, 0.0, 0.0, 0.0, 0.0)
 
 
 def momentum(q2: float, w1: float, w2: float, p: LimbParams) -> tuple[float, float]:
@@ -29,21 +29,20 @@ def observer_step(m: tuple[float, float, float, float, float, float, float, floa
     """Second-order (extended-state) momentum observer, both poles at -bandwidth_rad_s:
     e = P - xi, xi' = F + d_hat + 2 w0 e with the model torque F = Mdot omega + tau + N, d_hat' = w0^2 e, so that
     d_hat'' + 2 w0 d_hat' + w0^2 d_hat = w0^2 d (no lag for a ramp) and d_hat' = w0^2 e comes without differencing.
-    Discretised at each measurement: xi advances over the last period with the trapezoid of F (the SEA torque
-    changes within a period), then e, d_hat and d_hat' are updated. The first call starts xi at the measured
-    momentum (d_hat = 0)."""
+    Forward Euler over dt_s from this measurement; the returned d_hat is the one for the coming period. The first
+    call starts xi at the measured momentum (d_hat = 0)."""
     q1, q2, w1, w2, z1, z2 = m[0], m[1], m[2], m[3], m[4], m[5]
     p1, p2 = momentum(q2, w1, w2, p)
+    xi1, xi2, d1, d2 = obs[0], obs[1], obs[2], obs[3]
+    if xi1 != xi1:  # NaN: not started
+        xi1, xi2 = p1, p2
+    e1, e2 = p1 - xi1, p2 - xi2
+    l1, l2 = 2.0 * bandwidth_rad_s, bandwidth_rad_s * bandwidth_rad_s
     _, _, a1, a2, _, _ = sea_geometry(q1, q2, p)
     n1, n2 = n_terms(q1, q2, w1, w2, p)
     bs = p.b_coupling * math.sin(q2)
     f1 = -p.k1 * z1 * a1 + n1 + bs * w2 * (w2 - 2.0 * w1)   # (dM/dt) omega: dM11/dt = -2 b sin(q2) w2,
     f2 = -p.k2 * z2 * a2 + n2 + bs * w2 * w1                # dM12/dt = -b sin(q2) w2
-    if obs[0] != obs[0]:  # NaN: not started
-        return p1, p2, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, f1, f2
-    l1, l2 = 2.0 * bandwidth_rad_s, bandwidth_rad_s * bandwidth_rad_s
-    xi1 = obs[0] + dt_s * (0.5 * (obs[8] + f1) + obs[2] + l1 * obs[6])
-    xi2 = obs[1] + dt_s * (0.5 * (obs[9] + f2) + obs[3] + l1 * obs[7])
-    e1, e2 = p1 - xi1, p2 - xi2
     dd1, dd2 = l2 * e1, l2 * e2
-    return xi1, xi2, obs[2] + dt_s * dd1, obs[3] + dt_s * dd2, dd1, dd2, e1, e2, f1, f2
+    return (xi1 + dt_s * (f1 + d1 + l1 * e1), xi2 + dt_s * (f2 + d2 + l1 * e2),
+            d1 + dt_s * dd1, d2 + dt_s * dd2, dd1, dd2)
