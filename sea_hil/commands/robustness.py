@@ -28,7 +28,10 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--config", metavar="FILE", help="TOML overlaid on the embedded defaults (e.g. configs/paper.toml)")
     p.add_argument("--trajectory", metavar="CSV", help="desired trajectory CSV (t, theta1, theta2)")
     p.add_argument("--scales", default="0,0.25,0.5,0.75,1", help="disturbance amplitude scales (default %(default)s)")
-    p.add_argument("--percents", default="-20,-10,0,10,20", help="mismatch percentages (default %(default)s)")
+    p.add_argument("--percents", default="-20,-10,0,10,20",
+                   help="mismatch percentages (default %(default)s; write --percents=-20,20 for a leading minus)")
+    p.add_argument("--settle-s", type=float, default=0.5,
+                   help="errors over t >= this (default %(default)s s: the offline start is its own transient)")
     p.set_defaults(func=_main)
 
 
@@ -40,11 +43,13 @@ def _main(args: argparse.Namespace) -> int:
         ov["trajectory"] = {"kind": "csv", "csv_path": args.trajectory}
     points = grid(_floats("scales", args.scales), _floats("percents", args.percents))
     args.out.mkdir(parents=True, exist_ok=True)
-    rows = run_grid(points, args.config, ov, log=lambda s: print(s, file=sys.stderr, flush=True))
+    if args.settle_s < 0:
+        raise ConfigError(f"--settle-s must be >= 0, not {args.settle_s}")
+    rows = run_grid(points, args.config, ov, args.settle_s, log=lambda s: print(s, file=sys.stderr, flush=True))
     write_csv(args.out / "robustness.csv", rows)
     write_figure(args.out / "robustness.png", rows)
-    command = shlex.join(["sea-hil", "robustness", "--out", str(args.out), "--scales", args.scales, "--percents",
-                          args.percents] + (["--config", args.config] if args.config else [])
+    command = shlex.join(["sea-hil", "robustness", "--out", str(args.out), f"--scales={args.scales}",
+                          f"--percents={args.percents}", "--settle-s", f"{args.settle_s:g}"] + (["--config", args.config] if args.config else [])
                          + (["--trajectory", args.trajectory] if args.trajectory else []))
     write_markdown(args.out / "robustness.md", rows, command)
     print((args.out / "robustness.md").read_text(encoding="utf-8"))

@@ -65,7 +65,7 @@ def write_figure(path: Path, rows: list[dict[str, Any]]) -> None:
 
 
 def write_markdown(path: Path, rows: list[dict[str, Any]], command: str) -> None:
-    lines = ["# Robustness (offline, CAN-quantised, one cycle)", "", f"`{command}`", "",
+    lines = ["# Robustness (offline, CAN-quantised, one cycle, errors after --settle-s)", "", f"`{command}`", "",
              "| axis | series | value | TT max / RMS [rad] | ET max / RMS [rad] | ET / TT setpoints | "
              "saturated TT / ET |", "|---|---|---|---|---|---|---|"]
     pairs: dict[tuple[str, str, float], dict[str, dict[str, Any]]] = {}
