@@ -2,7 +2,8 @@
 
 The generalised momentum P = M(theta) omega of Eq. 2 obeys dP/dt = Mdot omega + tau + N + d with tau = -k a Delta
 (Eq. 4), so an observer of P driven by the model plus its estimate d_hat recovers the lumped joint torque d (external
-torque plus every nominal-model error) through the momentum error, without differentiating the measured velocity. Everything here uses the nominal model and the 1 kHz measurement only.
+torque plus every nominal-model error) through the momentum error, without differentiating the measured velocity.
+Everything here uses the nominal model and the 1 kHz measurement only.
 Plain float code: the offline closed loop compiles it with numba from this source (sea_hil/offline/closed_loop.py).
 """
 from __future__ import annotations

@@ -48,9 +48,11 @@ def _main(args: argparse.Namespace) -> int:
     rows = run_grid(points, args.config, ov, args.settle_s, log=lambda s: print(s, file=sys.stderr, flush=True))
     write_csv(args.out / "robustness.csv", rows)
     write_figure(args.out / "robustness.png", rows)
-    command = shlex.join(["sea-hil", "robustness", "--out", str(args.out), f"--scales={args.scales}",
-                          f"--percents={args.percents}", "--settle-s", f"{args.settle_s:g}"] + (["--config", args.config] if args.config else [])
-                         + (["--trajectory", args.trajectory] if args.trajectory else []))
+    parts = ["sea-hil", "robustness", "--out", str(args.out), f"--scales={args.scales}", f"--percents={args.percents}",
+             "--settle-s", f"{args.settle_s:g}"]
+    parts += ["--config", args.config] if args.config else []
+    parts += ["--trajectory", args.trajectory] if args.trajectory else []
+    command = shlex.join(parts)
     write_markdown(args.out / "robustness.md", rows, command)
     print((args.out / "robustness.md").read_text(encoding="utf-8"))
     return 0

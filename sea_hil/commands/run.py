@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_scenario_args, add_link_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_link_args, add_scenario_args, config_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
