@@ -63,3 +63,31 @@ def test_scenario_config_round_trips_through_toml() -> None:
     again = config_from_dict(tomllib.loads(config_to_toml(cfg)))
     assert again == cfg
     assert load_config() == config_from_dict(tomllib.loads(config_to_toml(load_config())))
+
+
+def test_sweep_points_carry_the_scenario(tmp_path) -> None:
+    from sea_hil.sweep.grid import expand_grid
+    from sea_hil.sweep.runner import SweepOptions, point_config
+    point = expand_grid([0.5], [0.2], [0.0], [0.0], [0.0])[0]
+    opts = SweepOptions(out=tmp_path, mode="offline", disturbance="knee=constant:0.05Nm", mismatch="stiffness=+10%")
+    cfg = point_config(opts, point)
+    assert cfg.disturbance.knee is not None and cfg.disturbance.knee.amplitude_nm == 0.05
+    assert cfg.controller.model.k2_n_per_m == pytest.approx(1.1 * cfg.plant.k2_n_per_m)
+
+
+def test_robustness_grid_and_outputs(tmp_path) -> None:
+    from sea_hil.offline.robustness import grid, run_grid
+    from sea_hil.offline.robustness_output import write_csv, write_figure, write_markdown
+    points = grid((0.0, 1.0), (20.0,))
+    assert len(points) == 4 * 2 + 3 and points[1].disturbance == "hip=constant:0.5Nm,knee=constant:0.05Nm"
+    assert points[-1].mismatch == "stiffness=+20%"
+    rows = run_grid([points[1], points[-1]], None, {"trajectory": {"period_s": 2.0}}, 0.5, log=lambda s: None)
+    assert [(r["axis"], r["controller"]) for r in rows] == [("disturbance", "tt"), ("disturbance", "et"),
+                                                           ("mismatch", "tt"), ("mismatch", "et")]
+    assert rows[0]["transmissions"] == 200 and 0 < rows[1]["transmissions"] < 200
+    write_csv(tmp_path / "r.csv", rows)
+    write_figure(tmp_path / "r.png", rows)
+    write_markdown(tmp_path / "r.md", rows, "sea-hil robustness")
+    assert (tmp_path / "r.png").read_bytes()[:4] == b"\x89PNG"
+    assert len((tmp_path / "r.csv").read_text().splitlines()) == 5
+    assert "| mismatch | stiffness | +20 % |" in (tmp_path / "r.md").read_text()
