@@ -5,12 +5,13 @@ its time derivative is zero. The cross term -(g_x)^T s of Eq. 27 is weighted by 
 docs/deviations.md): the augmented Lyapunov function V1 = V_x + (1/(2w)) |v_x - z1|^2 cancels it for any w > 0, and
 w = 1 (the paper) makes it ~1e4-1e5 times too large for these units.
 
-Disturbance compensation (docs/deviations.md section 10; `controller.disturbance_compensation`): Eq. 29's joint
-acceleration f_x + g_x z1 has no disturbance, so a torque d biases the deflection dynamics by a M^-1 d, which the
-loop turns into a deflection error ~ a M^-1 d / (kp1 kp2), i.e. a joint torque error ~ k a^2 M^-1 d / (kp1 kp2)
-(about 6 d at the knee). With the observer's d_hat (controller/observer.py), 'inner' adds M^-1 d_hat to that
-acceleration and 'full' also adds the deflection d_hat / (k a) to v_x, which cancels d at the joint, so the outer SMC
-sees the nominal plant. 'off' (compensation = 0) is the paper's law, computed exactly as before.
+Disturbance compensation (docs/deviations.md section 10; `controller.disturbance_compensation`): the joint
+acceleration f_x + g_x z1 inside F_R (f_2 of Eq. 28/31) has no disturbance, so a torque d biases the deflection
+dynamics by a M^-1 d, which the loop turns into a deflection error ~ a M^-1 d / (kp1 kp2), i.e. a joint torque error
+~ k a^2 M^-1 d / (kp1 kp2) (about 6 d at the knee). With the observer's d_hat (controller/observer.py), 'inner' adds
+M^-1 d_hat to that acceleration and 'full' also adds the deflection d_hat / (k a) to v_x, which cancels d at the
+joint, so the outer SMC sees the nominal plant. 'off' (compensation = 0) is the paper's law, computed exactly as
+before.
 """
 from __future__ import annotations
 
