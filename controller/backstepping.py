@@ -4,24 +4,35 @@ z1 = Delta (measured spring deflection), z2 = Delta_dot = a(theta) omega - rdot.
 its time derivative is zero. The cross term -(g_x)^T s of Eq. 27 is weighted by `w` (see `cross_term_weight` and
 docs/deviations.md): the augmented Lyapunov function V1 = V_x + (1/(2w)) |v_x - z1|^2 cancels it for any w > 0, and
 w = 1 (the paper) makes it ~1e4-1e5 times too large for these units.
+
+Disturbance compensation (docs/deviations.md section 10; `controller.disturbance_compensation`): the joint
+acceleration f_x + g_x z1 inside F_R (f_2 of Eq. 28/31) has no disturbance, so a torque d biases the deflection
+dynamics by a M^-1 d, which the loop turns into a deflection error ~ a M^-1 d / (kp1 kp2), i.e. a joint torque error
+~ k a^2 M^-1 d / (kp1 kp2) (about 6 d at the knee). With the observer's d_hat (controller/observer.py), 'inner' adds
+M^-1 d_hat to that acceleration and 'full' also adds the deflection d_hat / (k a) to v_x, which cancels d at the
+joint, so the outer SMC sees the nominal plant. 'off' (compensation = 0) is the paper's law, computed exactly as
+before.
 """
 from __future__ import annotations
 
 import math
 from typing import NamedTuple
 
-from sea_hil.mechanics import LimbParams, fx_gx, sea_geometry
+from sea_hil.mechanics import LimbParams, fx_gx, mass_matrix, sea_geometry, solve_m
 
 Measurement = tuple[float, float, float, float, float, float, float, float]
 """(theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2) as sent by the driver."""
 
 _FD_STEP_S = 1e-4  # finite-difference horizon for g_x_dot along the current joint velocity
+COMPENSATION = {"off": 0, "inner": 1, "full": 2}
 
 
 class InnerGains(NamedTuple):
     kp1: float
     kp2: float
     w: float  # cross-term weight (1.0 = paper)
+    compensation: int = 0  # COMPENSATION[controller.disturbance_compensation]; 0 = paper
+    observer_rad_s: float = 0.0  # disturbance observer pole (used when compensation > 0)
 
 
 def cross_term_weight(mode: str, p: LimbParams, bandwidth_rad_s: float, theta_rad: tuple[float, float]) -> float:
@@ -47,16 +58,26 @@ def _cross(g: tuple[float, float, float, float], s: tuple[float, float]) -> tupl
 
 
 def backstepping_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, float], p: LimbParams,
-                         gains: InnerGains) -> tuple[float, float]:
-    """Eq. 27 and 31 (unsaturated U_v in volts)."""
+                         gains: InnerGains, d_hat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
+                         ) -> tuple[float, float]:
+    """Eq. 27 and 31 (unsaturated U_v in volts). d_hat = (d1, d2, d1_dot, d2_dot), the observer's lumped joint
+    torques (N m) and their rates, is used only when gains.compensation > 0."""
     q1, q2, w1, w2, z11, z12, rd1, rd2 = m
     _, _, a1, a2, a1p, a2p = sea_geometry(q1, q2, p)
     f1, f2, g = fx_gx(q1, q2, w1, w2, a1, a2, p)
     z21, z22 = a1 * w1 - rd1, a2 * w2 - rd2
     e11, e12 = vx[0] - z11, vx[1] - z12
-    # nominal joint acceleration (disturbance unknown) and SEA end acceleration F_R = d2 r_B / dt2
+    # nominal joint acceleration and SEA end acceleration F_R = d2 r_B / dt2
     acc1 = f1 + g[0] * z11 + g[1] * z12
     acc2 = f2 + g[2] * z11 + g[3] * z12
+    if gains.compensation > 0:
+        m11, m12, m22 = mass_matrix(q2, p)
+        da1, da2 = solve_m(m11, m12, m22, d_hat[0], d_hat[1])
+        acc1 += da1
+        acc2 += da2
+        if gains.compensation > 1:  # extra deflection c = d_hat / (k a): its spring torque -k a c cancels d_hat
+            e11 += d_hat[0] / (p.k1 * a1)
+            e12 += d_hat[1] / (p.k2 * a2)
     fr1, fr2 = a1 * acc1 + a1p * w1 * w1, a2 * acc2 + a2p * w2 * w2
     if gains.w != 0.0:
         c1, c2 = _cross(g, s)

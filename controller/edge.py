@@ -31,8 +31,8 @@ from sea_hil.controller.edge_downlink import SetpointIntake
 from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, rx_monotonic_ns
 from sea_hil.controller.edge_uplink import StatePublisher
 from sea_hil.controller.inner import InnerLoop
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import MalformedFrame
-from sea_hil.mechanics import limb_params
 from sea_hil.protocol.can_codec import FEEDBACK_PARTS, Feedback, FeedbackAssembler, Heartbeat, SeaCodec, unwrap_us
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
@@ -56,7 +56,8 @@ class EdgeNode(Node):
         self.codec = SeaCodec([node_id])
         self.assembler = FeedbackAssembler()
         self.keys = Keys.from_config(cfg.zenoh)
-        self.inner = InnerLoop(cfg, limb_params(cfg.plant), tuple(cfg.plant.initial_theta_rad))
+        self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
+                               1.0 / cfg.can.feedback_rate_hz)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()

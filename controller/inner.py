@@ -2,9 +2,15 @@
 measurement into saturated SEA voltages with the backstepping law."""
 from __future__ import annotations
 
-from sea_hil.controller.backstepping import InnerGains, Measurement, backstepping_voltage, cross_term_weight
+import logging
+
+from sea_hil.controller.backstepping import (COMPENSATION, InnerGains, Measurement, backstepping_voltage,
+                                             cross_term_weight)
+from sea_hil.controller.observer import OBSERVER_UNSTARTED, ObserverState, observer_step
 from sea_hil.config import SeaHilConfig
 from sea_hil.mechanics import LimbParams
+
+log = logging.getLogger(__name__)
 
 
 def _sat(v: float, lim: float) -> float:
@@ -12,26 +18,66 @@ def _sat(v: float, lim: float) -> float:
 
 
 def limited_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, float], p: LimbParams,
-                    gains: InnerGains, limit_v: float) -> tuple[float, float, bool]:
+                    gains: InnerGains, limit_v: float,
+                    d_hat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> tuple[float, float, bool]:
     """(u1, u2, saturated): backstepping voltages clipped to +-limit_v; a NaN (degenerate state) commands nothing.
 
     Plain float code: the offline simulation also compiles it with numba (sea_hil/offline/closed_loop.py)."""
-    u1, u2 = backstepping_voltage(m, vx, s, p, gains)
+    u1, u2 = backstepping_voltage(m, vx, s, p, gains, d_hat)
     if u1 != u1 or u2 != u2:
         return 0.0, 0.0, False
     s1, s2 = _sat(u1, limit_v), _sat(u2, limit_v)
     return s1, s2, (s1 != u1 or s2 != u2)
 
 
+def inner_step(m: Measurement, vx: tuple[float, float], s: tuple[float, float], hold_measured: bool,
+               obs: ObserverState, p: LimbParams, gains: InnerGains, limit_v: float, dt_s: float
+               ) -> tuple[float, float, bool, ObserverState]:
+    """One inner-loop step as the edge runs it: observer update (if compensating), then the limited voltage.
+    hold_measured (no setpoint yet): hold the measured deflection, no compensating deflection either.
+    Returns (u1, u2, saturated, new observer state). Plain float code (compiled offline with numba)."""
+    v = (m[4], m[5]) if hold_measured else vx
+    if gains.compensation == 0:
+        u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v, (0.0, 0.0, 0.0, 0.0))
+        return u1, u2, saturated, obs
+    obs = observer_step(m, obs, p, gains.observer_rad_s, dt_s)
+    d_hat = (obs[2], obs[3], obs[4], obs[5])
+    if hold_measured:
+        d_hat = (0.0, 0.0, 0.0, 0.0)
+    u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v, d_hat)
+    return u1, u2, saturated, obs
+
+
+MAX_OBSERVER_POLE_STEP = 0.4
+"""Largest observer pole x period: the forward-Euler observer is well damped only for w0 dt well below 1."""
+
+
+def observer_bandwidth(bandwidth_rad_s: float, period_s: float) -> float:
+    """The configured observer pole, capped at MAX_OBSERVER_POLE_STEP / period_s (e.g. the 10 ms remote placement)."""
+    cap = MAX_OBSERVER_POLE_STEP / period_s
+    if bandwidth_rad_s > cap:
+        log.info("observer bandwidth %.0f rad/s capped at %.0f rad/s for a %.4f s inner period",
+                    bandwidth_rad_s, cap, period_s)
+        return cap
+    return bandwidth_rad_s
+
+
 class InnerLoop:
-    def __init__(self, cfg: SeaHilConfig, params: LimbParams, theta0_rad: tuple[float, float]) -> None:
+    """`params` is the controller's nominal model (controller/nominal.py); `period_s` the time between two calls
+    of `voltage` (default: 1 / can.feedback_rate_hz), used by the disturbance observer."""
+
+    def __init__(self, cfg: SeaHilConfig, params: LimbParams, theta0_rad: tuple[float, float],
+                 period_s: float | None = None) -> None:
         cc = cfg.controller
         w = cross_term_weight(cc.cross_term_scale, params, cc.cross_term_bandwidth_rad_s, theta0_rad)
-        self.gains = InnerGains(cc.kp1, cc.kp2, w)
+        self.period_s = period_s if period_s is not None else 1.0 / cfg.can.feedback_rate_hz
+        self.gains = InnerGains(cc.kp1, cc.kp2, w, COMPENSATION[cc.disturbance_compensation],
+                                observer_bandwidth(cc.observer_bandwidth_rad_s, self.period_s))
         self._p = params
         self._limit = params.voltage_limit
         self.deflection_m: tuple[float, float] | None = None
         self.sliding: tuple[float, float] = (0.0, 0.0)
+        self.observer: ObserverState = OBSERVER_UNSTARTED
         self.saturated_steps = 0
 
     def hold(self, deflection_m: tuple[float, float], sliding: tuple[float, float]) -> None:
@@ -40,8 +86,9 @@ class InnerLoop:
 
     def voltage(self, m: Measurement) -> tuple[float, float]:
         """Saturated voltages; before the first setpoint, hold the measured deflection (no motion commanded)."""
-        vx = self.deflection_m if self.deflection_m is not None else (m[4], m[5])
-        s1, s2, saturated = limited_voltage(m, vx, self.sliding, self._p, self.gains, self._limit)
+        held = self.deflection_m
+        s1, s2, saturated, self.observer = inner_step(m, held or (0.0, 0.0), self.sliding, held is None,
+                                                      self.observer, self._p, self.gains, self._limit, self.period_s)
         if saturated:
             self.saturated_steps += 1
         return s1, s2

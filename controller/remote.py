@@ -28,7 +28,7 @@ from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.keys import Keys
-from sea_hil.mechanics import limb_params
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.protocol.payloads import (PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
                                        VoltagePayload, encode)
 from sea_hil.protocol.zsession import publisher
@@ -46,10 +46,10 @@ class RemoteController(Node):
         super().__init__()
         self.cfg, self.mode, self.inner_mode, self.session = cfg, mode, inner, session
         self.keys = Keys.from_config(cfg.zenoh)
-        self.params = limb_params(cfg.plant)
+        self.params = nominal_params(cfg)
         self.traj = make_trajectory(cfg.trajectory)
         self.outer = OuterController(cfg, self.params, mode)
-        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad))
+        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.controller.sample_period_s)
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         self._lead_in: LeadIn | None = None

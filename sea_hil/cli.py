@@ -13,7 +13,8 @@ from typing import NoReturn
 
 from sea_hil.errors import SeaHilError
 
-COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "export", "sweep", "certs")
+COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "export", "sweep", "robustness",
+            "certs")
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -63,5 +63,7 @@ def test_quantised_et_keeps_its_savings_and_rms_error() -> None:
     _, rms_exact, n_exact = _errors("et", quantise=False)
     _, rms_q, n_q = _errors("et", quantise=True)
     assert n_q <= n_tt / 3
-    assert abs(n_q / n_exact - 1.0) < ET_SPREAD, (n_exact, n_q)
+    # one-sided: with the edge disturbance observer (docs/deviations.md 10) the quantised run sends ~4 % *fewer*
+    # setpoints than the exact one (eta 0.48-0.52: 299/312, 300/312, 290/314, 285/300, 296/308)
+    assert n_q / n_exact - 1.0 < ET_SPREAD, (n_exact, n_q)
     assert np.all(np.abs(rms_q / rms_exact - 1.0) < ET_SPREAD), (rms_exact, rms_q)

@@ -4,7 +4,8 @@ from __future__ import annotations
 import argparse
 from typing import Any
 
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config import SeaHilConfig
+from sea_hil.config.shorthand import scenario_config
 from sea_hil.protocol.link import parse_link_spec
 
 
@@ -25,6 +26,15 @@ def add_link_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--uplink", metavar="SPEC", help="link emulation edge->controller, e.g. 'delay=20ms,jitter=5ms,"
                                                     "loss=1%%,ge=0.01/0.3/0.8,rate=1Mbps'")
     p.add_argument("--downlink", metavar="SPEC", help="link emulation controller->edge (same syntax)")
+
+
+def add_scenario_args(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--disturbance", metavar="SPEC",
+                   help="disturbance torques per joint, e.g. 'knee=sine:0.05Nm@2Hz,hip=constant:0.5Nm', "
+                        "'noise:0.05Nm@10ms' (no joint: both); replaces [disturbance.hip]/[disturbance.knee]")
+    p.add_argument("--mismatch", metavar="SPEC",
+                   help="controller's nominal model vs the plant, e.g. 'mass=+20%%,stiffness=-20%%' (groups mass, "
+                        "inertia, stiffness, damping, all; or m1, m2, i1, i2, k1, k2, b1, b2); sets [controller.model]")
 
 
 def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
@@ -49,4 +59,5 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
         ov["zenoh"] = {**ov.get("zenoh", {}), **z}
     if getattr(args, "can", None):
         ov.setdefault("can", {})["interface"] = args.can
-    return load_config(getattr(args, "config", None), ov)
+    return scenario_config(getattr(args, "config", None), ov, getattr(args, "disturbance", None),
+                           getattr(args, "mismatch", None))

@@ -11,6 +11,7 @@ import sys
 import time
 from pathlib import Path
 
+from sea_hil.commands.common import add_scenario_args
 from sea_hil.errors import ConfigError
 from sea_hil.sweep.grid import DIRECTIONS, expand_grid, parse_axis, seed_axis
 
@@ -45,6 +46,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "timeline, links and quantisation; same summary, ~100x faster); lockstep = a `sea-hil run "
                         "--lockstep` session per point (the check that the real path behaves the same)")
     p.add_argument("--mode", choices=("lockstep", "offline"), default=None, help=argparse.SUPPRESS)  # old name
+    add_scenario_args(p)
     p.set_defaults(func=_main)
 
 
@@ -56,6 +58,8 @@ def _command_line(args: argparse.Namespace) -> str:
     parts += ["--config", args.config] if args.config else []
     parts += ["--seeds", str(args.seeds)] if args.seeds is not None else []
     parts += ["--scheduler", args.scheduler] if args.scheduler else []
+    parts += ["--disturbance", args.disturbance] if args.disturbance else []
+    parts += ["--mismatch", args.mismatch] if args.mismatch else []
     return shlex.join(parts + (["--seed", str(args.seed)] if args.seed is not None else []))
 
 
@@ -75,7 +79,8 @@ def _main(args: argparse.Namespace) -> int:
                          seed_axis(args.seeds, args.seed))
     opts = SweepOptions(out=args.out, config=Path(args.config) if args.config else None, mode=args.engine,
                         cycles=args.cycles, seed=args.seed, jobs=args.jobs, direction=args.link,
-                        scheduler=args.scheduler, resume=args.resume)
+                        scheduler=args.scheduler, resume=args.resume, disturbance=args.disturbance,
+                        mismatch=args.mismatch)
     configs = build_configs(points, opts)
     command = _command_line(args)
     log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731

@@ -76,7 +76,7 @@ def config_to_toml(cfg: SeaHilConfig) -> str:
         return repr(v)
 
     def emit(prefix: str, d: dict[str, Any]) -> None:
-        scalars = {k: v for k, v in d.items() if not isinstance(v, dict)}
+        scalars = {k: v for k, v in d.items() if not isinstance(v, dict) and v is not None}  # None = unset
         tables = {k: v for k, v in d.items() if isinstance(v, dict)}
         if scalars:
             lines.append(f"[{prefix}]")

@@ -34,12 +34,37 @@ class PlantConfig(_Frozen):
     include_i2_in_coupling: bool = True
 
 
+DisturbanceKind = Literal["none", "constant", "sine", "noise"]
+
+
+class JointDisturbanceConfig(_Frozen):
+    """One joint's disturbance torque ([disturbance.hip] / [disturbance.knee]); bounded by |amplitude_nm|."""
+    kind: DisturbanceKind = "none"
+    amplitude_nm: float = 0.0
+    frequency_hz: float = Field(0.5, ge=0, description="sine only")
+    noise_hold_s: float = Field(0.01, gt=0, description="noise only: each uniform draw is held this long")
+
+
 class DisturbanceConfig(_Frozen):
-    kind: Literal["none", "constant", "sine", "noise"] = "none"
+    """Disturbance torques d1, d2 of Eq. 3. The flat keys give both joints one kind (the original form); a
+    [disturbance.hip] or [disturbance.knee] table replaces that joint's part (per-joint kinds, `--disturbance`)."""
+    kind: DisturbanceKind = "none"
     amplitude_nm: Pair = (0.0, 0.0)
     frequency_hz: float = Field(0.5, ge=0)
     noise_hold_s: float = Field(0.01, gt=0)
     seed: int = 0
+    hip: JointDisturbanceConfig | None = None
+    knee: JointDisturbanceConfig | None = None
+
+    def per_joint(self) -> tuple[JointDisturbanceConfig, JointDisturbanceConfig]:
+        """(hip, knee): the joint tables where given, else that joint's part of the flat keys."""
+        flat = [JointDisturbanceConfig(kind=self.kind, amplitude_nm=a, frequency_hz=self.frequency_hz,
+                                       noise_hold_s=self.noise_hold_s) for a in self.amplitude_nm]
+        return (self.hip or flat[0], self.knee or flat[1])
+
+    def is_zero(self) -> bool:
+        """True when every joint's torque is identically zero."""
+        return all(j.kind == "none" or j.amplitude_nm == 0.0 for j in self.per_joint())
 
 
 class TrajectoryConfig(_Frozen):
@@ -48,6 +73,35 @@ class TrajectoryConfig(_Frozen):
     csv_path: str = ""
     lead_in_s: float = Field(0.5, ge=0, description="networked session: quintic from the measured start state onto "
                              "the trajectory before the measured cycles; 0 = start the cycles at once")
+
+
+class NominalModelConfig(_Frozen):
+    """[controller.model]: the controller's nominal model where it differs from the plant (unset = `[plant]`'s
+    value). Used by the outer SMC (Eq. 13), the inner backstepping loop (Eq. 24-31) and the disturbance observer;
+    the plant emulator always integrates `[plant]`. `--mismatch` fills it (sea_hil/commands/common.py)."""
+    d_m: tuple[float, float, float, float, float, float, float, float, float, float] | None = None
+    r1_m: float | None = None
+    r2_m: float | None = None
+    l1_m: float | None = None
+    l2_m: float | None = None
+    m1_kg: float | None = Field(None, gt=0)
+    m2_kg: float | None = Field(None, gt=0)
+    i1_kgm2: float | None = Field(None, ge=0)
+    i2_kgm2: float | None = Field(None, ge=0)
+    k1_n_per_m: float | None = Field(None, gt=0)
+    k2_n_per_m: float | None = Field(None, gt=0)
+    b1_nms: float | None = Field(None, ge=0)
+    b2_nms: float | None = Field(None, ge=0)
+    g_m_s2: float | None = None
+    alpha1_rad: float | None = None
+    alpha2_rad: float | None = None
+    nut_damping_per_s: float | None = Field(None, ge=0)
+    include_i2_in_coupling: bool | None = None
+
+    def resolve(self, plant: PlantConfig) -> PlantConfig:
+        """The nominal model as a PlantConfig: `plant` with every field set here replaced."""
+        given = {k: v for k, v in self.model_dump().items() if v is not None}
+        return plant.model_copy(update=given) if given else plant
 
 
 class ControllerConfig(_Frozen):
@@ -60,6 +114,11 @@ class ControllerConfig(_Frozen):
                                    "controller samples it every sample_period_s (inner loop: can.feedback_rate_hz)")
     cross_term_scale: Literal["normalized", "paper", "off"] = "normalized"
     cross_term_bandwidth_rad_s: float = Field(30.0, gt=0, description="omega_c of the normalized Eq. 27 cross term")
+    disturbance_compensation: Literal["full", "inner", "off"] = Field(
+        "full", description="edge disturbance observer: 'full' = in the inner loop's F_R (Eq. 28) and as an "
+        "extra deflection on v_x; 'inner' = F_R only; 'off' = the paper's Eq. 24-31 (docs/deviations.md 10)")
+    observer_bandwidth_rad_s: float = Field(400.0, gt=0, description="pole of the momentum disturbance observer")
+    model: NominalModelConfig = NominalModelConfig()
 
 
 class TriggerConfig(_Frozen):

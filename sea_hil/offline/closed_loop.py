@@ -15,7 +15,9 @@ from typing import Callable
 
 import numpy as np
 
-from sea_hil.controller.inner import InnerLoop, limited_voltage
+from sea_hil.controller.inner import InnerLoop, inner_step
+from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.observer import ObserverState
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import make_trajectory
@@ -47,15 +49,17 @@ def inner_ratio(cfg: SeaHilConfig) -> int:
     return int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz))
 
 
-def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, int]]:
+def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, int, ObserverState]]:
     """The inner-step kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, gains, limit_v, dist_tab, volts,  # noqa
-                    lsb):
-        """Inner steps k0 .. k0 + n_steps - 1: measurement -> limited backstepping voltage (written to volts[k]) ->
-        `substeps` RK4 sub-steps with the disturbance torques of dist_tab row k * substeps + i (d(t_i),
-        d(t_i + h/2), d(t_i + h)). `lsb` = (theta, omega, delta, nut velocity, voltage) resolutions of the CAN
-        frames (sea_hil/offline/wire_quantiser.py; zeros: exact values) rounds what the inner loop sees and sends. Returns (x, saturated step count, first step whose result is not finite or -1).
+    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, pn, gains, obs, limit_v,  # noqa
+                    dist_tab, volts, lsb):
+        """Inner steps k0 .. k0 + n_steps - 1: measurement of plant x (truth p) -> the edge's inner step on the
+        nominal model pn (observer state obs, limited backstepping voltage written to volts[k]) -> `substeps` RK4
+        sub-steps with the disturbance torques of dist_tab row k * substeps + i (d(t_i), d(t_i + h/2), d(t_i + h)).
+        `lsb` = (theta, omega, delta, nut velocity, voltage) resolutions of the CAN frames
+        (sea_hil/offline/wire_quantiser.py; zeros: exact values) rounds what the inner loop sees and sends.
+        Returns (x, saturated step count, first step whose result is not finite or -1, observer state).
         Plain float code, untyped: this body is what numba compiles."""
         fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
         h = dt / substeps
@@ -65,8 +69,7 @@ def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, i
             dl1, dl2, _, _ = deflections(x, p)
             m = (quantised(x[0], lsb[0]), quantised(x[1], lsb[0]), quantised(x[2], lsb[1]), quantised(x[3], lsb[1]),
                  quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
-            v = (m[4], m[5]) if hold_measured else vx
-            u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v)
+            u1, u2, saturated, obs = inner_step(m, vx, s, hold_measured, obs, pn, gains, limit_v, dt)
             u1, u2 = quantised(u1, lsb[4]), quantised(u2, lsb[4])
             if saturated:
                 saturated_count += 1
@@ -76,8 +79,8 @@ def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, i
                 d = dist_tab[k * substeps + i]
                 x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
             if not is_finite(x):
-                return x, saturated_count, k
-        return x, saturated_count, -1
+                return x, saturated_count, k, obs
+        return x, saturated_count, -1, obs
 
     return inner_steps
 
@@ -87,7 +90,7 @@ def disturbance_table(dist: Disturbance, cfg: DisturbanceConfig, n_inner: int, d
     """(n_inner * substeps, 6): d(t_i), d(t_i + h/2), d(t_i + h) of every RK4 sub-step, at exactly the times
     `integrator.advance(k dt, ...)` samples. All zero without calls when the config has no disturbance (every kind is
     bounded by |amplitude_nm|)."""
-    if cfg.kind == "none" or (cfg.amplitude_nm[0] == 0.0 and cfg.amplitude_nm[1] == 0.0):
+    if cfg.is_zero():
         return np.zeros((n_inner * substeps, 6))
     h = dt / substeps
     t_i = (np.arange(n_inner) * dt)[:, None] + np.arange(substeps) * h   # same float ops as advance/rk4_step
@@ -101,6 +104,7 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
     """Closed loop over `cycles` trajectory periods; jit=False runs `inner_steps` as plain Python (the reference).
     quantise=True rounds every measurement and voltage to its CAN frame's resolution, as the networked path does."""
     p = limb_params(cfg.plant)
+    pn = nominal_params(cfg)
     traj = make_trajectory(cfg.trajectory)
     ratio = inner_ratio(cfg)
     dt = 1.0 / cfg.can.feedback_rate_hz
@@ -111,8 +115,8 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
     substeps = cfg.sim.substeps
     d0 = traj.sample(0.0)
     x: State = initial_state(d0.theta_rad[0], d0.theta_rad[1], d0.omega_rad_s[0], d0.omega_rad_s[1], p)
-    outer = OuterController(cfg, p, mode)
-    inner = InnerLoop(cfg, p, d0.theta_rad)
+    outer = OuterController(cfg, pn, mode)
+    inner = InnerLoop(cfg, pn, d0.theta_rad, dt)
     dist_tab = disturbance_table(make_disturbance(cfg.disturbance), cfg.disturbance, n_inner, dt, substeps)
     lsb = dbc_resolutions() if quantise else EXACT
     kernel = compiled(make_inner_steps) if jit else None
@@ -137,8 +141,9 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
         theta.append((x[0], x[1]))
         desired.append(ds.theta_rad)
         held = inner.deflection_m
-        x, n_sat, bad_k = steps(x, k0, min(ratio, n_inner - k0), dt, substeps, held or (0.0, 0.0), inner.sliding,
-                                held is None, p, inner.gains, p.voltage_limit, tab, volts, lsb)
+        x, n_sat, bad_k, inner.observer = steps(x, k0, min(ratio, n_inner - k0), dt, substeps, held or (0.0, 0.0),
+                                                inner.sliding, held is None, p, pn, inner.gains, inner.observer,
+                                                pn.voltage_limit, tab, volts, lsb)
         inner.saturated_steps += n_sat
         if bad_k >= 0:
             raise SeaHilError(f"simulation diverged at t = {bad_k * dt:.3f} s")

