@@ -29,10 +29,12 @@ import can
 import zenoh
 
 from sea_hil.controller.edge_lockstep import LockstepPlane
+from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.edge_stats import EdgeCounters, percentiles_us, rx_monotonic_ns
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.protocol.can_codec import (ClearErrors, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
                                 VoltageCmd, unwrap_us, FEEDBACK_PARTS)
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, ErrorFlags
 from sea_hil.protocol.canbus import send_with_retry
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import BusError, MalformedFrame
@@ -57,6 +59,7 @@ class EdgeNode(LockstepPlane):
         self.keys = Keys.from_config(cfg.zenoh)
         p = limb_params(cfg.plant)
         self.inner = InnerLoop(cfg, p, tuple(cfg.plant.initial_theta_rad))
+        self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.zenoh.state_period_s * cfg.can.feedback_rate_hz)))
         self.timeout_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
@@ -87,6 +90,7 @@ class EdgeNode(LockstepPlane):
         self._last_rx_ns = 0          # sample time of the newest accepted setpoint/voltage
         self._voltage: tuple[float, float] | None = None
         self._driver_state = DriverState.INIT
+        self._driver_flags = ErrorFlags(0)
         self._last_fb_seq: int | None = None
         self._last_cmd: can.Message | None = None
         self._acks: dict[int, AckPayload] = {}
@@ -118,7 +122,7 @@ class EdgeNode(LockstepPlane):
             log.debug("ignored frame: %s", err)
             return
         if isinstance(frame, Heartbeat):
-            self._driver_state = frame.state
+            self._driver_state, self._driver_flags = frame.state, frame.flags
         elif isinstance(frame, FEEDBACK_PARTS):
             fb = self.assembler.push(frame)
             if fb is not None:
@@ -178,7 +182,9 @@ class EdgeNode(LockstepPlane):
         fresh = self._last_setpoint_ns is not None and now - self._last_setpoint_ns <= self.timeout_ns
         if not fresh and not self.lockstep:
             return None     # stop commanding: the driver watchdog takes it to its safe state
-        if fresh and self._driver_state in (DriverState.FAULT,) and not self.lockstep:
+        # a watchdog fault is cleared when setpoints come back, a soft-limit fault (LIMIT_FLAGS) is left to the operator
+        if fresh and self._driver_state is DriverState.FAULT and not self._driver_flags & LIMIT_FLAGS \
+                and not self.lockstep:
             self._send(self.codec.encode(ClearErrors(self.node_id)))
             self.counters.clear_errors_sent += 1
             self._driver_state = DriverState.INIT
@@ -233,6 +239,8 @@ class EdgeNode(LockstepPlane):
                 return False
         self._seen_setpoints.add(p.seq)
         self._last_rx_ns = self._sample_t_ns
+        if isinstance(p, SetpointPayload) and not self.envelope.admit(p.seq, p.deflection_m):
+            return False        # out of the envelope: seen (lockstep goes on), counted, never applied
         at = self.downlink.submit(self._sample_t_ns, len(data))
         if at is not None:
             self.pending_down.push(at, p)
@@ -291,6 +299,7 @@ class EdgeNode(LockstepPlane):
             "lockstep_startup_resends": c.lockstep_startup_resends,
             "commands_sent": c.commands_sent, "arrival_commands": c.arrival_commands, "payload_rejected": self.payloads.as_dict()["rejected_total"],
             "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
+            "setpoints_out_of_envelope": self.envelope.rejected,
             "bus_errors": c.bus_errors,
             "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": self.inner.saturated_steps,
             "seq_lost": self.sp_seq.lost, "seq_reordered": self.sp_seq.reordered, "seq_duplicates": self.sp_seq.duplicates,

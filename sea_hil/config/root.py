@@ -9,6 +9,7 @@ from sea_hil.config.base import _Frozen
 from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfig
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
+from sea_hil.config.safety import SafetyConfig
 
 
 class SeaHilConfig(_Frozen):
@@ -22,6 +23,7 @@ class SeaHilConfig(_Frozen):
     zenoh: ZenohConfig = ZenohConfig()
     link: LinkConfig = LinkConfig()
     record: RecordConfig = RecordConfig()
+    safety: SafetyConfig = SafetyConfig()
 
     @field_validator("plant")
     @classmethod
