@@ -4,23 +4,18 @@ from __future__ import annotations
 
 import logging
 import math
-import uuid
-from collections.abc import Iterator
 
-import can
 import pytest
 
 from sea_hil.config import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import limited_voltage
-from sea_hil.mechanics import limb_params
-from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Heartbeat, SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
-from sea_hil.protocol.zsession import make_config, open_session
+
+from test_edge_arrival import rig  # noqa: F401  (fixture: an EdgeNode on a virtual bus + a DriverCore)
 
 NODE = 1
 CFG = load_config()
@@ -47,29 +42,12 @@ def test_gate_counts_every_rejection_and_logs_a_bounded_number(caplog: pytest.Lo
     assert gate.admit(1000, (0.0005, 0.0)) and gate.rejected == 1000
 
 
-@pytest.fixture
-def rig() -> Iterator[tuple[EdgeNode, can.BusABC, DriverCore]]:
-    channel = f"virtual:envelope-{uuid.uuid4().hex[:8]}"
-    session = open_session(make_config())
-    edge_bus, peer = open_bus(channel), open_bus(channel)
-    edge = EdgeNode(CFG, edge_bus, session, NODE)
-    drv = DriverCore.create(NODE, limb_params(CFG.plant), 1e-3, 0.1, CFG.sim.substeps,
-                            tuple(CFG.plant.initial_theta_rad), make_disturbance(CFG.disturbance))
-    try:
-        yield edge, peer, drv
-    finally:
-        edge.close()
-        session.close()
-        edge_bus.shutdown()
-        peer.shutdown()
-
-
-def _sample(edge: EdgeNode, drv: DriverCore, peer: can.BusABC, codec: SeaCodec) -> list[VoltageCmd]:
+def _sample(edge: EdgeNode, drv: DriverCore, peer: object, codec: SeaCodec) -> list[VoltageCmd]:
     """One driver sample through the edge; the VOLTAGE_CMDs it answered with."""
     for msg in codec.encode_feedback(drv.step(), saturate=True):
         edge.on_can(msg, 0)
     out = []
-    while (msg := peer.recv(timeout=0)) is not None:
+    while (msg := peer.recv(timeout=0)) is not None:   # type: ignore[attr-defined]
         frame = codec.decode(msg)
         if isinstance(frame, VoltageCmd):
             drv.handle(frame, 0)
@@ -81,7 +59,7 @@ def _setpoint(seq: int, deflection_m: tuple[float, float]) -> bytes:
     return encode(SetpointPayload(seq, 0, 1, deflection_m, (0.1, -0.1), TriggerReason.ERROR_BOUND))
 
 
-def test_out_of_envelope_setpoint_is_rejected_counted_and_never_applied(rig) -> None:
+def test_out_of_envelope_setpoint_is_rejected_counted_and_never_applied(rig) -> None:  # noqa: F811
     edge, peer, drv = rig
     codec = SeaCodec([NODE])
     for _ in range(10):
@@ -109,7 +87,8 @@ def test_out_of_envelope_setpoint_is_rejected_counted_and_never_applied(rig) -> 
 
 @pytest.mark.parametrize("flags,cleared", [(ErrorFlags.WATCHDOG, True), (ErrorFlags.POSITION_LIMIT, False),
                                            (ErrorFlags.WATCHDOG | ErrorFlags.FORCE_LIMIT, False)])
-def test_edge_clears_a_watchdog_fault_but_not_a_limit_fault(rig, flags: ErrorFlags, cleared: bool) -> None:
+def test_edge_clears_a_watchdog_fault_but_not_a_limit_fault(rig, flags: ErrorFlags,  # noqa: F811
+                                                            cleared: bool) -> None:
     edge, peer, drv = rig
     codec = SeaCodec([NODE])
     _sample(edge, drv, peer, codec)
