@@ -71,8 +71,9 @@ def test_compose_topology_through_a_router_equals_peer_to_peer(tmp_path: Path) -
     out.mkdir()
     script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
               f"{shlex.quote(str(TOPOLOGY))} {shlex.quote(str(config))} {shlex.quote(str(out))} {GROUP}")
-    result = subprocess.run(["unshare", "--net", "sh", "-c", script], capture_output=True, text=True, timeout=400,
-                            check=False, stdin=subprocess.DEVNULL)   # ends with its namespace's processes
+    # its own PID namespace too: if the script dies (even by SIGKILL on the timeout) every node process dies with it
+    result = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "sh", "-c", script],
+                            capture_output=True, text=True, timeout=400, check=False, stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr[-3000:]
     report = json.loads(result.stdout.strip().splitlines()[-1])
     assert report["codes"] == {"controller": 0, "edge": 0, "plant": 0, "recorder": 0}, report
