@@ -16,7 +16,7 @@ from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.dynamics import end_stop_energy, end_stop_torque, f, initial_state
 from sea_hil.plant_emulator.integrator import advance, make_advance_kernel, prepare_advance
 from sea_hil.plant_emulator.soft_limits import DriveLimits
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, FeedbackAngle, SeaCodec, VoltageCmd
 from sea_hil.jit import loaded
 
 NODE = 1
@@ -160,3 +160,21 @@ def test_limit_config_is_validated() -> None:
         load_config(overrides={"safety": {"drive": {"velocity_max_rad_s": [0.0, 1.0]}}})
     with pytest.raises(ConfigError, match="end_stops"):
         load_config(overrides={"plant": {"end_stops": {"min_rad": [2.0, -0.5]}}})
+
+
+def test_plant_node_reports_a_limit_fault_over_can() -> None:
+    """End to end on a CAN bus (lockstep `PlantNode`, a peer answering every feedback with a 24 V hip step like a
+    runaway edge): the heartbeat reports FAULT with err_force_limit and the limb never reaches its end stops."""
+    from test_plant_node import is_hb, running_node   # the node test's virtual-bus helpers
+
+    seen: list[float] = []
+    with running_node(CFG, lockstep=True) as (node, peer):
+        def answer(frame: object) -> None:
+            if isinstance(frame, FeedbackAngle):     # the first of a sample's three frames
+                seen.append(frame.theta_rad[0])
+                peer.send(VoltageCmd(NODE, (24.0, 0.0), frame.seq))
+        hb = peer.wait_for(is_hb(DriverState.FAULT), timeout_s=30.0, on_frame=answer)
+        assert hb.flags & ~ErrorFlags.OVERRUN == ErrorFlags.FORCE_LIMIT
+        assert node.drivers[NODE].counters.limit_trips == 1 and node.drivers[NODE].voltage_v == (0.0, 0.0)
+    stops = CFG.plant.end_stops
+    assert seen and all(stops.min_rad[0] < q < stops.max_rad[0] for q in seen)
