@@ -25,6 +25,7 @@ import time
 import can
 import zenoh
 
+from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.edge_command import CommandPath
 from sea_hil.controller.edge_downlink import SetpointIntake
@@ -58,6 +59,7 @@ class EdgeNode(Node):
         self.keys = Keys.from_config(cfg.zenoh)
         self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
                                1.0 / cfg.can.feedback_rate_hz)
+        self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()
@@ -69,7 +71,8 @@ class EdgeNode(Node):
             LinkedPublisher(publisher(session, self.keys.state), LinkEmulator(cfg.link.uplink, f"{seed}/up")),
             self.counters)
         self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
-                                     int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync)
+                                     int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync,
+                                     self.envelope)
         self.command_path = CommandPath(bus, self.codec, node_id, self.inner, inner, cfg.can.send_retries,
                                         self.counters)
         self.stats_pub = publisher(session, self.keys.stats, express=False)
@@ -114,7 +117,7 @@ class EdgeNode(Node):
             log.debug("ignored frame: %s", err)
             return
         if isinstance(frame, Heartbeat):
-            self.command_path.driver_state = frame.state
+            self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
         elif isinstance(frame, FEEDBACK_PARTS):
             fb = self.assembler.push(frame)
             if fb is not None:

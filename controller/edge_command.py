@@ -10,6 +10,7 @@ import can
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.errors import BusError
 from sea_hil.protocol.can_codec import ClearErrors, DriverState, Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, ErrorFlags
 from sea_hil.protocol.canbus import send_with_retry
 from sea_hil.protocol.payloads import SetpointPayload
 from sea_hil.controller.edge_downlink import SETPOINT_BYTES
@@ -26,6 +27,7 @@ class CommandPath:
         self.counters = counters
         self.voltage: tuple[float, float] | None = None    # the newest tunnelled voltage (inner = remote)
         self.driver_state = DriverState.INIT
+        self.driver_flags = ErrorFlags(0)         # the driver's error flags from its latest HEARTBEAT
         self.last_cmd: can.Message | None = None
 
     def send(self, msg: can.Message) -> None:
@@ -50,7 +52,8 @@ class CommandPath:
         clock's gate on setpoint freshness."""
         if not command:
             return False     # stop commanding: the driver watchdog takes it to its safe state
-        if clear and self.driver_state in (DriverState.FAULT,):
+        # a watchdog fault is cleared when setpoints come back; a soft-limit fault (LIMIT_FLAGS) is left to the operator
+        if clear and self.driver_state is DriverState.FAULT and not self.driver_flags & LIMIT_FLAGS:
             self.send(self.codec.encode(ClearErrors(self.node_id)))
             self.counters.clear_errors_sent += 1
             self.driver_state = DriverState.INIT

@@ -17,12 +17,13 @@ SETPOINT_BYTES = 53
 
 class SetpointIntake:
     def __init__(self, downlink: LinkEmulator, counters: Any, payloads: PayloadCounters, timeout_ns: int,
-                 sync: Any) -> None:
+                 sync: Any, envelope: Any = None) -> None:
         self.downlink = downlink
         self.counters = counters
         self.payloads = payloads
         self.timeout_ns = timeout_ns
         self.sync = sync
+        self.envelope = envelope                  # `EnvelopeGate` (controller/envelope.py) or None: admit all
         self.sp_seq = SequenceTracker()
         self.pending: DelayQueue[object] = DelayQueue()
         self.seen_setpoints: set[int] = set()
@@ -44,6 +45,9 @@ class SetpointIntake:
                 return False
         self.seen_setpoints.add(p.seq)
         self.last_rx_ns = sample_t_ns
+        if isinstance(p, SetpointPayload) and self.envelope is not None \
+                and not self.envelope.admit(p.seq, p.deflection_m):
+            return False        # out of the envelope: seen (lockstep goes on), counted, never applied
         at = self.downlink.submit(sample_t_ns, len(data))
         if at is not None:
             self.pending.push(at, p)

@@ -66,6 +66,7 @@ def edge_stats(edge: Any) -> dict[str, float]:
         "commands_sent": c.commands_sent, "arrival_commands": c.arrival_commands,
         "payload_rejected": edge.payloads.as_dict()["rejected_total"],
         "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
+        "setpoints_out_of_envelope": edge.envelope.rejected,
         "bus_errors": c.bus_errors,
         "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": edge.inner.saturated_steps,
         "seq_lost": sp_seq.lost, "seq_reordered": sp_seq.reordered, "seq_duplicates": sp_seq.duplicates,

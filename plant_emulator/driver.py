@@ -2,8 +2,10 @@
 
 Pure logic, no I/O: the node loop (`sea_hil.plant_emulator.node`) feeds it decoded frames and ticks. States:
 INIT (powered, zero voltage) -> RUNNING on the first voltage command; RUNNING -> FAULT (WATCHDOG) when no command
-arrived for `watchdog_timeout_s`; any state -> ESTOP on an e-stop frame (latched). Only CLEAR_ERRORS leaves FAULT or
-ESTOP (back to INIT). In FAULT, ESTOP and INIT the motor voltage is zero.
+arrived for `watchdog_timeout_s`; RUNNING -> FAULT (POSITION_LIMIT, VELOCITY_LIMIT and/or FORCE_LIMIT) when an
+integrated sample leaves the soft limits (`soft_limits.DriveLimits`, zero voltage from that sample on); any state ->
+ESTOP on an e-stop frame (latched). Only CLEAR_ERRORS leaves FAULT or ESTOP (back to INIT; a sample still outside a
+limit faults the drive again as soon as a command makes it RUNNING). In FAULT, ESTOP and INIT the voltage is zero.
 
 A voltage change takes effect when the frame arrives, as on a real drive: in real time the node sets
 `period_start_ns` (monotonic time of the sample the current period starts from, i.e. when its feedback was sent) and
@@ -16,6 +18,7 @@ from dataclasses import dataclass, field
 
 from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, saturate
 from sea_hil.plant_emulator.integrator import Disturbance, advance
+from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_frames import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
                                  VoltageCmd)
 from sea_hil.mechanics import LimbParams
@@ -30,6 +33,7 @@ class DriverCounters:
     overruns: int = 0
     commands: int = 0
     watchdog_trips: int = 0
+    limit_trips: int = 0
     heartbeat_seq: int = 0
 
 
@@ -42,6 +46,7 @@ class DriverCore:
     substeps: int
     x: State
     disturbance: Disturbance
+    limits: DriveLimits = DriveLimits()
     state: DriverState = DriverState.INIT
     flags: ErrorFlags = ErrorFlags(0)
     voltage_v: tuple[float, float] = (0.0, 0.0)
@@ -54,10 +59,11 @@ class DriverCore:
 
     @classmethod
     def create(cls, node_id: int, params: LimbParams, period_s: float, watchdog_s: float, substeps: int,
-               theta0_rad: tuple[float, float], disturbance: Disturbance) -> "DriverCore":
+               theta0_rad: tuple[float, float], disturbance: Disturbance,
+               limits: DriveLimits = DriveLimits()) -> "DriverCore":
         x0 = initial_state(theta0_rad[0], theta0_rad[1], 0.0, 0.0, params)
         return cls(node_id, params, int(round(period_s * 1e9)), int(round(watchdog_s * 1e9)), substeps, x0,
-                   disturbance)
+                   disturbance, limits)
 
     @property
     def sample_t_ns(self) -> int:
@@ -133,7 +139,19 @@ class DriverCore:
         self.x = x
         self._u_start, self._changes = self.voltage_v, []
         self.seq += 1
-        return self.feedback()
+        fb = self.feedback()
+        if self.state is DriverState.RUNNING:
+            self._check_limits(fb)
+        return fb
+
+    def _check_limits(self, fb: Feedback) -> None:
+        """Fault on a sample outside the soft limits: 0 V from this sample on (the start of the next period)."""
+        violated = self.limits.violations(fb.theta_rad, fb.omega_rad_s, fb.delta_m, self.params)
+        if violated:
+            self.state = DriverState.FAULT
+            self.flags |= violated
+            self.voltage_v = self._u_start = (0.0, 0.0)
+            self.counters.limit_trips += 1
 
     def feedback(self) -> Feedback:
         x = self.x

@@ -1,5 +1,5 @@
 """Plant dynamics (paper Eq. 1-9) as a pure function, plus the plant-only parts: SEA nut dynamics (Eq. 6),
-disturbance torques and voltage saturation.
+disturbance torques, mechanical end stops and voltage saturation.
 
 State x = (theta1, theta2, omega1, omega2, r1, r2, rdot1, rdot2): joint angles/velocities and ball-screw nut
 displacements/velocities. Spring deflection Delta_i = r_Bi - r_i with r_Bi = L_Si(theta) - L_Si(theta_ref) (Eq. 7).
@@ -25,16 +25,40 @@ def deflections(x: State, p: LimbParams) -> tuple[float, float, float, float]:
     return (len1 - p.l_ref[0] - x[4], len2 - p.l_ref[1] - x[5], a1 * x[2] - x[6], a2 * x[3] - x[7])
 
 
+def end_stop_torque(q: float, w: float, lo: float, hi: float, k: float, c: float) -> float:
+    """Torque (Nm) of one joint's mechanical end stops at angle q, velocity w: a spring-damper (k Nm/rad, c Nms/rad)
+    acting on the penetration beyond [lo, hi], exactly 0.0 inside. It pushes back and never pulls (no adhesion: the
+    force is clamped at zero when the damper would hold the joint against the stop), so its non-conservative part
+    only dissipates: power = -c w^2 while not clamped, k p w <= 0 while clamped (p the penetration, moving out)."""
+    if q > hi:
+        return -max(0.0, k * (q - hi) + c * w)
+    if q < lo:
+        return max(0.0, k * (lo - q) - c * w)
+    return 0.0
+
+
+def end_stop_energy(x: State, p: LimbParams) -> float:
+    """Potential energy (J) stored in the end stops' springs at state x (0 inside the stops)."""
+    e = 0.0
+    for j in range(2):
+        pen = max(x[j] - p.stop_max_rad[j], p.stop_min_rad[j] - x[j], 0.0)
+        e += 0.5 * p.stop_k_nm_per_rad[j] * pen * pen
+    return e
+
+
 def f(t: float, x: State, u: tuple[float, float], p: LimbParams,
       d_nm: tuple[float, float] = (0.0, 0.0)) -> State:
-    """dx/dt for applied (already saturated) voltages u and disturbance torques d_nm (Eq. 3-6)."""
+    """dx/dt for applied (already saturated) voltages u and disturbance torques d_nm (Eq. 3-6), plus the end-stop
+    torques (zero inside the stops, so on the trajectory this is Eq. 3-6 exactly)."""
     q1, q2, w1, w2, r1, r2, rd1, rd2 = x
     len1, len2, a1, a2, _, _ = sea_geometry(q1, q2, p)
     tau1 = -p.k1 * (len1 - p.l_ref[0] - r1) * a1
     tau2 = -p.k2 * (len2 - p.l_ref[1] - r2) * a2
     n1, n2 = n_terms(q1, q2, w1, w2, p)
     m11, m12, m22 = mass_matrix(q2, p)
-    acc1, acc2 = solve_m(m11, m12, m22, tau1 + n1 + d_nm[0], tau2 + n2 + d_nm[1])
+    s1 = end_stop_torque(q1, w1, p.stop_min_rad[0], p.stop_max_rad[0], p.stop_k_nm_per_rad[0], p.stop_c_nms_per_rad[0])
+    s2 = end_stop_torque(q2, w2, p.stop_min_rad[1], p.stop_max_rad[1], p.stop_k_nm_per_rad[1], p.stop_c_nms_per_rad[1])
+    acc1, acc2 = solve_m(m11, m12, m22, tau1 + n1 + d_nm[0] + s1, tau2 + n2 + d_nm[1] + s2)
     c = p.nut_damping
     return (w1, w2, acc1, acc2, rd1, rd2, u[0] - c * rd1, u[1] - c * rd2)
 

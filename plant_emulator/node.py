@@ -20,6 +20,7 @@ import can
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.integrator import prepare_advance
+from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback
 from sea_hil.protocol.canbus import send_with_retry
@@ -74,7 +75,8 @@ class PlantNode(Node):
         cc = cfg.can
         self.period_ns = int(round(1e9 / cc.feedback_rate_hz))
         self.drivers = {n: DriverCore.create(n, p, 1.0 / cc.feedback_rate_hz, cc.watchdog_timeout_s, cfg.sim.substeps,
-                                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance))
+                                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance),
+                                             DriveLimits.from_config(cfg.safety.drive))
                         for n in node_ids}
         self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
         self.lateness = LogHistogram()

@@ -29,13 +29,19 @@ class DriverState(IntEnum):
 
 
 class ErrorFlags(IntFlag):
-    """HEARTBEAT error bits; bit i of byte 1 is DBC signal `err_<name>`."""
+    """HEARTBEAT error bits; bit i is DBC signal `err_<name>` at frame bit 8 + i (the 16-bit flag field)."""
     WATCHDOG = 1
     ESTOP = 2
     BAD_FRAME = 4
     OVERRUN = 8
     BUS_ERROR = 16
     SATURATED = 32
+    POSITION_LIMIT = 64     # a joint left its soft position range (drive faulted)
+    VELOCITY_LIMIT = 128    # a joint exceeded its velocity limit (drive faulted)
+    FORCE_LIMIT = 256       # an SEA spring force exceeded its limit (drive faulted)
+
+
+LIMIT_FLAGS = ErrorFlags.POSITION_LIMIT | ErrorFlags.VELOCITY_LIMIT | ErrorFlags.FORCE_LIMIT  # soft-limit faults
 
 
 ROLLING = frozenset({"seq", "t_us"})  # counters that wrap; never saturated

@@ -47,6 +47,11 @@ class LimbParams(NamedTuple):
     b_coupling: float
     grav1: float
     grav2: float
+    # mechanical end stops of the plant (`[plant.end_stops]`; +-inf: none), used by the plant model only
+    stop_min_rad: tuple[float, float] = (-math.inf, -math.inf)
+    stop_max_rad: tuple[float, float] = (math.inf, math.inf)
+    stop_k_nm_per_rad: tuple[float, float] = (0.0, 0.0)
+    stop_c_nms_per_rad: tuple[float, float] = (0.0, 0.0)
 
 
 def limb_params(cfg: PlantConfig) -> LimbParams:
@@ -69,6 +74,11 @@ def limb_params(cfg: PlantConfig) -> LimbParams:
         grav1=(cfg.m1_kg * cfg.r1_m + cfg.m2_kg * cfg.l1_m) * cfg.g_m_s2,
         grav2=cfg.m2_kg * cfg.r2_m * cfg.g_m_s2,
     )
+    stops = cfg.end_stops
+    if stops.enabled:
+        partial = partial._replace(stop_min_rad=tuple(stops.min_rad), stop_max_rad=tuple(stops.max_rad),
+                                   stop_k_nm_per_rad=tuple(stops.stiffness_nm_per_rad),
+                                   stop_c_nms_per_rad=tuple(stops.damping_nms_per_rad))
     return partial._replace(l_ref=sea_lengths(partial.theta_ref[0], partial.theta_ref[1], partial))
 
 

@@ -39,9 +39,10 @@ EXACT = [
     (VoltageCmd(1, (12.345, -3.2), 200), 0x021, "c8 3930 80f3"),
     # 0.0125 m / 1 um = 12500 = 0x30D4; -1 um -> -1 = 0xFFFF
     (DeflectionSetpoint(2, (0.0125, -0.000001), 0), 0x042, "00 d430 ffff"),
-    # 63 << 5 | 7; state FAULT=2; flags WATCHDOG(bit0)|BUS_ERROR(bit4) = 0x11; 258 = 0x0102; 65535; seq 17 = 0x11
-    (Heartbeat(63, DriverState.FAULT, ErrorFlags.WATCHDOG | ErrorFlags.BUS_ERROR, 258, 65535, 17),
-     0x7E7, "02 11 0201 ffff 11"),
+    # 63 << 5 | 7; state FAULT=2; flags (u16) WATCHDOG(bit0)|BUS_ERROR(bit4)|FORCE_LIMIT(bit8) = 0x0111; 258 = 0x0102;
+    # 65535; seq 17 = 0x11
+    (Heartbeat(63, DriverState.FAULT, ErrorFlags.WATCHDOG | ErrorFlags.BUS_ERROR | ErrorFlags.FORCE_LIMIT, 258, 65535,
+               17), 0x7E7, "02 1101 0201 ffff 11"),
     # seq 5 | t_us 0xBEEF at bit 8 | theta1 bits 24..43 = 1.5708 rad / 1e-5 = 157080 | theta2 bits 44..63 = -1e-5
     # rad -> -1 -> 2^20 - 1; as one little-endian 64-bit integer:
     (FeedbackAngle(1, 5, 0xBEEF, (1.5708, -0.00001)), 0x023,
@@ -115,7 +116,7 @@ BAD_ENCODE = [
     FeedbackJoint1(1, 0, 30.01, 0.0, 0.0), FeedbackJoint2(1, 0, 0.0, 0.0, -0.6002),
     FeedbackJoint2(1, 0, 0.0, math.nan, 0.0), FeedbackJoint1(1, 0, 0.0, 0.0301, 0.0),
     Heartbeat(1, 7, ErrorFlags(0), 0, 0, 0),  # type: ignore[arg-type]
-    Heartbeat(1, DriverState.RUNNING, 64, 0, 0, 0),  # type: ignore[arg-type]
+    Heartbeat(1, DriverState.RUNNING, 512, 0, 0, 0),  # type: ignore[arg-type]
     Heartbeat(1, DriverState.RUNNING, ErrorFlags(0), 65536, 0, 0),
 ]
 
@@ -144,8 +145,9 @@ BAD_DECODE = [
     ("FD", can.Message(arbitration_id=0x021, data=bytes(5), is_extended_id=False, is_fd=True)),
     ("outside", _msg(0x021, "00 3175 0000")),                      # 30001 mV > 30 V
     ("outside", _msg(0x023, (320001 << 24).to_bytes(8, "little").hex())),  # theta1 raw 320001 > 3.2 rad
-    ("enum", _msg(0x027, "04 00 0000 0000 00")),                   # state 4
-    ("reserved", _msg(0x027, "01 40 0000 0000 00")),               # flag bit 6 reserved
+    ("enum", _msg(0x027, "04 0000 0000 0000 00")),                 # state 4
+    ("reserved", _msg(0x027, "01 0002 0000 0000 00")),             # flag bit 9 reserved
+    ("DLC", _msg(0x027, "01 00 0000 0000 00")),                    # the 7-byte heartbeat of DBC version 1
 ]
 
 
@@ -242,7 +244,7 @@ def test_saturate(codec: SeaCodec) -> None:
 
 
 def test_cantools_cli_decodes_candump_for_any_node() -> None:
-    lines = "  vcan0  041   [5]  C8 39 30 80 F3\n  vcan0  047   [7]  02 11 02 01 FF FF 11\n"  # node 2
+    lines = "  vcan0  041   [5]  C8 39 30 80 F3\n  vcan0  047   [8]  02 11 00 02 01 FF FF 11\n"  # node 2
     out = subprocess.run([sys.executable, "-m", "cantools", "decode", "-m", "0x1F", str(ROOT / "protocol/sea.dbc")],
                          input=lines, capture_output=True, text=True, timeout=60, check=True).stdout
     assert "VOLTAGE_CMD" in out and "voltage1: 12.345 V" in out and "voltage2: -3.2 V" in out

@@ -159,4 +159,4 @@ def test_frame_bits_and_documented_bus_load() -> None:
     feedback = sum(can_frame_bits(dlc[n]) for n in ("FEEDBACK_ANGLE", "FEEDBACK_JOINT1", "FEEDBACK_JOINT2"))
     assert feedback == 405  # docs/can-protocol.md: 40.5 % of 1 Mbit/s at 1 kHz
     per_s = 1000 * (feedback + can_frame_bits(dlc["VOLTAGE_CMD"])) + 10 * can_frame_bits(dlc["HEARTBEAT"])
-    assert per_s == 511_250  # 51.1 % with the inner loop on the edge
+    assert per_s == 511_350  # 51.1 % with the inner loop on the edge

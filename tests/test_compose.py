@@ -43,3 +43,17 @@ def test_shared_config_volume_file_loads():
     assert any(v.endswith(":/config:ro") for v in volumes)
     cfg = load_config(ROOT / "configs" / "session.toml")
     assert cfg.zenoh.mode == "client"
+
+
+def test_router_image_is_the_zenoh_release_the_package_requires():
+    """The zenohd image and the Python package speak the same release: pyproject.toml's eclipse-zenoh requirement
+    admits the image's tag and nothing of the next minor series (the installed package satisfies it: pip)."""
+    import tomllib
+
+    from packaging.requirements import Requirement
+
+    tag = _compose()["services"]["zenoh-router"]["image"].split(":")[1]
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    spec = next(Requirement(d).specifier for d in deps if Requirement(d).name == "eclipse-zenoh")
+    major, minor, _ = tag.split(".")
+    assert tag in spec and f"{major}.{int(minor) + 1}.0" not in spec

@@ -97,9 +97,11 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
         @given(data=payloads(), ack=st.booleans())
         def run(data: bytes, ack: bool) -> None:
             c = edge.counters
-            before = (edge.payloads.as_dict()["rejected_total"], c.unexpected_payloads, c.stale_setpoints)
+            before = (edge.payloads.as_dict()["rejected_total"], c.unexpected_payloads, c.stale_setpoints,
+                      edge.envelope.rejected)
             ok = edge.on_ack(data) if ack else edge.on_downlink(data)
-            after = (edge.payloads.as_dict()["rejected_total"], c.unexpected_payloads, c.stale_setpoints)
+            after = (edge.payloads.as_dict()["rejected_total"], c.unexpected_payloads, c.stale_setpoints,
+                     edge.envelope.rejected)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
             assert sum(a - b for a, b in zip(after, before)) == (0 if ok else 1)

@@ -14,8 +14,10 @@ from sea_hil.config.loader import config_from_dict, config_to_toml, default_toml
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
 from sea_hil.config.root import SeaHilConfig
+from sea_hil.config.safety import DriveLimitsConfig, EndStopConfig, SafetyConfig, SetpointEnvelopeConfig
 
-__all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "LinkConfig", "LinkDirectionConfig", "LiveConfig", "Pair",
-           "PlantConfig", "RecordConfig", "SeaHilConfig", "SimConfig", "TrajectoryConfig", "TriggerConfig",
+__all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "DriveLimitsConfig", "EndStopConfig", "LinkConfig",
+           "LinkDirectionConfig", "LiveConfig", "Pair", "PlantConfig", "RecordConfig", "SafetyConfig", "SeaHilConfig",
+           "SetpointEnvelopeConfig", "SimConfig", "TrajectoryConfig", "TriggerConfig",
            "ZenohAclConfig", "ZenohConfig", "ZenohTlsConfig", "config_from_dict", "config_to_toml",
            "default_toml_text", "load_config"]

@@ -6,6 +6,7 @@ from typing import Literal
 from pydantic import Field
 
 from sea_hil.config.base import Pair, _Frozen
+from sea_hil.config.safety import EndStopConfig
 
 
 class PlantConfig(_Frozen):
@@ -32,6 +33,7 @@ class PlantConfig(_Frozen):
     nut_damping_per_s: float = Field(48.0, ge=0)
     voltage_limit_v: float = Field(24.0, gt=0)
     include_i2_in_coupling: bool = True
+    end_stops: EndStopConfig = EndStopConfig()
 
 
 DisturbanceKind = Literal["none", "constant", "sine", "noise"]

@@ -10,6 +10,7 @@ from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfi
 from sea_hil.config.live import LiveConfig
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
+from sea_hil.config.safety import SafetyConfig
 
 
 class SeaHilConfig(_Frozen):
@@ -24,6 +25,7 @@ class SeaHilConfig(_Frozen):
     link: LinkConfig = LinkConfig()
     record: RecordConfig = RecordConfig()
     live: LiveConfig = LiveConfig()
+    safety: SafetyConfig = SafetyConfig()
 
     @field_validator("plant")
     @classmethod

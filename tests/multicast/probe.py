@@ -49,7 +49,7 @@ def drive(group: str) -> dict[str, object]:
                 states.add(frame.state.name)
             elif isinstance(frame, FeedbackAngle):
                 angles.append(frame.theta_rad[0])
-                bus.send(codec.encode(VoltageCmd(NODE, (6.0, 0.0), seq)))
+                bus.send(codec.encode(VoltageCmd(NODE, (2.0, 0.0), seq)))  # slow: no soft limit within 1 s
                 seq = (seq + 1) & 0xFF
                 if abs(angles[-1] - angles[0]) > MOVED_RAD and DriverState.RUNNING.name in states:
                     break

@@ -63,7 +63,7 @@ def test_plant_answers_cansend_voltage_frames_seen_by_candump(tmp_path: Path, vc
                 if angles and (next_send is None or now >= next_send):  # feedback flows: stream commands
                     if next_send is None:
                         deadline = now + MOVE_TIMEOUT_S
-                    cansend(cansend_arg(codec, VoltageCmd(NODE, (6.0, 0.0), seq)))
+                    cansend(cansend_arg(codec, VoltageCmd(NODE, (2.0, 0.0), seq)))  # no soft limit within 1 s
                     seq, next_send = (seq + 1) & 0xFF, time.monotonic() + SEND_EVERY_S
                 raw = dump.next_frame(timeout_s=SEND_EVERY_S)
                 if raw is None:

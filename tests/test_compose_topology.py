@@ -1,0 +1,86 @@
+"""The compose topology for real (issue 19 item 5): router + plant, edge, controller and recorder as separate processes
+in client mode (tests/multicast/topology.py, run in a private network namespace) complete a lockstep cycle whose
+summary equals the peer-to-peer `sea-hil run --lockstep` on the same config and seed.
+
+Compared: every deterministic field (tracking, transmissions, lead-in, events, inter-event times, the edge's
+counters), i.e. all but the wall-clock ones (`TIMING`, `EDGE_TIMING_PREFIX`, the fields the project's summary
+comparison drops, and `RESEND_COPIES`, duplicates caused by wall-clock resends) and `max_abs_voltage_v`, which
+comes from the recorded CAN frames: the compose recorder has no CAN bus (its container is not on the host
+network), so it records the Zenoh side only.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from test_udp_multicast import netns_available
+
+from sea_hil.config import load_config
+from sea_hil.session.run import RunOptions, run_session
+
+TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "topology.py"
+GROUP = "239.74.163.19"
+REPO = Path(__file__).resolve().parents[1]
+# configs/session.toml (the compose services' shared config: client mode) plus a short session: a 1 s gait after a
+# 0.25 s lead-in; the drive limits and the setpoint envelope are derived for the default 10 s gait
+# (docs/can-protocol.md) and this one is 10x faster (100x the accelerations): off
+SHORT = """
+[trajectory]
+period_s = 1.0
+lead_in_s = 0.25
+
+[safety.drive]
+enabled = false
+
+[safety.setpoint]
+enabled = false
+"""
+TIMING = ("latency_us", "latency_samples", "wall_s", "timing", "max_abs_voltage_v")
+EDGE_TIMING_PREFIX = ("loop_", "apply_latency_", "lockstep_resends", "lockstep_startup_resends", "uplink_mean",
+                      "downlink_mean", "arrival_commands")
+# copies of a setpoint the controller re-sends when the edge re-publishes a state after `resend_s` of wall time
+# (lockstep_resends): dropped by the edge, so they follow the wall clock without changing any result
+RESEND_COPIES = ("seq_duplicates", "stale_setpoints")
+
+
+def deterministic(summary: dict[str, Any]) -> dict[str, Any]:
+    out = {k: v for k, v in summary.items() if k not in TIMING}
+    edge = summary["edge"]
+    assert edge["seq_duplicates"] <= edge["lockstep_resends"] + edge["lockstep_startup_resends"]
+    out["edge"] = {k: v for k, v in edge.items() if not k.startswith(EDGE_TIMING_PREFIX) and k not in RESEND_COPIES}
+    return out
+
+
+@pytest.mark.slow
+def test_compose_topology_through_a_router_equals_peer_to_peer(tmp_path: Path) -> None:
+    why = netns_available()
+    if why is not None:
+        if os.environ.get("CI") == "true":
+            pytest.fail(f"CI must run the compose topology test: {why}")
+        pytest.skip(why)
+    config = tmp_path / "compose.toml"
+    config.write_text((REPO / "configs" / "session.toml").read_text() + SHORT, encoding="utf-8")
+    out = tmp_path / "compose"
+    out.mkdir()
+    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
+              f"{shlex.quote(str(TOPOLOGY))} {shlex.quote(str(config))} {shlex.quote(str(out))} {GROUP}")
+    # its own PID namespace too: if the script dies (even by SIGKILL on the timeout) every node process dies with it
+    result = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "sh", "-c", script],
+                            capture_output=True, text=True, timeout=400, check=False, stdin=subprocess.DEVNULL)
+    assert result.returncode == 0, result.stderr[-3000:]
+    report = json.loads(result.stdout.strip().splitlines()[-1])
+    assert report["codes"] == {"controller": 0, "edge": 0, "plant": 0, "recorder": 0}, report
+    compose = json.loads(Path(report["summary"]).read_text())
+    assert load_config(config).zenoh.mode == "client"
+
+    peer = run_session(load_config(config), RunOptions(controller="et", cycles=1, out=tmp_path / "peer",
+                                                       lockstep=True, progress=False))
+    assert compose["transmissions"]["downlink_msgs"] > 10 and compose["edge"]["feedback_samples"] > 1000
+    assert deterministic(compose) == deterministic(json.loads(json.dumps(peer)))
