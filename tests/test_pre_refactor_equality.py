@@ -42,6 +42,8 @@ OLD_EDGE_TIMING = ("apply_latency_us_max", "apply_latency_us_p50", "apply_latenc
                    "arrival_commands", "seq_duplicates", "stale_setpoints")
 # old edge /stats key -> its current name (add an entry when a counter is renamed; never drop one)
 EDGE_RENAMED: dict[str, str] = {}
+# edge counters added since the fixtures were recorded, with the value the paper's path must give (never drop one)
+EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0}   # issue 19: the edge's setpoint envelope
 SAMPLE_PERIOD_S = 0.01
 
 
@@ -79,6 +81,7 @@ def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], s
     """An old session summary in the current layout: (deterministic part, timing keys, timing.edge keys)."""
     new = {k: v for k, v in old.items() if k not in OLD_TIMING}
     new["edge"] = {EDGE_RENAMED.get(k, k): v for k, v in old["edge"].items() if k not in OLD_EDGE_TIMING}
+    new["edge"].update(EDGE_ADDED)
     edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
     return new, {*OLD_TIMING, "edge"}, edge_timing
 
