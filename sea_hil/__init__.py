@@ -7,3 +7,19 @@ remote controller). Shared below them: `sea_hil.errors`, `sea_hil.config`, `sea_
 `sea_hil.recorder` (MCAP), `sea_hil.session` (`SessionBuilder`, multi-process sessions),
 `sea_hil.offline` (offline closed loop), `sea_hil.sweep`, `sea_hil.report`, `sea_hil.commands` and `sea_hil.cli`.
 """
+
+# The public API (docs/api.md), loaded on first use so that importing any part of the package stays light.
+__all__ = ["DriveSnapshot", "EmulatedDriver", "SeaHilConfig", "SeaHilError", "Session", "__version__", "load_config"]
+
+
+def __getattr__(name: str) -> object:
+    if name == "__version__":
+        from importlib.metadata import PackageNotFoundError, version
+        try:
+            return version("sea-hil")
+        except PackageNotFoundError:   # a source tree that is not installed
+            return "0+unknown"
+    if name in __all__:
+        from sea_hil import api
+        return getattr(api, name)
+    raise AttributeError(f"module 'sea_hil' has no attribute {name!r}")

@@ -37,10 +37,11 @@ def test_timing_fields_are_found_under_timing_too():
 def test_lockstep_has_no_deadline_misses_and_simulate_uses_the_sample_count():
     rows = dict(end_of_run_rows({**RUN, "lockstep": True}))
     assert "deadline" not in rows["warnings"]
-    sim = dict(end_of_run_rows({"controller": "tt", "duration_s": 2.0, "transmissions": 200, "cpu_s": 0.7,
+    tx = {"uplink_msgs": 200, "downlink_msgs": 200, "uplink_bytes": 17600, "downlink_bytes": 10600}
+    sim = dict(end_of_run_rows({"controller": "tt", "duration_s": 2.0, "transmissions": tx, "timing": {"cpu_s": 0.7},
                                 "tracking": RUN["tracking"], "saturated_steps": 0}, command="simulate",
                                tt_msgs=200))
-    assert sim["messages down (setpoints)"] == "200" and sim["ratio to TT"].startswith("1.000")
+    assert sim["messages up / down / total"] == "200 / 200 / 400" and sim["ratio to TT"].startswith("1.000")
     assert sim["warnings"] == "none" and "latency p50 / p99" not in sim
 
 
@@ -73,4 +74,4 @@ def test_simulate_prints_the_table_or_json(tmp_path: Path, capsys, monkeypatch):
     assert "ratio to TT" in table and "1.000" in table and "summary.json" in table
     assert main(["simulate", "--controller", "tt", "--config", str(cfg), "--out", str(tmp_path / "b"),
                  "--json"]) == 0
-    assert json.loads(capsys.readouterr().out)["transmissions"] == 30
+    assert json.loads(capsys.readouterr().out)["transmissions"]["downlink_msgs"] == 30

@@ -74,7 +74,7 @@ def test_out_of_envelope_setpoint_is_rejected_counted_and_never_applied(rig) -> 
     cmds = _sample(edge, drv, peer, codec)
     assert edge.inner.deflection_m == held and edge.counters.setpoints == 1   # never applied
     assert edge.stats_dict()["setpoints_out_of_envelope"] == 2
-    fb = edge._last_fb
+    fb = edge.last_fb
     m = (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s)
     held_u = limited_voltage(m, held, edge.inner.sliding, edge.inner._p, edge.inner.gains, 24.0)[:2]
     bad_u = limited_voltage(m, (0.01, -1e-4), edge.inner.sliding, edge.inner._p, edge.inner.gains, 24.0)[:2]

@@ -34,7 +34,9 @@ from sea_hil.session.run import RunOptions, run_session
 REPO = Path(__file__).resolve().parents[1]
 EXAMPLE = REPO / "examples" / "external_controller"
 # a 3 s cycle keeps both lockstep sessions to a few seconds each
-TEST_CFG = {"trajectory": {"period_s": 3.0}}
+# the CAN example's inner loop is the paper's (Eq. 24-31), not the edge's disturbance observer (issue 15): compare
+# like with like
+TEST_CFG = {"trajectory": {"period_s": 3.0}, "controller": {"disturbance_compensation": "off"}}
 # run the example with every `sea_hil` import failing
 BLOCKED = ("import runpy, sys; sys.modules['sea_hil'] = None; sys.argv = sys.argv[1:]; "
            "sys.path.insert(0, sys.argv[0].rsplit('/', 1)[0]); runpy.run_path(sys.argv[0], run_name='__main__')")

@@ -34,10 +34,7 @@ def checked(tmp_path_factory):
     return json.loads(res.stdout), summary, cfg
 
 
-@pytest.mark.parametrize("topic", [pytest.param(t, marks=pytest.mark.xfail(
-    reason="issue 18: /stats `final: true` fails the /stats schema (the /stats schema work fixes it; then drop this "
-           "mark)", strict=True))
-    if t == "/stats" else t for t in TOPICS])
+@pytest.mark.parametrize("topic", TOPICS)
 def test_every_message_decodes_and_validates_in_log_time_order(checked, topic):
     report = checked[0]
     ch = report["channels"][topic]

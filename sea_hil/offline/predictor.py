@@ -23,6 +23,9 @@ from sea_hil.controller.smc import JointState
 from sea_hil.mechanics import LimbParams, sea_geometry
 from sea_hil.offline.wire_quantiser import EXACT
 
+INF = float("inf")
+NO_LIMITS = (-INF, -INF, INF, INF, INF, INF, INF, INF)   # the prediction never faults
+
 
 @dataclass
 class Predictor:
@@ -83,7 +86,7 @@ class Predictor:
                 # the nominal closed loop without the edge's observer (it has no model of the disturbance)
                 x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p, p,
                                 self.gains._replace(compensation=0), OBSERVER_UNSTARTED, self.dt_s, p.voltage_limit,
-                                self.zeros, EXACT)[0]
+                                self.zeros, EXACT, NO_LIMITS, False)[0]
                 k = k_next
             if vx is not None:
                 held = (vx, s)

@@ -17,6 +17,7 @@ the controller's last sample (a session also records the commands of its shut-do
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 from typing import Any, Callable
 
@@ -25,6 +26,7 @@ import numpy as np
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop, inner_step
 from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
@@ -36,12 +38,14 @@ from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, is_finite, saturate
 from sea_hil.plant_emulator.integrator import rk4_core
+from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, encode
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.errors import SeaHilError
 
+_log = logging.getLogger("sea_hil.offline")
 STATE_BYTES = len(encode(StatePayload(1, 0, 0, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))
 SETPOINT_BYTES = 53
 
@@ -50,11 +54,13 @@ def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
     """The per-sample kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
     def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
-                      limit_v, dist_tab, lsb):
+                      limit_v, dist_tab, lsb, lim, faulted):
         """Samples k0 .. k0 + n_steps - 1 from the state x of sample k0: DBC-quantised feedback m -> the edge's
         inner step on its nominal model pn (`inner_step`: disturbance observer state obs, backstepping voltage) ->
-        quantised, saturated VOLTAGE_CMD -> one driver period of the plant p (`DriverCore.step`'s expressions).
-        Returns (x, m of the new x, saturated steps, max |u1|, max |u2|, first non-finite sample or -1, obs)."""
+        quantised, saturated VOLTAGE_CMD -> one driver period of the plant p (`DriverCore.step`'s expressions; 0 V
+        once `faulted`: a drive soft limit `lim` = (theta min x2, theta max x2, |omega| max x2, |spring force| max x2)
+        was left, checked on every integrated sample as `DriverCore` does). Returns (x, m of the new x, saturated
+        steps, max |u1|, max |u2| commanded, first non-finite sample or -1, obs, faulted)."""
         fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
         sat_count = 0
         u1_max = 0.0
@@ -68,15 +74,22 @@ def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
             u2 = saturate(quantised(u2, lsb[4]), p.voltage_limit)
             u1_max = max(u1_max, abs(u1))
             u2_max = max(u2_max, abs(u2))
+            if faulted:             # the drive ignores commands in FAULT: 0 V
+                u1 = 0.0
+                u2 = 0.0
             t = k * period_ns * 1e-9
             h = (period_ns * 1e-9) / substeps
             for i in range(substeps):
                 d = dist_tab[k * substeps + i]
                 x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
             if not is_finite(x):
-                return x, m, sat_count, u1_max, u2_max, k, obs
+                return x, m, sat_count, u1_max, u2_max, k, obs, faulted
+            if not faulted:
+                d1, d2, _, _ = deflections(x, p)
+                faulted = not (lim[0] <= x[0] <= lim[2] and lim[1] <= x[1] <= lim[3] and abs(x[2]) <= lim[4]
+                               and abs(x[3]) <= lim[5] and abs(p.k1 * d1) <= lim[6] and abs(p.k2 * d2) <= lim[7])
             m = feedback_measurement(x, p, lsb)
-        return x, m, sat_count, u1_max, u2_max, -1, obs
+        return x, m, sat_count, u1_max, u2_max, -1, obs, faulted
 
     return session_steps
 
@@ -114,6 +127,8 @@ class EngineResult:
     data: SessionData            # the messages a session's recorder would hold (see module docstring)
     samples: int                 # driver periods simulated
     saturated_steps: int
+    drive_faulted: bool = False          # a drive soft limit faulted the drive (0 V from then on)
+    setpoints_out_of_envelope: int = 0   # setpoints the edge's envelope rejected
 
 
 class SessionRecords:
@@ -172,6 +187,9 @@ class _Env:
         self.steps = kernel if kernel is not None else make_session_steps()
         self.jit = kernel is not None
         self.predictor: Predictor | None = None
+        dl = DriveLimits.from_config(cfg.safety.drive)
+        self.drive_limits = (*dl.position_min_rad, *dl.position_max_rad, *dl.velocity_max_rad_s, *dl.spring_force_max_n)
+        self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), _log)
 
     def lead_in(self, fb: tuple) -> LeadIn:
         return LeadIn(fb[0], fb[1], self.traj.sample(0.0), self.lead_in_ns * 1e-9)
@@ -204,7 +222,7 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
                                   env.steps,
                                   np.zeros_like(dist_tab) if env.jit else np.zeros_like(dist_tab).tolist())
     loop = SessionLoop(env, opts)
-    saturated, u_max, k = 0, [0.0, 0.0], 0
+    saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
     while k < env.n_max:
         now = k * env.period_ns
         loop.edge_sample(k, ((m[0], m[1]), (m[2], m[3]), (m[4], m[5]), (m[6], m[7])))
@@ -213,16 +231,18 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
         loop.take_downlink(now)
         nxt = loop.next_k(k)
         held = env.inner.deflection_m
-        x, m, n_sat, u1m, u2m, bad, env.inner.observer = env.steps(
+        x, m, n_sat, u1m, u2m, bad, env.inner.observer, faulted = env.steps(
             x, k, nxt - k, env.period_ns, cfg.sim.substeps, held or (0.0, 0.0), env.inner.sliding, held is None, p,
-            env.nominal, env.inner.gains, env.inner.observer, env.inner.period_s, env.nominal.voltage_limit, tab, lsb)
+            env.nominal, env.inner.gains, env.inner.observer, env.inner.period_s, env.nominal.voltage_limit, tab, lsb,
+            env.drive_limits, faulted)
         saturated += n_sat
         u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
         if bad >= 0:
             raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * env.period_ns * 1e-9:.3f} s)")
         k = nxt
     env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
-    return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated)
+    return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated, faulted,
+                        env.envelope.rejected)
 
 
 def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,

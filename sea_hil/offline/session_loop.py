@@ -107,9 +107,11 @@ class SessionLoop:
                 self.setpoint_seq += 1
                 payload = SetpointPayload(self.setpoint_seq, now, seq, sp.deflection_m, sp.sliding, sp.reason)
                 e.rec.setpoint(payload, now)
-                at = e.downlink.submit(now, e.setpoint_bytes)
-                if at is not None:
-                    self.pending_down.push(at, payload)
+                # the edge's intake: the envelope first (a rejected setpoint never enters the downlink emulator)
+                if e.envelope.admit(payload.seq, payload.deflection_m):
+                    at = e.downlink.submit(now, e.setpoint_bytes)
+                    if at is not None:
+                        self.pending_down.push(at, payload)
                 if e.predictor is not None:
                     e.predictor.sent(e.predictor.apply_time_ns(now), sp.deflection_m, sp.sliding)
             if self.edge is None:

@@ -97,22 +97,19 @@ class SessionProgress:
 
 
 def _messages(summary: Mapping[str, Any], tt_msgs: int | None) -> list[tuple[str, str]]:
-    tx = summary.get("transmissions")
-    if isinstance(tx, Mapping):   # a networked session: states up, setpoints (or voltages) down
-        up, down = int(tx.get("uplink_msgs", 0)), int(tx.get("downlink_msgs", 0))
-        tt = up if tt_msgs is None else tt_msgs   # TT answers every state
-        rows = [("messages up / down / total", f"{up} / {down} / {up + down}"),
-                ("bytes up / down", f"{tx.get('uplink_bytes', 0)} / {tx.get('downlink_bytes', 0)}")]
-    else:   # the offline loop: transmissions = setpoints sent
-        down, tt = int(tx or 0), tt_msgs
-        rows = [("messages down (setpoints)", f"{down}")]
+    tx = summary.get("transmissions") or {}   # states up, setpoints (or voltages) down (offline: as a session would)
+    up, down = int(tx.get("uplink_msgs", 0)), int(tx.get("downlink_msgs", 0))
+    tt = up if tt_msgs is None else tt_msgs   # TT answers every state
+    rows = [("messages up / down / total", f"{up} / {down} / {up + down}"),
+            ("bytes up / down", f"{tx.get('uplink_bytes', 0)} / {tx.get('downlink_bytes', 0)}")]
     if tt:
         rows.append(("ratio to TT", f"{down / tt:.3f} ({down} / {tt} samples)"))
     return rows
 
 
 def _warnings(summary: Mapping[str, Any]) -> list[str]:
-    edge = field(summary, "edge", default={}) or {}
+    timing = summary.get("timing") or {}
+    edge = {**(timing.get("edge") or {}), **(summary.get("edge") or {})}   # counters and wall-time-derived ones
     out = []
     if not summary.get("lockstep", True):   # lockstep has no deadlines: simulated time waits for every node
         out.append(f"deadline misses: {edge.get('loop_overruns', 0)} edge loop overruns")

@@ -35,10 +35,13 @@ class SessionBuilder:
         self._stack = ExitStack()
 
     # ---- resources ------------------------------------------------------------------------------------------------
-    def zenoh(self, *, listen: Iterable[str] | None = None, connect: Iterable[str] | None = None) -> zenoh.Session:
-        """A Zenoh session from `cfg.zenoh` (mode, TLS, ACL), its endpoints replaced where given."""
+    def zenoh(self, *, listen: Iterable[str] | None = None, connect: Iterable[str] | None = None,
+              mode: str | None = None) -> zenoh.Session:
+        """A Zenoh session from `cfg.zenoh` (mode, TLS, ACL), its endpoints (and mode) replaced where given."""
         z = self.cfg.zenoh
-        update = {k: tuple(v) for k, v in (("listen", listen), ("connect", connect)) if v is not None}
+        update: dict[str, Any] = {k: tuple(v) for k, v in (("listen", listen), ("connect", connect)) if v is not None}
+        if mode is not None:
+            update["mode"] = mode
         if update:
             z = z.model_validate({**z.model_dump(), **update})
         session = open_session(z)

@@ -45,6 +45,7 @@ class RunOptions:
     progress: bool = True
     seed: int | None = None
     join_timeout_s: float = 300.0   # --controller external: wall time allowed for the outside controller to join
+    on_nodes: Callable[[Any, Any, Any], None] | None = None   # called with (plant, edge, controller) once they run
 
 
 def _controller_cmd(opts: RunOptions, cfg_path: Path) -> list[str]:
@@ -75,7 +76,9 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     listen = listen_endpoints(cfg, opts)
     t0 = time.monotonic()
     with SessionBuilder(cfg, lockstep=opts.lockstep) as b:
-        session = b.zenoh(listen=listen, connect=())
+        # this process is what the controller connects to: a peer even when the nodes' config says client (a
+        # client needs a router; `sea-hil run` has none), with the config's TLS and ACL
+        session = b.zenoh(listen=listen, connect=(), mode="peer")
         proc: Any
         if opts.controller == "external":   # no child: wait for an outside controller (sea_hil/session/external.py)
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
@@ -124,6 +127,8 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0
     recorder.start()
     plant.start()
     edge.start()
+    if opts.on_nodes is not None:   # the public API's handle on a running session (sea_hil.api.Session)
+        opts.on_nodes(plant, edge, proc)
     extra_s = waited_s + (opts.join_timeout_s if opts.controller == "external" else 0.0)
     _wait_for_controller(proc, edge, opts, cfg, t0, extra_s, log)
 
