@@ -140,6 +140,18 @@ def _pids_mentioning(text: str) -> list[int]:
     return found
 
 
+def _recording_fake(monkeypatch) -> list[int]:
+    """Stand-in point commands that write SUMMARY at once; the list of point indices they ran."""
+    ran: list[int] = []
+
+    def fake(point, mode, cfg_path, out_dir, cycles, python):
+        ran.append(point.index)
+        return [python, "-c", f"import pathlib; pathlib.Path({str(out_dir)!r}, 'summary.json').write_text("
+                              f"{json.dumps(SUMMARY)!r})"]
+    monkeypatch.setattr("sea_hil.sweep.task.point_command", fake)
+    return ran
+
+
 def test_killed_sweep_keeps_finished_points_and_resume_runs_only_the_rest(tmp_path, monkeypatch):
     out = tmp_path / "sw"
     proc = subprocess.Popen([sys.executable, str(_fake_sweep_script(tmp_path, out))], cwd=ROOT,
@@ -153,16 +165,11 @@ def test_killed_sweep_keeps_finished_points_and_resume_runs_only_the_rest(tmp_pa
             os.kill(pid, signal.SIGKILL)
     assert {r["point"] for r in read_rows(out / "sweep.csv")} == {"p000_tt_d0_j0_l0", "p001_et_eta0.3_r0.2_d0_j0_l0"}
 
-    ran: list[int] = []
-
-    def fake(point, mode, cfg_path, out_dir, cycles, python):
-        ran.append(point.index)
-        return [python, "-c", f"import pathlib; pathlib.Path({str(out_dir)!r}, 'summary.json').write_text("
-                              f"{json.dumps(SUMMARY)!r})"]
-    monkeypatch.setattr("sea_hil.sweep.task.point_command", fake)
+    ran = _recording_fake(monkeypatch)
     points = expand_grid((0.3, 0.5, 0.8), (0.2,), (0.0,), (0.0,), (0.0,))
     lines: list[str] = []
-    rows, interrupted = run_sweep(points, SweepOptions(out=out, mode="lockstep", jobs=2, resume=True, progress_bar=False), lines.append)
+    rows, interrupted = run_sweep(points, SweepOptions(out=out, mode="lockstep", jobs=2, resume=True, progress_bar=False),
+                                  lines.append)
     assert not interrupted and sorted(ran) == [2, 3]
     assert lines[0].startswith("sweep: resuming, 2 of 4 points already in")
     assert [r["status"] for r in rows] == ["ok"] * 4
@@ -170,13 +177,7 @@ def test_killed_sweep_keeps_finished_points_and_resume_runs_only_the_rest(tmp_pa
 
 
 def test_resume_recomputes_a_point_whose_config_changed(tmp_path, monkeypatch):
-    ran: list[int] = []
-
-    def fake(point, mode, cfg_path, out_dir, cycles, python):
-        ran.append(point.index)
-        return [python, "-c", f"import pathlib; pathlib.Path({str(out_dir)!r}, 'summary.json').write_text("
-                              f"{json.dumps(SUMMARY)!r})"]
-    monkeypatch.setattr("sea_hil.sweep.task.point_command", fake)
+    ran = _recording_fake(monkeypatch)
     points = expand_grid((0.5,), (0.2,), (0.0,), (0.0,), (0.0,))
     run_sweep(points, SweepOptions(out=tmp_path, mode="lockstep", jobs=2, progress_bar=False), lambda s: None)
     changed = tmp_path / "c.toml"

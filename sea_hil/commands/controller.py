@@ -23,14 +23,12 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.live.child import start_live_child
+    from sea_hil.live.child import attach_live_child
     from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
     with SessionBuilder(cfg, lockstep=args.lockstep) as b:
         session = b.zenoh()
-        live = start_live_child(args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view
-        if live is not None:
-            b.callback(live.close)
+        attach_live_child(b, args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view
         node = b.controller(session, args.controller, inner=args.inner, cycles=args.cycles)
         done = b.serve(node, args.timeout)
     return 0 if done else 3

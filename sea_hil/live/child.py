@@ -121,3 +121,11 @@ def start_live_child(args: argparse.Namespace, cfg: SeaHilConfig, can_spec: str 
         raise
     atexit.register(child.close)
     return child
+
+
+def attach_live_child(builder: Any, args: argparse.Namespace, cfg: SeaHilConfig, can_spec: str | None) -> None:
+    """`start_live_child` for a node composed by `builder` (`sea_hil.session.builder.SessionBuilder`): the child is
+    ended with the builder's other resources. Call it once the node's Zenoh session is open."""
+    child = start_live_child(args, cfg, can_spec)
+    if child is not None:
+        builder.callback(child.close)
