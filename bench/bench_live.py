@@ -85,10 +85,11 @@ def _session(out: Path, controller: str, live: bool, client_nice: int = 10,
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     final = read_session(out / "session.mcap").metadata.get("sea-hil.final", {})
     ticks, overruns = int(final.get("plant_ticks", 0)), int(final.get("plant_overruns", 0))
-    return {"live": live, "p99_us": s["latency_us"]["p99"], "p50_us": s["latency_us"]["p50"],
-            "samples": s["latency_samples"], "plant_ticks": ticks, "plant_overruns": overruns,
+    t = s["timing"]   # wall-time-derived fields (docs/session.md)
+    return {"live": live, "p99_us": t["latency_us"]["p99"], "p50_us": t["latency_us"]["p50"],
+            "samples": t["latency_samples"], "plant_ticks": ticks, "plant_overruns": overruns,
             "miss_pct": 100.0 * overruns / ticks if ticks else float("nan"),
-            "edge_loop_overruns": s["edge"]["loop_overruns"], "wall_s": s["wall_s"], "cpu_s": cpu_s, **got}
+            "edge_loop_overruns": t["edge"]["loop_overruns"], "wall_s": t["wall_s"], "cpu_s": cpu_s, **got}
 
 
 def _children_cpu_s() -> float:

@@ -97,6 +97,7 @@ def test_dead_child_is_counted_not_raised_and_reported_by_close(tmp_path: Path) 
     proc._proc.wait(timeout=30)
     for i in range(20):   # several batches hit the closed pipe
         proc.submit_can(RawFrame(i, 0x21, 2, b"\x00\x00"))
+    proc.flush()          # once flushed, every batch is written or counted
     assert proc.dropped >= 16
     with pytest.raises(RecordingError, match="exited with status"):
         proc.close()

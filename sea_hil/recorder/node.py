@@ -142,7 +142,7 @@ class RecorderNode(Node):
             msg = self._bus.recv(timeout=0.05)
             if msg is None:
                 if isinstance(self.rec, RecorderProcess):
-                    self.rec.flush()   # idle bus: deliver what is batched
+                    self.rec.flush(wait=False)   # idle bus: deliver what is batched, never block
                 continue
             while msg is not None:
                 self.on_can(msg)

@@ -14,6 +14,7 @@ from __future__ import annotations
 import logging
 import os
 import pickle
+import queue
 import struct
 import subprocess
 import sys
@@ -60,6 +61,14 @@ class RecorderProcess:
         self._pending: list[tuple[Any, ...]] = []
         self._closed = False
         self.sent_ops = self.dropped = 0
+        # batches go to the child's stdin from a feeder thread: a child that falls behind (it runs on idle CPU time
+        # only, and may serve a live view) makes the backlog grow here instead of blocking the taps that submit (a
+        # blocked tap would stop draining its Zenoh subscriber and stall the session's Zenoh runtime)
+        self._out: queue.SimpleQueue[tuple[bytes, int] | threading.Event | None] = queue.SimpleQueue()
+        self.backlog_max = 0
+        self._backlog = 0
+        self._feeder = threading.Thread(target=self._feed, name="recorder-feed", daemon=True)
+        self._feeder.start()
 
     # -- the recorder interface ----------------------------------------------------------------------------------
     def submit_can(self, frame: RawFrame) -> None:
@@ -90,9 +99,15 @@ class RecorderProcess:
                              argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None:
         write_session_header(self, config, seed=seed, argv=argv, extra=extra)
 
-    def flush(self) -> None:
+    def flush(self, wait: bool = True) -> None:
+        """Hand what is batched to the feeder; with `wait`, return once it is written to the child (or counted as
+        dropped). The taps flush without waiting (they must never block on a slow child)."""
         with self._lock:
             self._flush_locked()
+        if wait:
+            done = threading.Event()
+            self._out.put(done)
+            done.wait(self.close_timeout_s)
 
     def close(self, final_stats: Mapping[str, Any] | None = None) -> None:
         """Deliver everything, let the child write `sea-hil.final` and the index, wait for it. Idempotent."""
@@ -102,10 +117,12 @@ class RecorderProcess:
             self._pending.append((CLOSE, {**(final_stats or {}), "recorder_dropped_ops": self.dropped}))
             self._flush_locked()
             self._closed = True
-            try:
-                self._stdin.close()
-            except OSError:
-                pass
+        self._out.put(None)               # the feeder writes what is queued, then stops
+        self._feeder.join(self.close_timeout_s)
+        try:
+            self._stdin.close()
+        except OSError:
+            pass
         try:
             code = self._proc.wait(timeout=self.close_timeout_s)
             if self.live is not None:
@@ -118,7 +135,7 @@ class RecorderProcess:
             raise RecordingError(f"recorder process for {self.path} exited with status {code}")
 
     def counters(self) -> dict[str, int]:
-        return {"sent_ops": self.sent_ops, "dropped": self.dropped}
+        return {"sent_ops": self.sent_ops, "dropped": self.dropped, "backlog_max_batches": self.backlog_max}
 
     # -- transport -----------------------------------------------------------------------------------------------
     @property
@@ -140,14 +157,25 @@ class RecorderProcess:
         if not self._pending or self._closed:
             return
         ops, self._pending = self._pending, []
-        blob = pickle.dumps(ops, protocol=pickle.HIGHEST_PROTOCOL)
-        try:
-            self._stdin.write(_LEN.pack(len(blob)) + blob)
-            self._stdin.flush()
-            self.sent_ops += len(ops)
-        except (OSError, ValueError) as err:   # child gone: count, keep the caller alive
-            self.dropped += len(ops)
-            log.error("recorder process pipe: %s", err)
+        self._backlog += 1
+        self.backlog_max = max(self.backlog_max, self._backlog)
+        self._out.put((pickle.dumps(ops, protocol=pickle.HIGHEST_PROTOCOL), len(ops)))
+
+    def _feed(self) -> None:
+        """The feeder thread: write queued batches to the child until the end marker."""
+        while (item := self._out.get()) is not None:
+            if isinstance(item, threading.Event):   # a waiting `flush`: everything before it is written
+                item.set()
+                continue
+            blob, n = item
+            self._backlog -= 1
+            try:
+                self._stdin.write(_LEN.pack(len(blob)) + blob)
+                self._stdin.flush()
+                self.sent_ops += n
+            except (OSError, ValueError) as err:   # child gone: count, keep the callers alive
+                self.dropped += n
+                log.error("recorder process pipe: %s", err)
 
 
 def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: LiveFeed | None = None) -> bool:
