@@ -14,7 +14,7 @@ from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
 from sea_hil.config import load_config
 from sea_hil.mechanics import limb_params
-from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
+from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
 from sea_hil.session.builder import SessionBuilder
 
 NODE = 1

@@ -5,7 +5,6 @@ under a constant disturbance ET sends <= 0.40 of TT's setpoints. The 2 Hz hip di
 with the default inner gains (docs/deviations.md section 10): its test asserts the measured frontier instead."""
 from __future__ import annotations
 
-from pathlib import Path
 
 import numpy as np
 import pytest

@@ -3,13 +3,11 @@ with stand-in point processes (failure isolation); bad arguments; a real 2-point
 from __future__ import annotations
 
 import csv
-import json
 import os
 import signal
 import subprocess
 import sys
 import time
-import tomllib
 from pathlib import Path
 
 import pytest
