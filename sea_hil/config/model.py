@@ -120,6 +120,9 @@ class ControllerConfig(_Frozen):
         "full", description="edge disturbance observer: 'full' = in the inner loop's F_R (Eq. 28) and as an "
         "extra deflection on v_x; 'inner' = F_R only; 'off' = the paper's Eq. 24-31 (docs/deviations.md 10)")
     observer_bandwidth_rad_s: float = Field(400.0, gt=0, description="pole of the momentum disturbance observer")
+    compensation: Literal["none", "predict"] = Field(
+        "none", description="link-delay compensation: 'predict' = v_x for the state predicted at the instant the "
+        "setpoint acts (issue 16, docs/et-over-links.md); 'none' = the paper's (v_x for the received state)")
     model: NominalModelConfig = NominalModelConfig()
 
 
@@ -128,6 +131,13 @@ class TriggerConfig(_Frozen):
     eta: float = Field(gt=0)
     lipschitz_l: float = Field(gt=0)
     max_inter_event_s: float = Field(0.25, gt=0)
+    placement: Literal["controller", "edge"] = Field(
+        "controller", description="where Eq. 16-19 are evaluated: 'controller' = the paper's (the edge publishes "
+        "every outer sample); 'edge' = the edge publishes a state only on an event (both directions event-triggered)")
+    edge_check: Literal["outer", "sample"] = Field(
+        "outer", description="edge placement: evaluate the trigger every outer sample or every inner (1 kHz) sample")
+    edge_model: bool = Field(False, description="edge placement: the lookahead runs the nominal model (else: "
+                             "extrapolation of the sampled state over one round trip)")
 
 
 class SimConfig(_Frozen):

@@ -206,9 +206,11 @@ class _Env:
 
 
 def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
-               opts: EngineOptions = EngineOptions()) -> EngineResult:
+               opts: EngineOptions | None = None) -> EngineResult:
     """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` selects the trigger
-    placement and delay compensation (the defaults are the paper's scheme, the lockstep session bit for bit)."""
+    placement and delay compensation (None: the config's, `EngineOptions.from_config`; the paper's scheme is the
+    lockstep session bit for bit)."""
+    opts = EngineOptions.from_config(cfg) if opts is None else opts
     p = limb_params(cfg.plant)
     env = _Env(cfg, mode, cycles, p, jit)
     theta0 = tuple(cfg.plant.initial_theta_rad)

@@ -33,6 +33,14 @@ class EngineOptions:
                 or self.edge_check not in ("outer", "sample"):
             raise ValueError(f"bad engine options {self}")
 
+    @classmethod
+    def from_config(cls, cfg: Any) -> "EngineOptions":
+        """The options a config selects (`trigger.placement`, `trigger.edge_check`, `trigger.edge_model`,
+        `controller.compensation`)."""
+        t = cfg.trigger
+        return cls(placement=t.placement, compensation=cfg.controller.compensation, edge_check=t.edge_check,
+                   edge_model=t.edge_model)
+
 
 class SessionLoop:
     """State of one offline session; `run()` steps it to the end. Built by `run_engine`."""
