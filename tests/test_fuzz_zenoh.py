@@ -23,8 +23,9 @@ from sea_hil.mechanics import limb_params
 from sea_hil.protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
                                SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)
 from sea_hil.protocol.zsession import make_config, open_session
+from fuzz_budget import cases
 
-CASES = 10_000
+CASES = cases(10_000)   # tests/fuzz_budget.py: SEA_HIL_FUZZ_SCALE=1 for the depth of docs/reliability.md
 FUZZ = settings(max_examples=CASES, deadline=None, database=None, derandomize=True,
                 suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
 
@@ -132,7 +133,7 @@ def test_edge_applies_only_valid_setpoints_on_arrival(session: object) -> None:
         for msg in codec.encode_feedback(drv.step(), saturate=True):
             edge.on_can(msg, 0)
 
-        @settings(max_examples=2000, deadline=None, database=None, derandomize=True,
+        @settings(max_examples=cases(2000), deadline=None, database=None, derandomize=True,
                   suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
         @given(data=payloads())
         def run(data: bytes) -> None:

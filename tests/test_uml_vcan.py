@@ -6,8 +6,6 @@ Without ``linux.uml`` (and no native vcan0) these tests skip, except under CI=tr
 """
 from __future__ import annotations
 
-import importlib.machinery
-import importlib.util
 import os
 import re
 import signal
@@ -15,26 +13,11 @@ import subprocess
 import sys
 from collections.abc import Callable
 from pathlib import Path
-from types import ModuleType
 
 import pytest
-
-REPO = Path(__file__).resolve().parents[1]
-WITH_VCAN = REPO / "scripts" / "with-vcan"
-GUEST_TIMEOUT_S = 480   # the two multi-process session tests take ~40 s each in the guest (more on a busy host)
-HOST_TIMEOUT_S = GUEST_TIMEOUT_S + 60
+from uml_suite import BACKGROUND_KEY, HOST_TIMEOUT_S, REPO, SUITE_ARGS, WITH_VCAN, BackgroundRun, load_with_vcan
 
 pytestmark = pytest.mark.uml
-
-
-def load_with_vcan() -> ModuleType:
-    """Import scripts/with-vcan (no .py suffix) as a module, to reuse its probes."""
-    loader = importlib.machinery.SourceFileLoader("with_vcan", str(WITH_VCAN))
-    spec = importlib.util.spec_from_loader("with_vcan", loader)
-    assert spec is not None
-    module = importlib.util.module_from_spec(spec)
-    loader.exec_module(module)
-    return module
 
 
 def require_uml_kernel() -> None:
@@ -75,11 +58,13 @@ def run_with_vcan(*args: str, cwd: Path = REPO, env: dict[str, str] | None = Non
 Runner = Callable[..., subprocess.CompletedProcess[str]]
 
 
-def test_socketcan_suite_passes_on_real_vcan(with_vcan_runner: Runner) -> None:
-    result = with_vcan_runner("--timeout", str(GUEST_TIMEOUT_S), "--", sys.executable, "-m", "pytest", "-q",
-                              "-rA", "-p", "no:cacheprovider", "tests/socketcan")
-    output = result.stdout + result.stderr
-    assert result.returncode == 0, output
+def test_socketcan_suite_passes_on_real_vcan(with_vcan_runner: Runner, request: pytest.FixtureRequest) -> None:
+    """The guest run was started in the background when pytest had collected this test (tests/conftest.py);
+    started here when it was not."""
+    background = request.config.stash.get(BACKGROUND_KEY, None) or BackgroundRun(*SUITE_ARGS)
+    returncode, output = background.result()
+    assert returncode is not None, f"with-vcan did not finish within {HOST_TIMEOUT_S} s:\n{output}"
+    assert returncode == 0, output
     summary = re.search(r"(\d+) passed", output)
     assert summary is not None and int(summary.group(1)) >= 6, output
     for test in ("test_two_buses_exchange_frames", "test_cansend_reaches_python_can",
