@@ -133,7 +133,8 @@ def test_outputs_from_rows(tmp_path):
             csv_row(GridPoint(4, "et", ET.link, 0.8, 0.2), None, cycles=1, seed=0, wall_s=1, status="error",
                     error="exit status 2: boom")]
     fronts = fronts_by_link(rows)
-    assert list(fronts) == [(5.0, 2.0, 0.05)] and [f for _, f in fronts[(5.0, 2.0, 0.05)]] == [False, True]
+    key = (5.0, 2.0, 0.05, "")   # delay, jitter, loss, link spec ("": the axes)
+    assert list(fronts) == [key] and [f for _, f in fronts[key]] == [False, True]
     write_outputs(tmp_path, rows, "sea-hil sweep ...", 3.0, 2, "lockstep", False)
     write_csv(tmp_path / "sweep.csv", rows)
     with (tmp_path / "sweep.csv").open(encoding="utf-8") as fh:
