@@ -13,8 +13,7 @@ from sea_hil.commands.sweep import method_axes
 from sea_hil.errors import ConfigError
 from sea_hil.sweep.grid import CSV_COLUMNS, LinkCondition, expand_grid
 from sea_hil.sweep.methods import METHODS, Scheme, parse_choices, parse_links, schemes_from_axes
-from sea_hil.sweep.methods_output import curves_by_link
-from sea_hil.sweep.output import write_outputs
+from sea_hil.sweep.methods_output import curves_by_link, domination_markdown, methods_figure
 from sea_hil.sweep.runner import SweepOptions, point_config, point_spec
 from sea_hil.sweep.task import run_point
 
@@ -91,8 +90,8 @@ def test_tiny_method_sweep_on_the_offline_engine(tmp_path: Path):
     assert list(curves) == [(5.0, 1.0, 0.01, "delay=5ms,jitter=1ms,dist=normal,loss=1%")]
     assert sorted(curves[next(iter(curves))]) == ["ET, trigger at edge + model, compensation predict",
                                                   "TT, compensation none", "TT, compensation predict"]
-    write_outputs(tmp_path, rows, "sea-hil sweep ...", 1.0, 1, "offline", False)
+    methods_figure(tmp_path / "methods.png", rows)    # write_outputs adds it beside pareto.png (test_sweep.py)
     assert (tmp_path / "methods.png").stat().st_size > 10_000
-    md = (tmp_path / "sweep.md").read_text(encoding="utf-8")
+    md = "\n".join(domination_markdown(rows))
     assert "## Methods: total link messages against periodic TT" in md
     assert "ET, trigger at edge + model, compensation predict η=0.5 r=0.2" in md
