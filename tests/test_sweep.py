@@ -63,7 +63,7 @@ def test_point_overrides_and_config(tmp_path):
     assert ov["trigger"] == {"eta": 0.5, "r": 0.2}
     for d in ("uplink", "downlink"):
         assert ov["link"][d] == {"delay_s": 0.005, "jitter_s": 0.002, "loss": 0.05}
-    assert "trigger" not in point_overrides(TT)
+    assert point_overrides(TT)["trigger"] == {"placement": "controller"}   # TT stays periodic both ways
     assert set(point_overrides(ET, "downlink")["link"]) == {"downlink"}
     with pytest.raises(ConfigError):
         point_overrides(ET, "sideways")

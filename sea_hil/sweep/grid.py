@@ -142,6 +142,8 @@ def point_overrides(point: GridPoint, direction: str = "both") -> dict[str, Any]
     ov: dict[str, Any] = {"link": {d: dict(one) for d in dirs}, **point.scheme.overrides()}
     if point.controller == "et":
         ov["trigger"] = {**ov.get("trigger", {}), "eta": point.eta, "r": point.r}
+    else:   # a TT reference is periodic both ways: a state up and a setpoint down every sample, whatever the config
+        ov["trigger"] = {**ov.get("trigger", {}), "placement": "controller"}
     return ov
 
 
