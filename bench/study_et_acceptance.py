@@ -96,10 +96,10 @@ def markdown(scenario: str, rows: dict[str, dict[str, Any]]) -> str:
         b_ratio, b_err = BOUNDS[link][0] + d_ratio, BOUNDS[link][1] * f_err
         for name, label in (("paper", "ET paper (controller, none)"), ("new", "**ET new** (edge, predict, model)")):
             m = r[name]
-            ok = m["ratio"] <= b_ratio and m["err"] <= b_err
+            ratio_ok, err_ok = m["ratio"] <= b_ratio, m["err"] <= b_err
             lines.append(f"| {link} | {label} | {m['total']} ({r['tt_total']}) | {m['ratio']:.3f} (<= {b_ratio:.2f}) "
-                         f"| {m['err']:.4f} (<= {b_err:.3f}) {'met' if ok else 'NOT met'} | {m['tt_err']:.4f} | "
-                         f"{_verdict(m['dominates'])} |")
+                         f"{_verdict(ratio_ok)} | {m['err']:.4f} (<= {b_err:.3f}) {_verdict(err_ok)} | "
+                         f"{m['tt_err']:.4f} | {_verdict(m['dominates'])} |")
     return "\n".join(lines) + "\n"
 
 
