@@ -21,6 +21,8 @@ def test_run_table_has_mode_messages_ratio_errors_latency_warnings_and_files(tmp
     assert rows["mode"] == "real time, ET-SMC, inner loop on edge"
     assert rows["messages up / down / total"] == "1001 / 250 / 1251"
     assert rows["ratio to TT"].startswith("0.250")                     # TT answers each of the 1001 states
+    assert rows["bytes up / down / total"] == "88088 / 13250 / 101338"
+    assert rows["total ratio to TT"] == "0.625 (1251 / 2002 messages)"  # TT: a state up, a setpoint down per sample
     assert rows["error knee max / RMS"] == "0.0120 / 0.0060 rad"
     assert rows["latency p50 / p99"] == "0.70 / 2.50 ms"
     assert "3 edge loop overruns" in rows["warnings"] and "saturated: 12" in rows["warnings"]

@@ -77,9 +77,18 @@ def lockstep_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, s
         return {run: fut.result() for run, fut in futures.items()}
 
 
+def with_totals(counts: dict[str, Any]) -> dict[str, Any]:
+    """Old transmission counts with the link totals added since (issue 16), derived from the old fields only:
+    `total_msgs` = uplink + downlink messages, `total_bytes` = uplink + downlink bytes."""
+    return {**counts, "total_msgs": counts["uplink_msgs"] + counts["downlink_msgs"],
+            "total_bytes": counts["uplink_bytes"] + counts["downlink_bytes"]}
+
+
 def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]:
     """An old session summary in the current layout: (deterministic part, timing keys, timing.edge keys)."""
     new = {k: v for k, v in old.items() if k not in OLD_TIMING}
+    new["transmissions"] = with_totals(old["transmissions"])
+    new["lead_in"] = with_totals(old["lead_in"])
     new["edge"] = {EDGE_RENAMED.get(k, k): v for k, v in old["edge"].items() if k not in OLD_EDGE_TIMING}
     new["edge"].update(EDGE_ADDED)
     edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
@@ -92,7 +101,7 @@ def old_offline_as_new(old: dict[str, Any]) -> dict[str, Any]:
     down, up = old["transmissions"], round(old["duration_s"] / SAMPLE_PERIOD_S)
     tx = {"downlink_msgs": down, "downlink_bytes": down * PAYLOAD_SIZE[MsgType.SETPOINT],
           "uplink_msgs": up, "uplink_bytes": up * PAYLOAD_SIZE[MsgType.STATE]}
-    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": tx}
+    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": with_totals(tx)}
 
 
 @pytest.mark.parametrize("controller,link", RUNS, ids=[f"{c}-{lk}" for c, lk in RUNS])

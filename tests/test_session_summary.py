@@ -41,7 +41,7 @@ def test_cycles_lead_in_and_outside_are_counted_apart() -> None:
     data = _session(first, last, range(1, last + 6), events)   # 19 states before the controller, 5 after
     s = session_summary(data, "et")
     assert s["transmissions"] == {"downlink_msgs": 3, "downlink_bytes": 159, "uplink_msgs": 101,
-                                  "uplink_bytes": 101 * 88}
+                                  "uplink_bytes": 101 * 88, "total_msgs": 104, "total_bytes": 159 + 101 * 88}
     lead = s["lead_in"]
     assert (lead["downlink_msgs"], lead["uplink_msgs"], lead["duration_s"]) == (4, 50, 0.5)
     assert lead["tracking"]["max_abs_error_rad"][0] == 0.01

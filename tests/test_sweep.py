@@ -63,7 +63,7 @@ def test_point_overrides_and_config(tmp_path):
     assert ov["trigger"] == {"eta": 0.5, "r": 0.2}
     for d in ("uplink", "downlink"):
         assert ov["link"][d] == {"delay_s": 0.005, "jitter_s": 0.002, "loss": 0.05}
-    assert "trigger" not in point_overrides(TT)
+    assert point_overrides(TT)["trigger"] == {"placement": "controller"}   # TT stays periodic both ways
     assert set(point_overrides(ET, "downlink")["link"]) == {"downlink"}
     with pytest.raises(ConfigError):
         point_overrides(ET, "sideways")
@@ -133,13 +133,14 @@ def test_outputs_from_rows(tmp_path):
             csv_row(GridPoint(4, "et", ET.link, 0.8, 0.2), None, cycles=1, seed=0, wall_s=1, status="error",
                     error="exit status 2: boom")]
     fronts = fronts_by_link(rows)
-    assert list(fronts) == [(5.0, 2.0, 0.05)] and [f for _, f in fronts[(5.0, 2.0, 0.05)]] == [False, True]
+    key = (5.0, 2.0, 0.05, "")   # delay, jitter, loss, link spec ("": the axes)
+    assert list(fronts) == [key] and [f for _, f in fronts[key]] == [False, True]
     write_outputs(tmp_path, rows, "sea-hil sweep ...", 3.0, 2, "lockstep", False)
     write_csv(tmp_path / "sweep.csv", rows)
     with (tmp_path / "sweep.csv").open(encoding="utf-8") as fh:
         got = list(csv.DictReader(fh))
     assert [r["status"] for r in got] == ["ok", "ok", "error"] and got[2]["error"] == "exit status 2: boom"
-    assert (tmp_path / "pareto.png").stat().st_size > 10_000
+    assert (tmp_path / "pareto.png").stat().st_size > 10_000 and (tmp_path / "methods.png").is_file()
     md = (tmp_path / "sweep.md").read_text(encoding="utf-8")
     assert "ET η=0.5 r=0.2 (304 tx/cycle, 0.0082 rad)" in md and "error: exit status 2: boom" in md
 

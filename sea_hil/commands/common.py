@@ -2,10 +2,12 @@
 from __future__ import annotations
 
 import argparse
+import math
 from typing import Any
 
 from sea_hil.config import SeaHilConfig
 from sea_hil.config.shorthand import scenario_config
+from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import parse_link_spec
 
 
@@ -37,6 +39,26 @@ def add_scenario_args(p: argparse.ArgumentParser) -> None:
                         "inertia, stiffness, damping, all; or m1, m2, i1, i2, k1, k2, b1, b2); sets [controller.model]")
 
 
+def add_period_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--period-ms", type=float, metavar="P",
+                   help="outer sample period on the wire [ms] (controller.sample_period_s; the inner loop stays at "
+                        "can.feedback_rate_hz): periodic baselines at reduced rates, e.g. --controller tt "
+                        "--period-ms 30; a positive multiple of the inner period")
+
+
+def check_period_ms(period_ms: float, cfg: SeaHilConfig, option: str = "--period-ms") -> float:
+    """`period_ms` as `controller.sample_period_s` [s], or a ConfigError: not a positive finite number, or not a
+    whole multiple of the inner-loop period of `cfg` (1 / can.feedback_rate_hz)."""
+    if not math.isfinite(period_ms) or period_ms <= 0:
+        raise ConfigError(f"{option} {period_ms:g}: must be a positive number of milliseconds")
+    inner_ms = 1000.0 / cfg.can.feedback_rate_hz
+    steps = period_ms / inner_ms
+    if abs(steps - round(steps)) > 1e-9:
+        raise ConfigError(f"{option} {period_ms:g}: must be a whole multiple of the inner-loop period "
+                          f"{inner_ms:g} ms (1 / can.feedback_rate_hz)")
+    return period_ms / 1000.0
+
+
 def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
     ov: dict[str, Any] = dict(overrides or {})
     if getattr(args, "seed", None) is not None:
@@ -59,5 +81,12 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
         ov["zenoh"] = {**ov.get("zenoh", {}), **z}
     if getattr(args, "can", None):
         ov.setdefault("can", {})["interface"] = args.can
-    return scenario_config(getattr(args, "config", None), ov, getattr(args, "disturbance", None),
-                           getattr(args, "mismatch", None))
+    def build(o: dict[str, Any]) -> SeaHilConfig:
+        return scenario_config(getattr(args, "config", None), o, getattr(args, "disturbance", None),
+                               getattr(args, "mismatch", None))
+    cfg = build(ov)
+    period_ms = getattr(args, "period_ms", None)
+    if period_ms is None:
+        return cfg
+    ctrl = {**ov.get("controller", {}), "sample_period_s": check_period_ms(period_ms, cfg)}
+    return build({**ov, "controller": ctrl})

@@ -5,7 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_link_args, add_scenario_args, config_from_args
+from sea_hil.commands.common import (add_config_args, add_link_args, add_period_arg, add_scenario_args,
+                                    config_from_args)
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -34,6 +35,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_link_args(p)
     add_live_args(p)
     add_config_args(p)
+    add_period_arg(p)
     add_scenario_args(p)
     p.set_defaults(func=_main)
 
@@ -54,5 +56,7 @@ def _main(args: argparse.Namespace) -> int:
     if args.json:
         print_summary(summary)
     else:
-        print_end_of_run(summary, files_in(args.out))
+        # TT publishes and answers a state at every sample of the cycle, both ends included
+        samples = round(summary["duration_s"] / cfg.controller.sample_period_s) + 1
+        print_end_of_run(summary, files_in(args.out), tt_msgs=samples)
     return 0

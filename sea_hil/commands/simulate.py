@@ -5,7 +5,7 @@ import argparse
 import json
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_scenario_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_period_arg, add_scenario_args, config_from_args
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,6 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_config_args(p)
+    add_period_arg(p)
     add_scenario_args(p)
     p.set_defaults(func=_main)
 

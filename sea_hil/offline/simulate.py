@@ -11,7 +11,8 @@ from sea_hil.config import SeaHilConfig
 from sea_hil.offline.closed_loop import SimResult, simulate
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, TriggerReason
 from sea_hil.report.figures import inter_event_figure, tracking_figure
-from sea_hil.report.summary import TIMING_KEY, compare_table, inter_event_block, tracking_block, write_summary
+from sea_hil.report.summary import (TIMING_KEY, compare_table, inter_event_block, tracking_block,
+                                    transmissions_block, write_summary)
 
 
 def offline_transmissions(res: SimResult) -> dict[str, int]:
@@ -19,8 +20,7 @@ def offline_transmissions(res: SimResult) -> dict[str, int]:
     event (downlink) and one StatePayload per outer sample (uplink), bytes = payload sizes of protocol/payloads.py
     (Zenoh, TCP and IP overhead not included; no lead-in, no lockstep ACKs)."""
     down, up = len(res.event_t_s), len(res.t_s)
-    return {"downlink_msgs": down, "downlink_bytes": down * PAYLOAD_SIZE[MsgType.SETPOINT],
-            "uplink_msgs": up, "uplink_bytes": up * PAYLOAD_SIZE[MsgType.STATE]}
+    return transmissions_block(down, down * PAYLOAD_SIZE[MsgType.SETPOINT], up, up * PAYLOAD_SIZE[MsgType.STATE])
 
 
 def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:

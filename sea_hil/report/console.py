@@ -1,5 +1,6 @@
 """What `sea-hil run` and `sea-hil simulate` print: live progress while a session runs and one short table at the
-end (mode, messages up/down/total and the ratio to TT, tracking error per joint, latency, warnings, files written).
+end (mode, messages and bytes up/down/total and the ratios to TT, tracking error per joint, latency, warnings,
+files written).
 
 Rendering only: the numbers come from summary.json as written (read through `field`, which also finds the
 timing-derived fields under a `timing` key). Progress is a rich progress bar when its stream is a terminal and one
@@ -97,13 +98,18 @@ class SessionProgress:
 
 
 def _messages(summary: Mapping[str, Any], tt_msgs: int | None) -> list[tuple[str, str]]:
+    """Messages and bytes per direction and in total; the ratios to TT (which sends a state up and a setpoint down
+    every sample: `tt_msgs` samples, else the uplink count, right when the edge publishes every sample)."""
     tx = summary.get("transmissions") or {}   # states up, setpoints (or voltages) down (offline: as a session would)
     up, down = int(tx.get("uplink_msgs", 0)), int(tx.get("downlink_msgs", 0))
-    tt = up if tt_msgs is None else tt_msgs   # TT answers every state
-    rows = [("messages up / down / total", f"{up} / {down} / {up + down}"),
-            ("bytes up / down", f"{tx.get('uplink_bytes', 0)} / {tx.get('downlink_bytes', 0)}")]
+    total = int(tx.get("total_msgs", up + down))
+    up_b, down_b = int(tx.get("uplink_bytes", 0)), int(tx.get("downlink_bytes", 0))
+    tt = up if tt_msgs is None else tt_msgs
+    rows = [("messages up / down / total", f"{up} / {down} / {total}"),
+            ("bytes up / down / total", f"{up_b} / {down_b} / {int(tx.get('total_bytes', up_b + down_b))}")]
     if tt:
         rows.append(("ratio to TT", f"{down / tt:.3f} ({down} / {tt} samples)"))
+        rows.append(("total ratio to TT", f"{total / (2 * tt):.3f} ({total} / {2 * tt} messages)"))
     return rows
 
 

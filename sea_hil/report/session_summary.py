@@ -17,7 +17,7 @@ from typing import Any, Callable
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData
-from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block
+from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 
 # edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
 # re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
@@ -68,8 +68,8 @@ def _phase_of(data: SessionData, rows: list[dict[str, Any]]) -> Callable[[int], 
 
 
 def _counts(down: list[dict[str, Any]], up: list[dict[str, Any]]) -> dict[str, int]:
-    return {"downlink_msgs": len(down), "downlink_bytes": int(sum(d["payload_bytes"] for d in down)),
-            "uplink_msgs": len(up), "uplink_bytes": int(sum(u["payload_bytes"] for u in up))}
+    return transmissions_block(len(down), int(sum(d["payload_bytes"] for d in down)),
+                               len(up), int(sum(u["payload_bytes"] for u in up)))
 
 
 def _tracking(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[float]]:

@@ -1,7 +1,7 @@
 """summary.json: the numbers users compare between runs, one schema for `simulate`, `run`, `report` and `sweep`.
 
 Common keys: `controller`, `duration_s`, `transmissions` (an object everywhere: `downlink_msgs`, `downlink_bytes`,
-`uplink_msgs`, `uplink_bytes`), `events_by_reason`, `tracking`, `inter_event_s`, `max_abs_voltage_v`, and `timing`:
+`uplink_msgs`, `uplink_bytes`, and `total_msgs`, `total_bytes` = uplink + downlink, `transmissions_block`), `events_by_reason`, `tracking`, `inter_event_s`, `max_abs_voltage_v`, and `timing`:
 every field derived from wall-clock or CPU time (offline `cpu_s`; sessions `wall_s`, `latency_us`,
 `latency_samples` and the edge's timing counters). Everything outside `timing` is deterministic (offline always, a
 session in lockstep), so two runs compare with `deterministic(a) == deterministic(b)`. docs/session.md lists the keys.
@@ -18,6 +18,15 @@ TIMING_KEY = "timing"
 
 PAPER = {"tt": {"transmissions": 997, "max_abs_error_rad": 0.07},
          "et": {"transmissions": 305, "max_abs_error_rad": 0.075}}
+
+
+def transmissions_block(downlink_msgs: int, downlink_bytes: int, uplink_msgs: int, uplink_bytes: int
+                        ) -> dict[str, int]:
+    """summary.json's `transmissions` (and `lead_in`'s counts): each direction and the link total (states up +
+    setpoints or voltages down; payload bytes)."""
+    return {"downlink_msgs": downlink_msgs, "downlink_bytes": downlink_bytes, "uplink_msgs": uplink_msgs,
+            "uplink_bytes": uplink_bytes, "total_msgs": uplink_msgs + downlink_msgs,
+            "total_bytes": uplink_bytes + downlink_bytes}
 
 
 def tracking_block(theta_rad: np.ndarray, desired_rad: np.ndarray) -> dict[str, list[float]]:

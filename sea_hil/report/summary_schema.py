@@ -19,7 +19,8 @@ def _object(props: dict[str, Any], required: tuple[str, ...] | None = None) -> d
             "additionalProperties": False}
 
 
-TRANSMISSIONS = _object({k: _COUNT for k in ("downlink_msgs", "downlink_bytes", "uplink_msgs", "uplink_bytes")})
+TRANSMISSIONS = _object({k: _COUNT for k in ("downlink_msgs", "downlink_bytes", "uplink_msgs", "uplink_bytes",
+                                              "total_msgs", "total_bytes")})   # total = uplink + downlink
 TRACKING = _object({"max_abs_error_rad": _PAIR, "rms_error_rad": _PAIR})
 TIMING = _object({
     "cpu_s": _NUMBER,                                                        # offline

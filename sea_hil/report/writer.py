@@ -81,6 +81,7 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
              "| figure | value |", "|---|---|",
              f"| downlink messages / bytes | {tx['downlink_msgs']} / {tx['downlink_bytes']} |",
              f"| uplink messages / bytes | {tx['uplink_msgs']} / {tx['uplink_bytes']} |",
+             f"| total link messages / bytes (up + down) | {tx['total_msgs']} / {tx['total_bytes']} |",
              f"| max abs tracking error hip / knee [rad] | {summary['tracking']['max_abs_error_rad'][0]:.5f} / "
              f"{summary['tracking']['max_abs_error_rad'][1]:.5f} |",
              f"| rms tracking error hip / knee [rad] | {summary['tracking']['rms_error_rad'][0]:.5f} / "

@@ -40,7 +40,8 @@ def _value(text: str) -> Any:
     return text
 
 
-TEXT_COLUMNS = ("point", "controller", "status", "error", "config_sha256")
+TEXT_COLUMNS = ("point", "controller", "trigger", "compensation", "edge_model", "link", "status", "error",
+                "config_sha256")
 
 
 def parse_row(row: dict[str, str]) -> dict[str, Any]:

@@ -1,5 +1,6 @@
 """`sea-hil sweep` outputs: DIR/pareto.png (transmissions vs max tracking error, Pareto front per
-link condition, TT references and the paper's points marked) and DIR/sweep.md."""
+link condition, TT references and the paper's points marked), DIR/methods.png (sea_hil/sweep/methods_output.py) and
+DIR/sweep.md."""
 from __future__ import annotations
 
 from pathlib import Path
@@ -14,7 +15,7 @@ from sea_hil.report.summary import PAPER  # noqa: E402
 from sea_hil.sweep.grid import pareto_front  # noqa: E402
 from sea_hil.sweep.seeds import fold_seeds  # noqa: E402
 
-LINK_KEYS = ("delay_ms", "jitter_ms", "loss")
+LINK_KEYS = ("delay_ms", "jitter_ms", "loss", "link")
 
 
 METRICS = {"max_err_rad": "max |tracking error| over both joints [rad]",
@@ -36,11 +37,14 @@ def fronts_by_link(rows: Sequence[dict[str, Any]],
     of one grid point under several seeds are folded into their mean first (`sea_hil.sweep.seeds`)."""
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in _plottable(fold_seeds(rows), metric):
-        groups.setdefault(tuple(r[k] for k in LINK_KEYS), []).append(r)
+        groups.setdefault(tuple(r.get(k, "") for k in LINK_KEYS), []).append(r)
     return {k: list(zip(g, pareto_front([_xy(r, metric) for r in g]))) for k, g in groups.items()}
 
 
-def _link_label(key: tuple) -> str:
+def link_label(key: tuple) -> str:
+    """A LINK_KEYS group's label: its link spec (`--links`), else the delay/jitter/loss axes' values."""
+    if len(key) > 3 and key[3]:
+        return str(key[3])
     return f"delay {key[0]:g} ms, jitter {key[1]:g} ms, loss {key[2]:g}"
 
 
@@ -73,7 +77,7 @@ def _panel(ax: Any, rows: Sequence[dict[str, Any]], metric: str, paper: bool) ->
         for (x, y), text in _front_labels(flagged, metric).items():
             ax.annotate(text, (x, y), textcoords="offset points", xytext=(-6, 5), ha="right", fontsize=7, color=c)
         front = sorted(_xy(r, metric) for r, f in flagged if f)
-        ax.plot([p[0] for p in front], [p[1] for p in front], "-", color=c, alpha=0.7, label=_link_label(key))
+        ax.plot([p[0] for p in front], [p[1] for p in front], "-", color=c, alpha=0.7, label=link_label(key))
     if paper:
         for mode, marker in (("tt", "X"), ("et", "*")):
             p = PAPER[mode]
@@ -112,7 +116,7 @@ def sweep_markdown(rows: Sequence[dict[str, Any]], command: str, wall_s: float, 
     ok = sum(r["status"] == "ok" for r in rows)
     lines = ["# sea-hil sweep", "", f"Command: `{command}`", "",
              f"{len(rows)} points ({ok} ok{', INTERRUPTED' if interrupted else ''}), mode {mode}, {jobs} parallel "
-             f"jobs, total wall time {wall_s:.1f} s. Figure: `pareto.png`; all numbers: `sweep.csv`; "
+             f"jobs, total wall time {wall_s:.1f} s. Figures: `pareto.png`, `methods.png`; all numbers: `sweep.csv`; "
              "per point: `points/<point>/`.", "",
              f"Paper (one walking cycle): TT {PAPER['tt']['transmissions']} transmissions, max error "
              f"~{PAPER['tt']['max_abs_error_rad']} rad; ET {PAPER['et']['transmissions']} transmissions, "
@@ -122,14 +126,16 @@ def sweep_markdown(rows: Sequence[dict[str, Any]], command: str, wall_s: float, 
         pts = ", ".join(f"{r['controller'].upper()}"
                         + (f" η={r['eta']:g} r={r['r']:g}" if r["controller"] == "et" else "")
                         + f" ({_xy(r)[0]:g} tx/cycle, {_xy(r)[1]:.4f} rad)" for r in front)
-        lines.append(f"- {_link_label(key)}: {pts}")
+        lines.append(f"- {link_label(key)}: {pts}")
     lines += ["", "## All points", "",
-              "| point | ctrl | eta | r | delay ms | jitter ms | loss | downlink msgs | max err hip / knee [rad] | "
-              "latency p99 [us] | wall [s] | status |", "|" + "---|" * 12]
+              "| point | ctrl | trigger / compensation / period ms | eta | r | delay ms | jitter ms | loss | "
+              "downlink msgs | total msgs | max err hip / knee [rad] | latency p99 [us] | wall [s] | status |", "|" + "---|" * 14]
     for r in rows:
         status = r["status"] + (f": {r['error']}" if r["error"] else "")
-        lines.append(f"| {r['point']} | {r['controller']} | {_fmt(r['eta'], 'g')} | {_fmt(r['r'], 'g')} | "
+        scheme = f"{r.get('trigger', '')} / {r.get('compensation', '')} / {_fmt(r.get('period_ms', ''), 'g')}"
+        lines.append(f"| {r['point']} | {r['controller']} | {scheme} | {_fmt(r['eta'], 'g')} | {_fmt(r['r'], 'g')} | "
                      f"{r['delay_ms']:g} | {r['jitter_ms']:g} | {r['loss']:g} | {r['downlink_msgs']} | "
+                     f"{r.get('total_msgs', '')} | "
                      f"{_fmt(r['max_err_hip_rad'], '.4f')} / {_fmt(r['max_err_knee_rad'], '.4f')} | "
                      f"{_fmt(r['latency_p99_us'], '.0f')} | {r['wall_s']:.1f} | {status.replace('|', '/')} |")
     return "\n".join(lines) + "\n"
@@ -137,7 +143,11 @@ def sweep_markdown(rows: Sequence[dict[str, Any]], command: str, wall_s: float, 
 
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], command: str, wall_s: float, jobs: int, mode: str,
                   interrupted: bool) -> None:
-    """pareto.png and sweep.md (sweep.csv is written by the runner as points finish, `sea_hil.sweep.csvlog`)."""
+    """pareto.png, methods.png and sweep.md (sweep.csv is written by the runner as points finish,
+    `sea_hil.sweep.csvlog`)."""
+    from sea_hil.sweep.methods_output import domination_markdown, methods_figure
     out.mkdir(parents=True, exist_ok=True)
     pareto_figure(out / "pareto.png", rows)
-    (out / "sweep.md").write_text(sweep_markdown(rows, command, wall_s, jobs, mode, interrupted), encoding="utf-8")
+    methods_figure(out / "methods.png", rows)
+    md = sweep_markdown(rows, command, wall_s, jobs, mode, interrupted)
+    (out / "sweep.md").write_text(md + "\n" + "\n".join(domination_markdown(rows)), encoding="utf-8")

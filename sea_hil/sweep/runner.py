@@ -19,7 +19,7 @@ from typing import Any, Callable
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.sweep.csvlog import CsvLog, finished, read_rows, write_csv
-from sea_hil.sweep.grid import GridPoint, csv_row, point_overrides
+from sea_hil.sweep.grid import GridPoint, csv_row, point_overrides, scheme_columns
 from sea_hil.sweep.task import PointSpec, run_point
 
 
@@ -62,7 +62,8 @@ def build_configs(points: list[GridPoint], opts: SweepOptions) -> dict[int, SeaH
 def point_spec(opts: SweepOptions, point: GridPoint, cfg: SeaHilConfig, stop_event: str = "") -> PointSpec:
     toml = config_to_toml(cfg)
     return PointSpec(point, opts.mode, opts.cycles, str(opts.out), toml, hashlib.sha256(toml.encode()).hexdigest(),
-                     cfg.link.seed, point_timeout_s(cfg, opts.cycles), stop_event)
+                     cfg.link.seed, point_timeout_s(cfg, opts.cycles), stop_event,
+                     tuple(scheme_columns(cfg).items()))
 
 
 def progress_line(done: int, total: int, elapsed_s: float, row: dict[str, Any], point: GridPoint) -> str:
@@ -103,7 +104,7 @@ class _Progress:
 
 def _cancelled(point: GridPoint, opts: SweepOptions, cfg: SeaHilConfig) -> dict[str, Any]:
     return csv_row(point, None, cycles=opts.cycles, seed=cfg.link.seed, wall_s=0.0, status="cancelled",
-                   error="sweep interrupted")
+                   error="sweep interrupted", scheme=scheme_columns(cfg))
 
 
 def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], None] = print,

@@ -8,11 +8,12 @@ from typing import Any
 
 from scipy import stats
 
-MEAN_COLUMNS = ("downlink_msgs", "max_err_rad", "rms_err_rad", "max_err_hip_rad", "max_err_knee_rad")
+MEAN_COLUMNS = ("downlink_msgs", "total_msgs", "max_err_rad", "rms_err_rad", "max_err_hip_rad", "max_err_knee_rad")
 
 
 def _group_key(row: dict[str, Any]) -> tuple:
-    return (row["controller"], row["eta"], row["r"], row["delay_ms"], row["jitter_ms"], row["loss"], row["cycles"])
+    return (row["controller"], row["eta"], row["r"], row["delay_ms"], row["jitter_ms"], row["loss"], row["cycles"],
+            *(row.get(k, "") for k in ("link", "trigger", "compensation", "edge_model", "period_ms")))
 
 
 def ci95_half_width(values: Sequence[float]) -> float:
@@ -38,7 +39,7 @@ def fold_seeds(rows: Sequence[dict[str, Any]]) -> list[dict[str, Any]]:
     for members in groups.values():
         folded = dict(members[0], n_seeds=len(members))
         for c in MEAN_COLUMNS:
-            vals = [float(m[c]) for m in members if m[c] != ""]
+            vals = [float(m[c]) for m in members if m.get(c, "") != ""]
             if vals:
                 folded[c] = sum(vals) / len(vals)
                 folded[f"{c}_ci95"] = ci95_half_width(vals)

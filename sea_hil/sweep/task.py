@@ -41,6 +41,7 @@ class PointSpec:
     seed: int
     timeout_s: float
     stop_event: str = ""    # name of a distributed.Event that asks running points to stop ("" = none)
+    scheme: tuple[tuple[str, Any], ...] = ()   # the row's effective scheme columns (grid.scheme_columns)
 
 
 def _error_line(log_path: Path, returncode: int) -> str:
@@ -92,7 +93,8 @@ def _run_offline(spec: PointSpec) -> dict[str, Any]:
     from sea_hil.offline.session_engine import run_engine
     from sea_hil.report.session_summary import session_summary
     t0 = time.monotonic()
-    row = functools.partial(csv_row, spec.point, cycles=spec.cycles, seed=spec.seed, config_sha256=spec.config_sha256)
+    row = functools.partial(csv_row, spec.point, cycles=spec.cycles, seed=spec.seed, config_sha256=spec.config_sha256,
+                            scheme=dict(spec.scheme))
     try:
         res = run_engine(config_from_dict(tomllib.loads(spec.config_toml)), spec.point.controller, spec.cycles)
     except SeaHilError as err:      # e.g. a diverged closed loop: the point's row says so, the sweep goes on
@@ -106,7 +108,7 @@ def _run_process(spec: PointSpec) -> dict[str, Any]:
 
     def row(summary: dict[str, Any] | None, status: str, error: str = "") -> dict[str, Any]:
         return csv_row(point, summary, cycles=spec.cycles, seed=spec.seed, wall_s=time.monotonic() - t0,
-                       status=status, error=error, config_sha256=spec.config_sha256)
+                       status=status, error=error, config_sha256=spec.config_sha256, scheme=dict(spec.scheme))
 
     stop = _stop_requested(spec.stop_event)
     if stop():
