@@ -10,9 +10,10 @@ import pytest
 
 from sea_hil.config import load_config
 from sea_hil.config.shorthand import scenario_config
+from sea_hil.controller.backstepping import InnerGains, backstepping_voltage
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.observer import OBSERVER_UNSTARTED, observer_step
-from sea_hil.mechanics import limb_params
+from sea_hil.mechanics import limb_params, sea_geometry
 from sea_hil.offline.closed_loop import SimResult, simulate
 from sea_hil.plant_emulator.dynamics import deflections, initial_state
 from sea_hil.plant_emulator.integrator import rk4_step
@@ -50,13 +51,18 @@ def test_disturbances_within_the_design_bound_are_rejected(kind: str, joints: tu
         assert len(runs["et"].event_t_s) <= 0.40 * len(runs["tt"].event_t_s)
 
 
-def test_the_2hz_case_needs_the_compensation_rate() -> None:
-    """Both joints at 2 Hz with the compensating deflection held like v_x(t_i) (the rate term of Eq. 27 removed,
-    compensation "inner" + the deflection: what the rate feed-forward is for) is not enough: 'inner' alone leaves
-    the knee far off (the outer SMC has to reject d), 'full' meets the bound (test above)."""
-    r = _sim("hip=sine:0.5Nm@2Hz,knee=sine:0.05Nm@2Hz", mode="tt",
-             controller={"disturbance_compensation": "inner"})
-    assert _max_err(r) > 2 * BOUND_RAD
+def test_the_compensating_deflection_rate_enters_eq27_and_its_derivative() -> None:
+    """'full': c = d_hat / (k a) is not held, so Eq. 27 gets c' (through kp2 in Eq. 31) and v1' gets kp1 c':
+    at rest, a torque rate r changes the voltage by -(kp1 + kp2) r / (k a); 'inner' and 'off' ignore it."""
+    p = limb_params(load_config().plant)
+    m = (0.05, 0.5, 0.0, 0.0, 1e-4, 2e-4, 0.0, 0.0)
+    _, _, a1, a2, _, _ = sea_geometry(0.05, 0.5, p)
+    for comp, expect in ((2, 1.0), (1, 0.0), (0, 0.0)):
+        gains = InnerGains(60.0, 100.0, 0.0, comp, 400.0)
+        base = backstepping_voltage(m, (1e-4, 1e-4), (0.0, 0.0), p, gains, (0.1, 0.01, 0.0, 0.0))
+        rate = backstepping_voltage(m, (1e-4, 1e-4), (0.0, 0.0), p, gains, (0.1, 0.01, 3.0, -0.5))
+        assert rate[0] - base[0] == pytest.approx(-expect * 160.0 * 3.0 / (p.k1 * a1), rel=1e-9, abs=1e-12)
+        assert rate[1] - base[1] == pytest.approx(expect * 160.0 * 0.5 / (p.k2 * a2), rel=1e-9, abs=1e-12)
 
 
 @pytest.mark.parametrize("group", ["mass", "inertia", "stiffness"])
