@@ -8,16 +8,20 @@ w = 1 (the paper) makes it ~1e4-1e5 times too large for these units.
 Disturbance compensation (docs/deviations.md section 10; `controller.disturbance_compensation`): the joint
 acceleration f_x + g_x z1 inside F_R (f_2 of Eq. 28/31) has no disturbance, so a torque d biases the deflection
 dynamics by a M^-1 d, which the loop turns into a deflection error ~ a M^-1 d / (kp1 kp2), i.e. a joint torque error
-~ k a^2 M^-1 d / (kp1 kp2) (about 6 d at the knee). With the observer's d_hat (controller/observer.py), 'inner' adds
-M^-1 d_hat to that acceleration and 'full' also adds the deflection d_hat / (k a) to v_x, which cancels d at the
-joint, so the outer SMC sees the nominal plant. 'off' (compensation = 0) is the paper's law, computed exactly as
-before.
+~ k a^2 M^-1 d / (kp1 kp2) (about 6 d at the knee). With the observer's estimate (controller/observer.py), 'inner' adds
+M^-1 d_hat to that acceleration; 'full' also adds the deflection c = d_hat / (k a) to v_x, which cancels d at the
+joint, so the outer SMC sees the nominal plant. c is not held like v_x(t_i): Eq. 27's vdot_x term carries the
+observer's rate c', and so does v1' (kp1 c'), so the deflection loop tracks c without most of its own lag (kp1, kp2
+poles at 60 and 100 rad/s: 0.34 rad at 2 Hz). c'' (the observer's w0^3 e) is left out of v1': it gains little and
+saturates the drive under stepwise (held-noise) torques. 'off' (compensation = 0) is the paper's law, computed
+exactly as before.
 """
 from __future__ import annotations
 
 import math
 from typing import NamedTuple
 
+from sea_hil.controller.observer import Estimate
 from sea_hil.mechanics import LimbParams, fx_gx, mass_matrix, sea_geometry, solve_m
 
 Measurement = tuple[float, float, float, float, float, float, float, float]
@@ -25,6 +29,7 @@ Measurement = tuple[float, float, float, float, float, float, float, float]
 
 _FD_STEP_S = 1e-4  # finite-difference horizon for g_x_dot along the current joint velocity
 COMPENSATION = {"off": 0, "inner": 1, "full": 2}
+NO_ESTIMATE: Estimate = (0.0, 0.0, 0.0, 0.0)
 
 
 class InnerGains(NamedTuple):
@@ -58,10 +63,9 @@ def _cross(g: tuple[float, float, float, float], s: tuple[float, float]) -> tupl
 
 
 def backstepping_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, float], p: LimbParams,
-                         gains: InnerGains, d_hat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)
-                         ) -> tuple[float, float]:
-    """Eq. 27 and 31 (unsaturated U_v in volts). d_hat = (d1, d2, d1_dot, d2_dot), the observer's lumped joint
-    torques (N m) and their rates, is used only when gains.compensation > 0."""
+                         gains: InnerGains, d_hat: Estimate = NO_ESTIMATE) -> tuple[float, float]:
+    """Eq. 27 and 31 (unsaturated U_v in volts). d_hat = (d1, d2, d1', d2'), the observer's lumped joint torques
+    (N m) and their rates, is used only when gains.compensation > 0."""
     q1, q2, w1, w2, z11, z12, rd1, rd2 = m
     _, _, a1, a2, a1p, a2p = sea_geometry(q1, q2, p)
     f1, f2, g = fx_gx(q1, q2, w1, w2, a1, a2, p)
@@ -78,6 +82,10 @@ def backstepping_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float
         if gains.compensation > 1:  # extra deflection c = d_hat / (k a): its spring torque -k a c cancels d_hat
             e11 += d_hat[0] / (p.k1 * a1)
             e12 += d_hat[1] / (p.k2 * a2)
+    cr1 = cr2 = 0.0  # rate of the compensating deflection (compensation 2)
+    if gains.compensation > 1:
+        cr1 = _compensation_rate(d_hat[0], d_hat[2], p.k1, a1, a1p * w1)
+        cr2 = _compensation_rate(d_hat[1], d_hat[3], p.k2, a2, a2p * w2)
     fr1, fr2 = a1 * acc1 + a1p * w1 * w1, a2 * acc2 + a2p * w2 * w2
     if gains.w != 0.0:
         c1, c2 = _cross(g, s)
@@ -86,14 +94,19 @@ def backstepping_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float
         c1, c2, cd1, cd2 = gains.w * c1, gains.w * c2, gains.w * cd1, gains.w * cd2
     else:
         c1 = c2 = cd1 = cd2 = 0.0
-    v11 = gains.kp1 * e11 - c1          # Eq. 27 with vdot_x(t_i) = 0 (held setpoint)
-    v12 = gains.kp1 * e12 - c2
-    v1d1 = -gains.kp1 * z21 - cd1       # time derivative of v1 (s held between events)
-    v1d2 = -gains.kp1 * z22 - cd2
+    v11 = gains.kp1 * e11 + cr1 - c1    # Eq. 27: vdot_x(t_i) = 0 (held setpoint), the compensation's rate cr
+    v12 = gains.kp1 * e12 + cr2 - c2
+    v1d1 = gains.kp1 * (cr1 - z21) - cd1   # time derivative of v1 (s held; the c'' term left out, see above)
+    v1d2 = gains.kp1 * (cr2 - z22) - cd2
     cn = p.nut_damping
     u1 = fr1 + cn * rd1 - gains.kp2 * (v11 - z21) - v1d1 - e11   # Eq. 31 with g2 = -1
     u2 = fr2 + cn * rd2 - gains.kp2 * (v12 - z22) - v1d2 - e12
     return u1, u2
+
+
+def _compensation_rate(d: float, d_dot: float, k: float, a: float, a_dot: float) -> float:
+    """c' of the compensating deflection c = d / (k a) along the joint motion (a_dot = a' omega)."""
+    return d_dot / (k * a) - d * a_dot / (k * a * a)
 
 
 def _g_dot(q1: float, q2: float, w1: float, w2: float, p: LimbParams) -> tuple[float, float, float, float]:

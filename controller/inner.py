@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import logging
 
-from sea_hil.controller.backstepping import (COMPENSATION, InnerGains, Measurement, backstepping_voltage,
-                                             cross_term_weight)
-from sea_hil.controller.observer import OBSERVER_UNSTARTED, ObserverState, observer_step
+from sea_hil.controller.backstepping import (COMPENSATION, NO_ESTIMATE, InnerGains, Measurement,
+                                             backstepping_voltage, cross_term_weight)
+from sea_hil.controller.observer import OBSERVER_UNSTARTED, Estimate, ObserverState, observer_step
 from sea_hil.config import SeaHilConfig
 from sea_hil.mechanics import LimbParams
 
@@ -19,7 +19,7 @@ def _sat(v: float, lim: float) -> float:
 
 def limited_voltage(m: Measurement, vx: tuple[float, float], s: tuple[float, float], p: LimbParams,
                     gains: InnerGains, limit_v: float,
-                    d_hat: tuple[float, float, float, float] = (0.0, 0.0, 0.0, 0.0)) -> tuple[float, float, bool]:
+                    d_hat: Estimate = NO_ESTIMATE) -> tuple[float, float, bool]:
     """(u1, u2, saturated): backstepping voltages clipped to +-limit_v; a NaN (degenerate state) commands nothing.
 
     Plain float code: the offline simulation also compiles it with numba (sea_hil/offline/closed_loop.py)."""
@@ -38,12 +38,11 @@ def inner_step(m: Measurement, vx: tuple[float, float], s: tuple[float, float], 
     Returns (u1, u2, saturated, new observer state). Plain float code (compiled offline with numba)."""
     v = (m[4], m[5]) if hold_measured else vx
     if gains.compensation == 0:
-        u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v, (0.0, 0.0, 0.0, 0.0))
+        u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v, NO_ESTIMATE)
         return u1, u2, saturated, obs
-    obs = observer_step(m, obs, p, gains.observer_rad_s, dt_s)
-    d_hat = (obs[2], obs[3], obs[4], obs[5])
+    obs, d_hat = observer_step(m, obs, p, gains.observer_rad_s, dt_s)
     if hold_measured:
-        d_hat = (0.0, 0.0, 0.0, 0.0)
+        d_hat = NO_ESTIMATE
     u1, u2, saturated = limited_voltage(m, v, s, p, gains, limit_v, d_hat)
     return u1, u2, saturated, obs
 

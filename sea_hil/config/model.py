@@ -118,8 +118,10 @@ class ControllerConfig(_Frozen):
     cross_term_bandwidth_rad_s: float = Field(30.0, gt=0, description="omega_c of the normalized Eq. 27 cross term")
     disturbance_compensation: Literal["full", "inner", "off"] = Field(
         "full", description="edge disturbance observer: 'full' = in the inner loop's F_R (Eq. 28) and as an "
-        "extra deflection on v_x; 'inner' = F_R only; 'off' = the paper's Eq. 24-31 (docs/deviations.md 10)")
-    observer_bandwidth_rad_s: float = Field(400.0, gt=0, description="pole of the momentum disturbance observer")
+        "extra deflection on v_x with its rate in Eq. 27; 'inner' = F_R only; 'off' = the paper's Eq. 24-31 "
+        "(docs/deviations.md 10)")
+    observer_bandwidth_rad_s: float = Field(400.0, gt=0, description="triple pole of the momentum disturbance "
+                                            "observer (third order: the torque and its rate)")
     compensation: Literal["none", "predict"] = Field(
         "none", description="link-delay compensation: 'predict' = v_x for the state predicted at the instant the "
         "setpoint acts (issue 16, docs/et-over-links.md); 'none' = the paper's (v_x for the received state)")
