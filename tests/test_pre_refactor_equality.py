@@ -43,7 +43,18 @@ OLD_EDGE_TIMING = ("apply_latency_us_max", "apply_latency_us_p50", "apply_latenc
 # old edge /stats key -> its current name (add an entry when a counter is renamed; never drop one)
 EDGE_RENAMED: dict[str, str] = {}
 # edge counters added since the fixtures were recorded, with the value the paper's path must give (never drop one)
-EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0}   # issue 19: the edge's setpoint envelope
+EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0,   # issue 19: the edge's setpoint envelope
+                                 "epoch_old": 0, "epoch_foreign": 0}  # issue 19: session epochs (no replays here)
+# The one documented difference: payload version 2 (issue 19) added the 8-byte session epoch to every payload header,
+# so every payload byte count is 8 bytes per message larger (docs/deviations.md, "Session epoch"). Only these byte
+# fields are rewritten, each checked to be exactly its message count times the old size first; message counts and
+# every other field are compared as recorded.
+V1_SIZE = {MsgType.STATE: 88, MsgType.SETPOINT: 53}
+V1_BYTES = (("transmissions", "uplink_msgs", "uplink_bytes", MsgType.STATE),
+            ("transmissions", "downlink_msgs", "downlink_bytes", MsgType.SETPOINT),
+            ("lead_in", "uplink_msgs", "uplink_bytes", MsgType.STATE),
+            ("lead_in", "downlink_msgs", "downlink_bytes", MsgType.SETPOINT),
+            ("edge", "uplink_msgs", "uplink_bytes", MsgType.STATE))
 SAMPLE_PERIOD_S = 0.01
 
 
@@ -82,6 +93,10 @@ def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], s
     new = {k: v for k, v in old.items() if k not in OLD_TIMING}
     new["edge"] = {EDGE_RENAMED.get(k, k): v for k, v in old["edge"].items() if k not in OLD_EDGE_TIMING}
     new["edge"].update(EDGE_ADDED)
+    for block, msgs, nbytes, mtype in V1_BYTES:
+        part = new[block] = dict(new[block])
+        assert part[nbytes] == part[msgs] * V1_SIZE[mtype], (block, nbytes)
+        part[nbytes] = part[msgs] * PAYLOAD_SIZE[mtype]
     edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
     return new, {*OLD_TIMING, "edge"}, edge_timing
 
