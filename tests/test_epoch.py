@@ -6,11 +6,11 @@ from __future__ import annotations
 import logging
 import struct
 import threading
-import time
 import uuid
-from collections.abc import Callable
 
 import zenoh
+
+from faults_helpers import wait_for
 
 from sea_hil.config import load_config
 from sea_hil.controller.edge import EdgeNode
@@ -41,16 +41,6 @@ class Capture:
             return len(self.data[key])
 
 
-def wait_until(cond: Callable[[], bool], timeout_s: float = 10.0) -> bool:
-    deadline = time.monotonic() + timeout_s
-    tick = threading.Event()
-    while not cond():
-        if time.monotonic() > deadline:
-            return False
-        tick.wait(0.002)
-    return True
-
-
 def feedback(k: int) -> Feedback:
     return Feedback(1, k & 0xFFFF, (k * 10_000) & 0xFFFF, (0.05 + 1e-4 * k, 0.28), (0.01, 0.0), (0.0, 0.0),
                     (0.0, 0.0))
@@ -77,7 +67,7 @@ def test_replay_of_an_earlier_session_is_rejected_and_counted() -> None:
         keys = edge1.keys
         cap = Capture(session, [keys.state, keys.setpoint])
         drive(edge1, ctrl1, range(1, SAMPLES + 1))
-        assert wait_until(lambda: cap.count(keys.setpoint) == SAMPLES and cap.count(keys.state) == SAMPLES)
+        assert wait_for(lambda: cap.count(keys.setpoint) == SAMPLES and cap.count(keys.state) == SAMPLES, 10.0)
         first = (edge1.publisher.epoch, ctrl1.epoch)
     with SessionBuilder(cfg) as b:                       # session 2: new nodes, new epochs
         session = b.zenoh()
@@ -85,12 +75,12 @@ def test_replay_of_an_earlier_session_is_rejected_and_counted() -> None:
         ctrl = b.controller(session, "tt")
         assert 0 not in (edge.publisher.epoch, ctrl.epoch) and {edge.publisher.epoch, ctrl.epoch}.isdisjoint(first)
         drive(edge, ctrl, range(1, 11))
-        assert wait_until(lambda: edge.intake.sp_seq.accepted == 10)    # the edge learned the controller's epoch
+        assert wait_for(lambda: edge.intake.sp_seq.accepted == 10, 10.0)    # the edge learned the controller's epoch
         states, setpoints = ctrl.states, edge.intake.sp_seq.accepted
         replay = session.declare_publisher(keys.setpoint)
         for data in cap.data[keys.setpoint]:             # session 1's setpoints 1..100, re-published
             replay.put(data)
-        assert wait_until(lambda: edge.stats_dict()["epoch_foreign"] == SAMPLES), edge.stats_dict()
+        assert wait_for(lambda: edge.stats_dict()["epoch_foreign"] == SAMPLES, 10.0), edge.stats_dict()
         for data in cap.data[keys.state]:                # session 1's states 1..100 into the controller's intake
             ctrl.handle(data, now_ns=11 * 10 * MS)
         st, cs = edge.stats_dict(), ctrl.stats_dict()

@@ -21,6 +21,8 @@ from typing import Any
 
 import pytest
 
+from faults_helpers import wait_for
+
 from sea_hil.config import load_config
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.protocol.keys import Keys
@@ -36,15 +38,6 @@ SHORT = {"trajectory": {"period_s": 1.0, "lead_in_s": 0.25},
          "safety": {"drive": {"enabled": False}, "setpoint": {"enabled": False}}}
 REPLAYED = ("transmissions", "tracking", "lead_in", "events_by_reason", "inter_event_s", "duration_s",
             "uplink_outside_msgs", "max_abs_voltage_v")
-
-
-def wait_until(cond: Any, timeout_s: float) -> bool:
-    deadline, tick = time.monotonic() + timeout_s, threading.Event()
-    while not cond():
-        if time.monotonic() > deadline:
-            return False
-        tick.wait(0.01)
-    return True
 
 
 class Intruder:
@@ -81,7 +74,7 @@ class Intruder:
         try:
             sub = intruder.declare_subscriber(keys.state, self._on_state)
             sp_pub, v_pub = intruder.declare_publisher(keys.setpoint), intruder.declare_publisher(keys.voltage)
-            self.linked = wait_until(lambda: bool(list(intruder.info.peers_zid())), 20.0)
+            self.linked = wait_for(lambda: bool(list(intruder.info.peers_zid())), 20.0) is not None
             tick = threading.Event()
             while not self.stop.is_set():
                 epoch, last = self.edge.intake.epoch.current, self.edge.intake.sp_seq.last
