@@ -88,15 +88,24 @@ def lockstep_runs(tmp_path_factory: pytest.TempPathFactory) -> dict[tuple[str, s
         return {run: fut.result() for run, fut in futures.items()}
 
 
+def as_payload_v2(old: dict[str, Any]) -> dict[str, Any]:
+    """A summary recorded with payload version 1 with its byte fields (`V1_BYTES`, the blocks it has) as version 2
+    gives them; each is first checked to be exactly its message count times the version-1 size."""
+    new = dict(old)
+    for block, msgs, nbytes, mtype in V1_BYTES:
+        if block in new:
+            part = new[block] = dict(new[block])
+            assert part[nbytes] == part[msgs] * V1_SIZE[mtype], (block, nbytes)
+            part[nbytes] = part[msgs] * PAYLOAD_SIZE[mtype]
+    return new
+
+
 def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]:
     """An old session summary in the current layout: (deterministic part, timing keys, timing.edge keys)."""
     new = {k: v for k, v in old.items() if k not in OLD_TIMING}
     new["edge"] = {EDGE_RENAMED.get(k, k): v for k, v in old["edge"].items() if k not in OLD_EDGE_TIMING}
     new["edge"].update(EDGE_ADDED)
-    for block, msgs, nbytes, mtype in V1_BYTES:
-        part = new[block] = dict(new[block])
-        assert part[nbytes] == part[msgs] * V1_SIZE[mtype], (block, nbytes)
-        part[nbytes] = part[msgs] * PAYLOAD_SIZE[mtype]
+    new = as_payload_v2(new)
     edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
     return new, {*OLD_TIMING, "edge"}, edge_timing
 

@@ -33,7 +33,8 @@ from sea_hil.report.session_summary import session_summary
 from sea_hil.session.run import RunOptions, run_session
 
 pytestmark = pytest.mark.slow
-# a 1 s gait after a 0.25 s lead-in; the safety envelope is derived for the default 10 s gait: off (tests/test_session.py)
+# a 1 s gait after a 0.25 s lead-in; the safety envelope is derived for the default 10 s gait: off
+# (tests/test_session.py)
 SHORT = {"trajectory": {"period_s": 1.0, "lead_in_s": 0.25},
          "safety": {"drive": {"enabled": False}, "setpoint": {"enabled": False}}}
 REPLAYED = ("transmissions", "tracking", "lead_in", "events_by_reason", "inter_event_s", "duration_s",

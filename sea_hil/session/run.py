@@ -93,7 +93,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
             child_path = opts.out / "controller.toml"
-            child_path.write_text(config_to_toml(controller_config(_without_live(child_cfg), listen[0])), encoding="utf-8")
+            child = controller_config(_without_live(child_cfg), listen[0])
+            child_path.write_text(config_to_toml(child), encoding="utf-8")
             proc = subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL)
         b.callback(end_process, proc)
         _host_nodes(b, opts, session, proc, t0, log)
