@@ -1,6 +1,6 @@
 """Figure 2: Zenoh hop latency through the project's publish/decode path vs a raw zenoh-python ping-pong.
 
-Run: python bench/bench_zenoh_hop.py [--runs 5] [--pings 2000] [--json OUT]
+Run: python bench/bench_zenoh_hop.py [--runs 5] [--pings 2000] [--secure] [--json OUT]
 This process listens on a free loopback TCP port; an echo child process (this script with `--echo`) connects.
 One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
@@ -8,13 +8,17 @@ One hop = round trip / 2, on this process's monotonic clock, in three modes, int
   project    the real path: encode(StatePayload) + `sea_hil.protocol.zsession.publisher` (express, REAL_TIME, DROP) here;
              the echo receives like `controller/remote.py` (`LatestSubscriber`, newest-only slot), decodes,
              encodes a SetpointPayload and publishes it; this side receives with blocking recv() and decodes;
-  blocking   the project's payloads and publishers, but the echo uses a FIFO with blocking recv().
+  blocking   the project's payloads and publishers, but the echo uses a FIFO with blocking recv();
+  tls        (`--secure` only, figure 2s) `project` over the secure profile (docs/security.md): mutual TLS with
+             throwaway certificates, the ACL on both sides, pinging on the limb's `state` key as the edge's CN and
+             answering on `setpoint` as the controller's CN.
 """
 from __future__ import annotations
 
 import argparse
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from pathlib import Path
@@ -24,14 +28,33 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 import zenoh  # noqa: E402
 
 from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-from sea_hil.protocol.payloads import (PayloadCounters, SetpointPayload, StatePayload, TriggerReason,  # noqa: E402
-                               encode)
+from sea_hil.commands.certs import make_certs  # noqa: E402
+from sea_hil.config import ZenohConfig  # noqa: E402
+from sea_hil.protocol.keys import Keys  # noqa: E402
+from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload,  # noqa: E402
+                                       StatePayload, TriggerReason, encode)
+from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
 from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.protocol.zsession import LatestSubscriber, free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")
 PING, PONG = "bench/hop/ping", "bench/hop/pong"
-PING_BYTES, PONG_BYTES = 88, 53
+PING_BYTES, PONG_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
+_LIMB = Keys.make("sea", "limb1")
+
+
+def _keys(mode: str) -> tuple[str, str]:
+    return (_LIMB.state, _LIMB.setpoint) if mode == "tls" else (PING, PONG)
+
+
+def _config(mode: str, certs: Path | None, node: str, **endpoints: list[str]) -> zenoh.Config:
+    """Plain, or (tls) mutual TLS + ACL as `node` with the certificates in `certs`."""
+    if mode != "tls" or certs is None:
+        return make_config(**endpoints)
+    z = ZenohConfig.model_validate({"tls": {"enabled": True, "root_ca_certificate": str(certs / "ca.pem"),
+                                            "certificate": str(certs / f"{node}.pem"),
+                                            "private_key": str(certs / f"{node}.key")}, "acl": {"enabled": True}})
+    return make_config(settings=security_settings(z), **endpoints)
 SENTINEL = b"timeout"
 
 
@@ -40,20 +63,21 @@ def _state(seq: int) -> bytes:
                                (0.0, 0.0)))
 
 
-def echo(endpoint: str, mode: str) -> int:
-    """Child: answer every ping on PONG until terminated."""
-    session = open_session(make_config(connect=[endpoint]))
+def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
+    """Child: answer every ping on the pong key until terminated."""
+    session = open_session(_config(mode, certs, "controller", connect=[endpoint]))
     counters = PayloadCounters()
+    ping, pong = _keys(mode)
     if mode == "raw":
-        sub, pub = session.declare_subscriber(PING), session.declare_publisher(PONG)
-    elif mode == "project":
-        sub, pub = LatestSubscriber(session, PING), publisher(session, PONG)
+        sub, pub = session.declare_subscriber(ping), session.declare_publisher(pong)
+    elif mode in ("project", "tls"):
+        sub, pub = LatestSubscriber(session, ping), publisher(session, pong)
     else:
-        sub, pub = session.declare_subscriber(PING, zenoh.handlers.FifoChannel(1024)), publisher(session, PONG)
+        sub, pub = session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)), publisher(session, pong)
     print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
     while True:
-        sample = sub.recv(1.0) if mode == "project" else sub.recv()
+        sample = sub.recv(1.0) if mode in ("project", "tls") else sub.recv()
         if sample is None:
             continue
         data = sample.payload.to_bytes()
@@ -69,9 +93,9 @@ def echo(endpoint: str, mode: str) -> int:
 class _Watchdog:
     """Unblocks the pinger's blocking recv() with a local SENTINEL put when no pong came for `timeout_s`."""
 
-    def __init__(self, session: zenoh.Session, timeout_s: float = 1.0) -> None:
+    def __init__(self, session: zenoh.Session, timeout_s: float = 1.0, pong: str = PONG) -> None:
         self.progress_ns = time.monotonic_ns()
-        self._pub = session.declare_publisher(PONG)
+        self._pub = session.declare_publisher(pong)
         self._stop = threading.Event()
         self._timeout_ns = int(timeout_s * 1e9)
         self._thread = threading.Thread(target=self._run, daemon=True)
@@ -109,24 +133,27 @@ def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: zenoh.Subscriber,
             return (t1 - t0) // 2
 
 
-def batch(mode: str, pings: int) -> tuple[list[int], int]:
+def batch(mode: str, pings: int, certs: Path | None = None) -> tuple[list[int], int]:
     """One echo child in `mode`: warm up, then `pings` timed ping-pongs. Returns (hop ns list, lost count)."""
-    endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    session = open_session(make_config(listen=[endpoint]))
-    proc = subprocess.Popen([sys.executable, __file__, "--echo", endpoint, "--mode", mode], stdout=subprocess.PIPE)
+    endpoint = f"{'tls' if mode == 'tls' else 'tcp'}/127.0.0.1:{free_tcp_port()}"
+    session = open_session(_config(mode, certs, "edge", listen=[endpoint]))
+    cert_args = ["--certs", str(certs)] if mode == "tls" and certs is not None else []
+    proc = subprocess.Popen([sys.executable, __file__, "--echo", endpoint, "--mode", mode, *cert_args],
+                            stdout=subprocess.PIPE)
+    ping, pong = _keys(mode)
     dog = None
     try:
         wait_ready(proc)
-        pub = session.declare_publisher(PING) if mode == "raw" else publisher(session, PING)
-        sub = session.declare_subscriber(PING.replace("ping", "pong"), zenoh.handlers.FifoChannel(1024))
+        pub = session.declare_publisher(ping) if mode == "raw" else publisher(session, ping)
+        sub = session.declare_subscriber(pong, zenoh.handlers.FifoChannel(1024))
         counters = PayloadCounters()
-        dog = _Watchdog(session, timeout_s=0.05)   # warm-up: retry every ~0.1 s until the echo answers
+        dog = _Watchdog(session, timeout_s=0.05, pong=pong)   # warm-up: retry every ~0.1 s until the echo answers
         deadline = time.monotonic() + 20.0
         while _ping_once(mode, 0, pub, sub, counters, dog) is None:
             if time.monotonic() > deadline:
                 raise SeaHilError(f"no answer from the {mode} echo")
         dog.close()
-        dog = _Watchdog(session, timeout_s=1.0)
+        dog = _Watchdog(session, timeout_s=1.0, pong=pong)
         hops, lost = [], 0
         for seq in range(1, pings + 1):
             h = _ping_once(mode, seq, pub, sub, counters, dog)
@@ -146,18 +173,28 @@ def main(argv: list[str] | None = None) -> int:
     ap = bench_args(__doc__.splitlines()[0], runs=5)
     ap.add_argument("--pings", type=int, default=2000, help="timed ping-pongs per mode and run (default 2000)")
     ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
-    ap.add_argument("--mode", choices=MODES, default="raw", help=argparse.SUPPRESS)
+    ap.add_argument("--mode", choices=(*MODES, "tls"), default="raw", help=argparse.SUPPRESS)
+    ap.add_argument("--certs", type=Path, help=argparse.SUPPRESS)
+    ap.add_argument("--secure", action="store_true", help="also the project path over mutual TLS + ACL (figure 2s)")
     args = ap.parse_args(argv)
     if args.echo:
-        return echo(args.echo, args.mode)
+        return echo(args.echo, args.mode, args.certs)
+    with tempfile.TemporaryDirectory(prefix="bench-hop-") as tmp:
+        certs = Path(tmp)
+        if args.secure:
+            make_certs(certs, ("edge", "controller"))
+        return _measure(args, (*MODES, "tls") if args.secure else MODES, certs)
+
+
+def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> int:
     pings = 50 if args.quick else args.pings
     runs = 1 if args.quick else args.runs
-    pooled: dict[str, list[int]] = {m: [] for m in MODES}
-    medians: dict[str, list[float]] = {m: [] for m in MODES}
-    lost: dict[str, int] = {m: 0 for m in MODES}
+    pooled: dict[str, list[int]] = {m: [] for m in modes}
+    medians: dict[str, list[float]] = {m: [] for m in modes}
+    lost: dict[str, int] = {m: 0 for m in modes}
     for i in range(runs):
-        for mode in MODES:
-            hops, n_lost = batch(mode, pings)
+        for mode in modes:
+            hops, n_lost = batch(mode, pings, certs)
             pooled[mode] += hops
             medians[mode].append(pct(hops, 50) / 1e3)
             lost[mode] += n_lost
@@ -165,7 +202,7 @@ def main(argv: list[str] | None = None) -> int:
                   f"  lost {n_lost}", flush=True)
     details = [{"mode": m, "hops": len(pooled[m]), "lost": lost[m], "median_us": pct(pooled[m], 50) / 1e3,
                 "p99_us": pct(pooled[m], 99) / 1e3, "min_us": min(pooled[m], default=0) / 1e3,
-                "max_us": max(pooled[m], default=0) / 1e3} for m in MODES]
+                "max_us": max(pooled[m], default=0) / 1e3} for m in modes]
     base = pct(medians["raw"], 50)
     rec = record("2", "Zenoh hop latency, project path vs raw zenoh-python", runs=runs,
                  metric=f"one-way hop (round trip / 2) on loopback, median per run of {pings} pings; p99 pooled",
@@ -178,7 +215,17 @@ def main(argv: list[str] | None = None) -> int:
     rec["ratio"] = pct(ratios, 50)   # per-run ratios: both modes of a run share the machine's state
     rec["notes"] += f" Ratio = median of the per-run ratios project/raw: {', '.join(f'{x:.2f}' for x in ratios)}."
     rec["goal_met"] = rec["ratio"] <= 1.3
-    emit([rec], args.json)
+    records = [rec]
+    if "tls" in modes:
+        tls = [t / p for t, p in zip(medians["tls"], medians["project"])]
+        sec = record("2s", "Zenoh hop latency over the secure profile (mTLS + ACL) vs the same path on TCP", runs=runs,
+                     metric=f"as figure 2, `tls` mode: median per run of {pings} pings; p99 pooled", unit="us",
+                     per_run=medians["tls"], p99=pct(pooled["tls"], 99) / 1e3, baseline=pct(medians["project"], 50),
+                     baseline_label="`project` mode on plain TCP (median of run medians)", details=details,
+                     notes="Ratio = median of the per-run ratios tls/project: " + ", ".join(f"{x:.2f}" for x in tls))
+        sec["ratio"] = pct(tls, 50)
+        records.append(sec)
+    emit(records, args.json)
     return 0
 
 

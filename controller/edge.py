@@ -36,6 +36,7 @@ from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_codec import FEEDBACK_PARTS, Feedback, FeedbackAssembler, Heartbeat, SeaCodec, unwrap_us
 from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.epoch import new_epoch
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import PayloadCounters
 from sea_hil.protocol.zsession import LinkedPublisher, publisher
@@ -69,7 +70,7 @@ class EdgeNode(Node):
         seed = cfg.link.seed
         self.publisher = StatePublisher(
             LinkedPublisher(publisher(session, self.keys.state), LinkEmulator(cfg.link.uplink, f"{seed}/up")),
-            self.counters)
+            self.counters, new_epoch())
         self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
                                      int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync,
                                      self.envelope)

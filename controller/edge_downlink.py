@@ -1,18 +1,19 @@
-"""The edge's setpoint intake: setpoint/voltage payloads from Zenoh are checked (malformed, wrong type, stale or
-duplicated seqs are counted and dropped; a controller restart is detected when the clock allows it), pass the
-downlink link emulator, and are applied when it releases them (`take`)."""
+"""The edge's setpoint intake: setpoint/voltage payloads from Zenoh are checked (malformed, wrong type, an old or
+foreign session epoch, stale or duplicated seqs are counted and dropped; a controller restart -- a new epoch -- is
+accepted when the clock allows it), pass the downlink link emulator, and are applied when it releases them (`take`)."""
 from __future__ import annotations
 
 import logging
 import time
 from typing import Any
 
+from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import (PayloadCounters, SequenceTracker, SeqVerdict, SetpointPayload,
-                                       VoltagePayload)
+from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SequenceTracker, SeqVerdict,
+                                       SetpointPayload, VoltagePayload)
 
 log = logging.getLogger("sea_hil.edge")
-SETPOINT_BYTES = 53
+SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]
 
 
 class SetpointIntake:
@@ -25,6 +26,7 @@ class SetpointIntake:
         self.sync = sync
         self.envelope = envelope                  # `EnvelopeGate` (controller/envelope.py) or None: admit all
         self.sp_seq = SequenceTracker()
+        self.epoch = PeerEpoch("controller", log)
         self.pending: DelayQueue[object] = DelayQueue()
         self.seen_setpoints: set[int] = set()
         self.last_rx_ns = 0                       # sample time of the newest accepted setpoint/voltage
@@ -39,10 +41,14 @@ class SetpointIntake:
         if not isinstance(p, (SetpointPayload, VoltagePayload)):
             self.counters.unexpected_payloads += 1
             return False
-        if self.sp_seq.feed(p.seq) is not SeqVerdict.NEW:
-            if not self._controller_restarted(p.seq, sample_t_ns):
-                self.counters.stale_setpoints += 1
-                return False
+        verdict = self.epoch.check(p.epoch, lambda: self._restart_allowed(p.seq, sample_t_ns))
+        if verdict is EpochVerdict.REJECTED:
+            return False
+        if verdict is EpochVerdict.RESTART:
+            self._controller_restarted(p.seq)
+        elif self.sp_seq.feed(p.seq) is not SeqVerdict.NEW:
+            self.counters.stale_setpoints += 1
+            return False
         self.seen_setpoints.add(p.seq)
         self.last_rx_ns = sample_t_ns
         if isinstance(p, SetpointPayload) and self.envelope is not None \
@@ -56,18 +62,18 @@ class SetpointIntake:
                 self.counters.latency.record((max(rx_ns - sent, 0) + max(at - sample_t_ns, 0)) * 1e-9)
         return True
 
-    def _controller_restarted(self, seq: int, sample_t_ns: int) -> bool:
-        """A not-newer seq starts a new setpoint stream only after the old one timed out (the driver is then in its
-        safe state) and only if it looks like a fresh sender (seq < the tracker window); counted."""
+    def _restart_allowed(self, seq: int, sample_t_ns: int) -> bool:
+        """A new controller epoch starts a new setpoint stream only after the old one timed out (the driver is then
+        in its safe state) and only if it looks like a fresh sender (seq < the tracker window)."""
         timed_out = sample_t_ns - self.last_rx_ns > self.timeout_ns
-        if not self.sync.restart_possible(timed_out) or seq >= self.sp_seq.window:
-            return False
+        return self.sync.restart_possible(timed_out) and seq < self.sp_seq.window
+
+    def _controller_restarted(self, seq: int) -> None:
         self.sp_seq.restart()
         self.sp_seq.feed(seq)
         self.seen_setpoints.clear()
         self.counters.controller_restarts += 1
         log.warning("setpoint stream restarted at seq %d (controller restart)", seq)
-        return True
 
     def fresh(self, now_ns: int) -> bool:
         return self.last_setpoint_ns is not None and now_ns - self.last_setpoint_ns <= self.timeout_ns

@@ -70,6 +70,7 @@ def edge_stats(edge: Any) -> dict[str, float]:
         "bus_errors": c.bus_errors,
         "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": edge.inner.saturated_steps,
         "seq_lost": sp_seq.lost, "seq_reordered": sp_seq.reordered, "seq_duplicates": sp_seq.duplicates,
+        **intake.epoch.as_dict(),
         "latency_count": lat["count"],
         "uplink_submitted": up.submitted, "uplink_mean_added_delay_s": up.mean_added_delay_s,
         "downlink_submitted": down.submitted, "downlink_mean_added_delay_s": down.mean_added_delay_s,

@@ -13,8 +13,9 @@ KEEP = 1000   # states remembered for latency bookkeeping
 
 
 class StatePublisher:
-    def __init__(self, uplink: LinkedPublisher, counters: Any) -> None:
+    def __init__(self, uplink: LinkedPublisher, counters: Any, epoch: int = 0) -> None:
         self.uplink = uplink
+        self.epoch = epoch                      # this edge's session epoch (sea_hil.protocol.epoch)
         self.counters = counters
         self.seq = 0
         self.sent_at: dict[int, int] = {}       # state seq -> wall time published
@@ -25,7 +26,7 @@ class StatePublisher:
         self.seq += 1
         t = time.monotonic_ns()
         data = encode(StatePayload(self.seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s, fb.delta_m,
-                                   fb.nut_vel_m_s))
+                                   fb.nut_vel_m_s, epoch=self.epoch))
         self.sent_at[self.seq] = t
         self.sent_at.pop(self.seq - KEEP, None)
         self.sampled_at[self.seq] = sample_t_ns

@@ -29,6 +29,7 @@ from sea_hil.config import SeaHilConfig
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.keys import Keys
 from sea_hil.controller.nominal import nominal_params
+from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
 from sea_hil.protocol.payloads import (PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
                                        VoltagePayload, encode)
 from sea_hil.protocol.zsession import publisher
@@ -61,6 +62,8 @@ class RemoteController(Node):
                                    congestion_control=zenoh.CongestionControl.BLOCK)
         self.payloads = PayloadCounters()
         self.seq = SequenceTracker()
+        self.epoch = new_epoch()                    # this controller's session epoch, in every payload it sends
+        self.edge_epoch = PeerEpoch("edge", log)    # the state stream's epoch, learned on first contact
         self.t0_ns: int | None = None
         self.setpoint_seq = 0
         self.states = 0
@@ -97,12 +100,18 @@ class RemoteController(Node):
             self.unexpected_payloads += 1
             return
         now_ns = time.monotonic_ns() if now_ns is None else now_ns
-        verdict = self.seq.feed(p.seq)
-        if self.sync.repeat_state(verdict, p.seq):
+        epoch = self.edge_epoch.check(p.epoch, lambda: self._restart_allowed(p, now_ns))
+        if epoch is EpochVerdict.REJECTED:
             return
-        if verdict is not SeqVerdict.NEW and not self._edge_restarted(p, now_ns):
-            self.ignored_states += 1
-            return
+        if epoch is EpochVerdict.RESTART:
+            self._edge_restarted(p)
+        else:
+            verdict = self.seq.feed(p.seq)
+            if self.sync.repeat_state(verdict, p.seq):
+                return
+            if verdict is not SeqVerdict.NEW:
+                self.ignored_states += 1
+                return
         self._last_state_wall_ns = now_ns
         if self.t0_ns is None:
             self.t0_ns = p.sample_t_ns + self.lead_in_ns
@@ -143,26 +152,29 @@ class RemoteController(Node):
             self.inner.hold(sp.deflection_m, sp.sliding)
             if self.inner_mode == "edge":
                 answer.append((self.sp_pub, encode(SetpointPayload(self.setpoint_seq, time.monotonic_ns(), p.seq,
-                                                                   sp.deflection_m, sp.sliding, sp.reason))))
+                                                                   sp.deflection_m, sp.sliding, sp.reason,
+                                                                   epoch=self.epoch))))
         if self.inner_mode == "remote":
             m = (*p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
             u = self.inner.voltage(m)  # type: ignore[arg-type]
             self.setpoint_seq += 1
-            answer.append((self.v_pub, encode(VoltagePayload(self.setpoint_seq, time.monotonic_ns(), p.seq, u))))
+            answer.append((self.v_pub, encode(VoltagePayload(self.setpoint_seq, time.monotonic_ns(), p.seq, u,
+                                                                epoch=self.epoch))))
         return answer, sp, ds
 
-    def _edge_restarted(self, p: StatePayload, now_ns: int) -> bool:
-        """A not-newer state seq starts a new state stream only when no state arrived for the restart gap and it
-        looks like a fresh sender (seq < tracker window); the trajectory then continues where it stopped."""
+    def _restart_allowed(self, p: StatePayload, now_ns: int) -> bool:
+        """A new edge epoch starts a new state stream only when no state arrived for the restart gap and it looks
+        like a fresh sender (seq < tracker window)."""
         silent = self._last_state_wall_ns is not None and now_ns - self._last_state_wall_ns > self.restart_gap_ns
-        if not self.sync.restart_possible(silent) or p.seq >= self.seq.window:
-            return False
+        return self.sync.restart_possible(silent) and p.seq < self.seq.window
+
+    def _edge_restarted(self, p: StatePayload) -> None:
+        """The edge restarted: a new state stream; the trajectory continues where it stopped."""
         self.seq.restart()
         self.seq.feed(p.seq)
         self.t0_ns = p.sample_t_ns - self._last_t_ns
         self.edge_restarts += 1
         log.warning("state stream restarted at seq %d (edge restart)", p.seq)
-        return True
 
     def _stats(self) -> dict[str, object]:
         pc = self.payloads.as_dict()
@@ -171,4 +183,4 @@ class RemoteController(Node):
                 **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
-                **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}}
+                **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}, **self.edge_epoch.as_dict()}

@@ -1,12 +1,13 @@
 """Versioned binary Zenoh payloads (little-endian `struct`): layouts, encoder, decoder and decode counters.
 
-Common 16-byte header: magic `b"SH"` (2 bytes), version (u8), msg type (u8), seq (u32), t_ns (u64, monotonic ns of
-the sender at send time). Bodies (floats are float64 so lockstep runs are bit-reproducible):
+Common 24-byte header: magic `b"SH"` (2 bytes), version (u8), msg type (u8), seq (u32), t_ns (u64, monotonic ns of
+the sender at send time), epoch (u64, the sender's session epoch: `sea_hil.protocol.epoch`). Bodies (floats are
+float64 so lockstep runs are bit-reproducible):
 
-- STATE    (1): sample_t_ns u64, theta[2], omega[2], delta[2], nut_vel[2] f64            -> 88 bytes total
-- SETPOINT (2): state_seq u32, deflection_m[2] f64, sliding[2] f64, reason u8           -> 53 bytes total
-- VOLTAGE  (3): state_seq u32, voltage_v[2] f64                                          -> 36 bytes total
-- ACK      (4): state_seq u32, setpoint_seq u32, sent u8 (lockstep: controller handled state_seq) -> 25 bytes
+- STATE    (1): sample_t_ns u64, theta[2], omega[2], delta[2], nut_vel[2] f64            -> 96 bytes total
+- SETPOINT (2): state_seq u32, deflection_m[2] f64, sliding[2] f64, reason u8           -> 61 bytes total
+- VOLTAGE  (3): state_seq u32, voltage_v[2] f64                                          -> 44 bytes total
+- ACK      (4): state_seq u32, setpoint_seq u32, sent u8 (lockstep: controller handled state_seq) -> 33 bytes
 
 Versioning: `VERSION` is bumped on any change of an existing layout; a decoder rejects every version it does not
 know. New message types may be added without a bump (old decoders reject them as unknown type). Lengths are exact.
@@ -16,9 +17,10 @@ tracking (sequence.py), the wire-size estimate (wire_size.py).
 """
 from __future__ import annotations
 
+import logging
 import struct
 from collections import Counter
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from enum import IntEnum
 from typing import ClassVar, Union
 
@@ -32,11 +34,12 @@ __all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MA
            "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason", "VoltagePayload", "decode",
            "encode", "estimate_wire_bytes"]
 
+_log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"
-VERSION = 1
+VERSION = 2          # 2: `epoch` added to the header (issue 19)
 SUPPORTED_VERSIONS = frozenset({VERSION})
-_HEADER = struct.Struct("<2sBBIQ")
-HEADER_SIZE = _HEADER.size  # 16
+_HEADER = struct.Struct("<2sBBIQQ")
+HEADER_SIZE = _HEADER.size  # 24
 
 
 class MsgType(IntEnum):
@@ -55,13 +58,17 @@ class TriggerReason(IntEnum):
     INITIAL = 4         # first setpoint of a session
 
 
+@dataclass(frozen=True)
 class _Payload:
-    """Mixin validating the common fields and float pairs (named in `_pairs`) after construction."""
+    """Base validating the common fields and float pairs (named in `_pairs`) after construction. `epoch` (keyword
+    only; 0 = none given) is the sender's session epoch (`sea_hil.protocol.epoch`)."""
+    epoch: int = field(default=0, kw_only=True)
     _pairs: ClassVar[tuple[str, ...]] = ()
 
     def __post_init__(self) -> None:
         uint_field("seq", self.seq, U32_MAX)  # type: ignore[attr-defined]
         uint_field("t_ns", self.t_ns, U64_MAX)  # type: ignore[attr-defined]
+        uint_field("epoch", self.epoch, U64_MAX)
         for name in self._pairs:
             object.__setattr__(self, name, pair_field(name, getattr(self, name)))
 
@@ -149,7 +156,7 @@ def encode(p: Payload) -> bytes:
     mtype = _TYPE_OF.get(type(p))
     if mtype is None:
         raise PayloadRejected(RejectReason.TYPE, f"cannot encode {type(p).__name__}")
-    head = _HEADER.pack(MAGIC, VERSION, mtype, p.seq, p.t_ns)
+    head = _HEADER.pack(MAGIC, VERSION, mtype, p.seq, p.t_ns, p.epoch)
     if isinstance(p, StatePayload):
         body = _BODY[mtype].pack(p.sample_t_ns, *p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
     elif isinstance(p, SetpointPayload):
@@ -166,7 +173,7 @@ def decode(b: bytes) -> Payload:
     b = bytes(b)
     if len(b) < HEADER_SIZE:
         raise PayloadRejected(RejectReason.LENGTH, f"{len(b)} bytes is shorter than the {HEADER_SIZE}-byte header")
-    magic, version, mtype, seq, t_ns = _HEADER.unpack_from(b)
+    magic, version, mtype, seq, t_ns, epoch = _HEADER.unpack_from(b)
     if magic != MAGIC:
         raise PayloadRejected(RejectReason.MAGIC, f"magic {magic!r} != {MAGIC!r}")
     if version not in SUPPORTED_VERSIONS:
@@ -179,14 +186,14 @@ def decode(b: bytes) -> Payload:
         raise PayloadRejected(RejectReason.LENGTH, f"{mt.name} must be {PAYLOAD_SIZE[mt]} bytes, got {len(b)}")
     f = _BODY[mt].unpack_from(b, HEADER_SIZE)
     if mt is MsgType.STATE:
-        return StatePayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5:7], f[7:9])
+        return StatePayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5:7], f[7:9], epoch=epoch)
     if mt is MsgType.SETPOINT:
-        return SetpointPayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5])
+        return SetpointPayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5], epoch=epoch)
     if mt is MsgType.ACK:
         if f[2] > 1:
             raise PayloadRejected(RejectReason.ENUM, f"ack flag {f[2]} is not 0 or 1")
-        return AckPayload(seq, t_ns, f[0], f[1], f[2])
-    return VoltagePayload(seq, t_ns, f[0], f[1:3])
+        return AckPayload(seq, t_ns, f[0], f[1], f[2], epoch=epoch)
+    return VoltagePayload(seq, t_ns, f[0], f[1:3], epoch=epoch)
 
 
 class PayloadCounters:
@@ -196,14 +203,21 @@ class PayloadCounters:
         self.accepted = 0
         self.rejected: Counter[str] = Counter()
         self.last_error = ""
+        self._versions_logged: set[int] = set()
 
     def try_decode(self, b: bytes) -> Payload | None:
-        """Decode `b`, counting the outcome; None if it was rejected."""
+        """Decode `b`, counting the outcome; None if it was rejected. The first payload of every foreign layout
+        version is logged once (a peer of another sea-hil release), later ones only counted."""
         try:
             p = decode(b)
         except PayloadRejected as err:
             self.rejected[err.reason.value] += 1
             self.last_error = str(err)
+            if err.reason is RejectReason.VERSION and b[2] not in self._versions_logged:
+                self._versions_logged.add(b[2])
+                _log.warning("a peer sends payload version %d, this node speaks %s: its messages are dropped and "
+                             "counted (payload_rejected_version); run the same sea-hil release on both sides",
+                             b[2], "/".join(map(str, sorted(SUPPORTED_VERSIONS))))
             return None
         self.accepted += 1
         return p

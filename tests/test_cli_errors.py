@@ -51,6 +51,8 @@ def test_unreadable_config_file(path_kind: str, tmp_path: Path, capsys: pytest.C
 
 BAD_ARGS = [
     ["run", "--cycles", "0"],
+    ["run", "--certs", "{tmp}/no-certs", "--out", "{tmp}/o"],
+    ["run", "--secure", "--listen", "tcp/127.0.0.1:{port}", "--out", "{tmp}/o"],
     ["simulate", "--cycles", "0", "--out", "{tmp}/o"],
     ["simulate", "--trajectory", "{tmp}/none.csv", "--out", "{tmp}/o"],
     ["plant", "--rate", "0"],

@@ -25,7 +25,7 @@ from can_example import CAN_EXAMPLE, load_example, run_on_virtual
 from sea_hil.config import config_to_toml, load_config
 from sea_hil.errors import SeaHilError
 from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Heartbeat, SeaCodec
-from sea_hil.protocol.payloads import AckPayload, StatePayload, decode, encode
+from sea_hil.protocol.payloads import HEADER_SIZE, AckPayload, StatePayload, decode, encode
 from sea_hil.protocol.zsession import free_tcp_port, make_config
 from sea_hil.session.external import ExternalWatch
 from sea_hil.session.processes import end_process
@@ -168,12 +168,14 @@ def test_external_example_answers_a_resent_state_again_and_ignores_stale_and_mal
         assert again == [first[0], first[2]]                             # the same ACK and SETPOINT bytes
         node.handle(encode(StatePayload(4, 0, 0, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))   # stale
         node.handle(b"SH\x01\x01 not a state")                           # malformed
-        node.handle(state[:24] + struct.pack("<d", math.nan) + state[32:])  # a copy with NaN theta1: rejected
+        node.handle(state[:HEADER_SIZE + 8] + struct.pack("<d", math.nan) + state[HEADER_SIZE + 16:])  # NaN theta1
+        node.handle(encode(StatePayload(6, 0, 20_000_000, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0),
+                                        epoch=99)))                      # another session's epoch: ignored
         ack = decode(first[0][1])
         assert isinstance(ack, AckPayload) and ack.state_seq == 5 and ack.sent and ack.setpoint_seq == 1
         assert json.loads(first[1][1])["reason"] == "INITIAL"
         assert node.counts == {**node.counts, "states": 1, "setpoints": 1, "resent_answers": 1, "ignored": 1,
-                               "rejected": 2}
+                               "rejected": 2, "foreign_epoch": 1}
     finally:
         sub.undeclare()
         session.close()

@@ -98,11 +98,12 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
         @given(data=payloads(), ack=st.booleans())
         def run(data: bytes, ack: bool) -> None:
             c = edge.counters
+            ep = edge.intake.epoch
             before = (edge.payloads.as_dict()["rejected_total"], c.unexpected_payloads, c.stale_setpoints,
-                      edge.envelope.rejected)
+                      edge.envelope.rejected, ep.old + ep.foreign)
             ok = edge.on_ack(data) if ack else edge.on_downlink(data)
             after = (edge.payloads.as_dict()["rejected_total"], c.unexpected_payloads, c.stale_setpoints,
-                     edge.envelope.rejected)
+                     edge.envelope.rejected, ep.old + ep.foreign)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
             assert sum(a - b for a, b in zip(after, before)) == (0 if ok else 1)
@@ -111,7 +112,8 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
         assert calls["n"] >= CASES and pc["accepted"] + pc["rejected_total"] == calls["n"]
         assert pc["rejected_total"] == calls["malformed"] and edge.stats_dict()["payload_rejected"] == calls["malformed"]
         nxt = ((edge.intake.sp_seq.last or 0) + 1) & U32_MAX
-        assert edge.on_downlink(encode(SetpointPayload(nxt, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME)))
+        assert edge.on_downlink(encode(SetpointPayload(nxt, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME,
+                                                       epoch=edge.intake.epoch.current or 0)))
         print(f"\nedge: {calls['n']} payloads, {calls['malformed']} malformed, "
               f"{edge.counters.unexpected_payloads} wrong type, {edge.counters.stale_setpoints} stale")
     finally:
@@ -173,12 +175,14 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
         run()
         st_ = ctrl.stats_dict()
         assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"]
-        assert st_["payload_accepted"] == st_["unexpected_payloads"] + st_["ignored_states"] + ctrl.seq.accepted
+        assert st_["payload_accepted"] == st_["unexpected_payloads"] + st_["ignored_states"] + ctrl.seq.accepted \
+            + st_["epoch_old"] + st_["epoch_foreign"]
         states = ctrl.states
         nxt = ((ctrl.seq.last or 0) + 1) & U32_MAX
         ctrl.done = False
         ctrl.t0_ns = 0
-        ctrl.handle(encode(StatePayload(nxt, 0, 0, (0.05, 0.28), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))), calls["t"])
+        ctrl.handle(encode(StatePayload(nxt, 0, 0, (0.05, 0.28), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0),
+                                        epoch=ctrl.edge_epoch.current or 0)), calls["t"])
         assert ctrl.states == states + 1
         print(f"\ncontroller: {calls['n']} payloads, {calls['malformed']} malformed, "
               f"{st_['unexpected_payloads']} wrong type, {st_['ignored_states']} stale, {states} states handled, "

@@ -18,10 +18,12 @@ DOC = REPO / "docs" / "zenoh-protocol.md"
 
 # one payload per type with every field distinct, built through the public dataclasses
 SAMPLES: dict[str, Any] = {
-    "STATE": pl.StatePayload(11, 2**40 + 3, 5_000_000, (0.125, -0.25), (1.5, -2.5), (1e-4, -3e-4), (0.01, -0.02)),
-    "SETPOINT": pl.SetpointPayload(12, 7, 99, (2e-3, -1e-3), (0.5, -0.75), pl.TriggerReason.TRACKING_BOUND),
-    "VOLTAGE": pl.VoltagePayload(13, 8, 98, (3.25, -4.5)),
-    "ACK": pl.AckPayload(14, 9, 97, 12, True),
+    "STATE": pl.StatePayload(11, 2**40 + 3, 5_000_000, (0.125, -0.25), (1.5, -2.5), (1e-4, -3e-4), (0.01, -0.02),
+                             epoch=2**63 + 1),
+    "SETPOINT": pl.SetpointPayload(12, 7, 99, (2e-3, -1e-3), (0.5, -0.75), pl.TriggerReason.TRACKING_BOUND,
+                                   epoch=2**64 - 2),
+    "VOLTAGE": pl.VoltagePayload(13, 8, 98, (3.25, -4.5), epoch=0x0123_4567_89AB_CDEF),
+    "ACK": pl.AckPayload(14, 9, 97, 12, True, epoch=5),
 }
 
 
@@ -62,7 +64,7 @@ def mismatches(layout: dict[str, Any]) -> list[str]:
         except struct.error as err:
             bad.append(f"{name}: {err}")
             continue
-        if list(head) != [pl.MAGIC, pl.VERSION, m["type_id"], p.seq, p.t_ns] or len(data) != m["size"]:
+        if list(head) != [pl.MAGIC, pl.VERSION, m["type_id"], p.seq, p.t_ns, p.epoch] or len(data) != m["size"]:
             bad.append(f"{name}: header bytes")
         if list(body) != _values(p, m["fields"]):
             bad.append(f"{name}: fields {[f['name'] for f in m['fields']]} do not unpack to the payload's values")
@@ -97,7 +99,7 @@ def test_docs_tables_are_generated_from_the_layout() -> None:
 
 def test_check_reports_stale_docs(tmp_path: Path) -> None:
     stale = tmp_path / "doc.md"
-    stale.write_text(DOC.read_text(encoding="utf-8").replace("| 24 | f64[2] | `theta_rad`", "| 24 | f32[2] | `theta_rad`"),
+    stale.write_text(DOC.read_text(encoding="utf-8").replace("| 32 | f64[2] | `theta_rad`", "| 32 | f32[2] | `theta_rad`"),
                      encoding="utf-8")
     assert main([str(stale), "--check"]) == 1
     assert main([str(stale), "--write"]) == 0 and main([str(stale), "--check"]) == 0

@@ -26,11 +26,11 @@ def _state(**kw: object) -> StatePayload:
     return StatePayload(**base)  # type: ignore[arg-type]
 
 
-@given(u32, u64, u64, pair, pair, pair, pair)
-def test_state_roundtrip_is_bit_exact(seq, t, ts, th, om, de, nv):
-    p = StatePayload(seq, t, ts, th, om, de, nv)
+@given(u32, u64, u64, pair, pair, pair, pair, u64)
+def test_state_roundtrip_is_bit_exact(seq, t, ts, th, om, de, nv, epoch):
+    p = StatePayload(seq, t, ts, th, om, de, nv, epoch=epoch)
     b = encode(p)
-    assert len(b) == PAYLOAD_SIZE[MsgType.STATE] == 88
+    assert len(b) == PAYLOAD_SIZE[MsgType.STATE] == 96
     assert decode(b) == p
 
 
@@ -38,13 +38,13 @@ def test_state_roundtrip_is_bit_exact(seq, t, ts, th, om, de, nv):
 def test_setpoint_roundtrip(seq, t, sseq, d, s, reason):
     p = SetpointPayload(seq, t, sseq, d, s, reason)
     q = decode(encode(p))
-    assert q == p and isinstance(q.reason, TriggerReason) and len(encode(p)) == 53
+    assert q == p and isinstance(q.reason, TriggerReason) and len(encode(p)) == 61
 
 
 @given(u32, u64, u32, u32, st.booleans())
 def test_ack_roundtrip(seq, t, sseq, spseq, sent):
     p = AckPayload(seq, t, sseq, spseq, sent)
-    assert decode(encode(p)) == p and len(encode(p)) == 25
+    assert decode(encode(p)) == p and len(encode(p)) == 33
 
 
 def test_ack_flag_must_be_boolean():
@@ -56,7 +56,7 @@ def test_ack_flag_must_be_boolean():
 @given(u32, u64, u32, pair)
 def test_voltage_roundtrip(seq, t, sseq, v):
     p = VoltagePayload(seq, t, sseq, v)
-    assert decode(encode(p)) == p and len(encode(p)) == 36
+    assert decode(encode(p)) == p and len(encode(p)) == 44
 
 
 def _reason(b: bytes) -> RejectReason:

@@ -43,7 +43,18 @@ OLD_EDGE_TIMING = ("apply_latency_us_max", "apply_latency_us_p50", "apply_latenc
 # old edge /stats key -> its current name (add an entry when a counter is renamed; never drop one)
 EDGE_RENAMED: dict[str, str] = {}
 # edge counters added since the fixtures were recorded, with the value the paper's path must give (never drop one)
-EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0}   # issue 19: the edge's setpoint envelope
+EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0,   # issue 19: the edge's setpoint envelope
+                                 "epoch_old": 0, "epoch_foreign": 0}  # issue 19: session epochs (no replays here)
+# The one documented difference: payload version 2 (issue 19) added the 8-byte session epoch to every payload header,
+# so every payload byte count is 8 bytes per message larger (docs/deviations.md, "Session epoch"). Only these byte
+# fields are rewritten, each checked to be exactly its message count times the old size first; message counts and
+# every other field are compared as recorded.
+V1_SIZE = {MsgType.STATE: 88, MsgType.SETPOINT: 53}
+V1_BYTES = (("transmissions", "uplink_msgs", "uplink_bytes", MsgType.STATE),
+            ("transmissions", "downlink_msgs", "downlink_bytes", MsgType.SETPOINT),
+            ("lead_in", "uplink_msgs", "uplink_bytes", MsgType.STATE),
+            ("lead_in", "downlink_msgs", "downlink_bytes", MsgType.SETPOINT),
+            ("edge", "uplink_msgs", "uplink_bytes", MsgType.STATE))
 SAMPLE_PERIOD_S = 0.01
 
 
@@ -84,13 +95,26 @@ def with_totals(counts: dict[str, Any]) -> dict[str, Any]:
             "total_bytes": counts["uplink_bytes"] + counts["downlink_bytes"]}
 
 
+def as_payload_v2(old: dict[str, Any]) -> dict[str, Any]:
+    """A summary recorded with payload version 1 with its byte fields (`V1_BYTES`, the blocks it has) as version 2
+    gives them; each is first checked to be exactly its message count times the version-1 size."""
+    new = dict(old)
+    for block, msgs, nbytes, mtype in V1_BYTES:
+        if block in new:
+            part = new[block] = dict(new[block])
+            assert part[nbytes] == part[msgs] * V1_SIZE[mtype], (block, nbytes)
+            part[nbytes] = part[msgs] * PAYLOAD_SIZE[mtype]
+    return new
+
+
 def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], set[str]]:
     """An old session summary in the current layout: (deterministic part, timing keys, timing.edge keys)."""
     new = {k: v for k, v in old.items() if k not in OLD_TIMING}
-    new["transmissions"] = with_totals(old["transmissions"])
-    new["lead_in"] = with_totals(old["lead_in"])
     new["edge"] = {EDGE_RENAMED.get(k, k): v for k, v in old["edge"].items() if k not in OLD_EDGE_TIMING}
     new["edge"].update(EDGE_ADDED)
+    new = as_payload_v2(new)    # the byte fields first, so that the totals sum the version-2 bytes
+    new["transmissions"] = with_totals(new["transmissions"])
+    new["lead_in"] = with_totals(new["lead_in"])
     edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
     return new, {*OLD_TIMING, "edge"}, edge_timing
 

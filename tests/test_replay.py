@@ -1,5 +1,6 @@
 """Replay safety: stale or duplicated sequence numbers are ignored and counted -- setpoints/voltages at the edge,
-states at the controller -- and a restarted sender is accepted only after its old stream timed out."""
+states at the controller -- and a restarted sender (a new session epoch) is accepted only after its old stream timed
+out; the old epoch is refused from then on (replays across sessions: tests/test_epoch.py)."""
 from __future__ import annotations
 
 import uuid
@@ -23,12 +24,12 @@ def nodes() -> Iterator[tuple[EdgeNode, RemoteController]]:
         yield b.edge(b.bus(f"virtual:replay-{uuid.uuid4().hex[:8]}"), session, 1), b.controller(session, "tt")
 
 
-def setpoint(seq: int, d1: float = 0.001, reason: TriggerReason = TriggerReason.ERROR_BOUND) -> bytes:
-    return encode(SetpointPayload(seq, 0, seq, (d1, 0.0), (0.0, 0.0), reason))
+def setpoint(seq: int, d1: float = 0.001, reason: TriggerReason = TriggerReason.ERROR_BOUND, epoch: int = 1) -> bytes:
+    return encode(SetpointPayload(seq, 0, seq, (d1, 0.0), (0.0, 0.0), reason, epoch=epoch))
 
 
-def state(seq: int, sample_t_ns: int) -> bytes:
-    return encode(StatePayload(seq, 0, sample_t_ns, (0.05, 0.28), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)))
+def state(seq: int, sample_t_ns: int, epoch: int = 1) -> bytes:
+    return encode(StatePayload(seq, 0, sample_t_ns, (0.05, 0.28), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), epoch=epoch))
 
 
 def apply(edge: EdgeNode, now_ns: int) -> None:
@@ -64,15 +65,19 @@ def test_restarted_controller_is_accepted_only_after_the_stream_timed_out(
         assert edge.on_downlink(setpoint(s))
     apply(edge, 1000 * MS)
     timeout_ms = edge.intake.timeout_ns // MS
-    edge.sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a replayed seq 1 is refused
-    assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))
-    edge.sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): an old seq >= window
-    assert not edge.on_downlink(setpoint(edge.intake.sp_seq.window))   # is still refused, a fresh sender's seq is not
-    assert edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))
-    assert not edge.on_downlink(setpoint(1))                     # and the new stream is guarded again
-    assert edge.on_downlink(setpoint(2))
+    edge.sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a new epoch's seq 1 is refused
+    assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL, epoch=2))
+    assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))   # the old epoch's seq 1 is stale
+    edge.sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): the old epoch's seq 1
+    assert not edge.on_downlink(setpoint(1))                     # is still stale (a restart has a new epoch),
+    assert not edge.on_downlink(setpoint(edge.intake.sp_seq.window, epoch=2))   # a new epoch with seq >= window
+    assert edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL, epoch=2))  # refused, a fresh sender's not
+    assert not edge.on_downlink(setpoint(1, epoch=2))            # and the new stream is guarded again
+    assert edge.on_downlink(setpoint(2, epoch=2))
+    assert not edge.on_downlink(setpoint(101))                   # the old epoch is retired
     assert edge.counters.controller_restarts == 1 and edge.counters.stale_setpoints == 3
-    assert edge.stats_dict()["controller_restarts"] == 1
+    st = edge.stats_dict()
+    assert (st["controller_restarts"], st["epoch_foreign"], st["epoch_old"]) == (1, 2, 1)
 
 
 def test_controller_ignores_and_counts_duplicated_and_older_states(nodes: tuple[EdgeNode, RemoteController]) -> None:
@@ -92,10 +97,14 @@ def test_controller_accepts_a_restarted_edge_after_silence_and_continues_the_tra
     gap_ns = ctrl.restart_gap_ns
     stopped_at = ctrl._last_t_ns        # 1990 ms after the first state, minus the lead-in
     assert stopped_at == 1990 * MS - ctrl.lead_in_ns
-    ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS)              # within the gap: a replay, ignored
+    ctrl.handle(state(1, 7 * MS, epoch=2), now_ns=2000 * MS)     # within the gap: refused
+    ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS + gap_ns + 1)  # the old epoch after the gap: stale
     assert ctrl.states == 200 and ctrl.edge_restarts == 0
-    ctrl.handle(state(1, 7 * MS), now_ns=2000 * MS + gap_ns + 1)  # new edge: sample time restarts near 0
+    ctrl.handle(state(1, 7 * MS, epoch=2), now_ns=2000 * MS + gap_ns + 1)  # new edge: sample time restarts near 0
     assert ctrl.states == 201 and ctrl.edge_restarts == 1
     assert ctrl._last_t_ns == stopped_at                           # trajectory time continues where it stopped
-    ctrl.handle(state(2, 17 * MS), now_ns=2100 * MS + gap_ns)
+    ctrl.handle(state(2, 17 * MS, epoch=2), now_ns=2100 * MS + gap_ns)
     assert ctrl.states == 202 and ctrl._last_t_ns == stopped_at + 10 * MS
+    ctrl.handle(state(201, 2010 * MS), now_ns=2110 * MS + gap_ns)  # the old epoch, newer seq: retired, refused
+    st = ctrl.stats_dict()
+    assert ctrl.states == 202 and (st["epoch_foreign"], st["epoch_old"], st["ignored_states"]) == (1, 1, 1)

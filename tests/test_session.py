@@ -53,7 +53,7 @@ def test_lockstep_session_tracks_and_counts(et_runs):
     assert a["duration_s"] == pytest.approx(10.0, abs=0.011)
     assert a["transmissions"]["uplink_msgs"] >= 1000         # one state per 10 ms sample
     assert 0 < a["transmissions"]["downlink_msgs"] < a["transmissions"]["uplink_msgs"]
-    assert a["transmissions"]["downlink_bytes"] == 53 * a["transmissions"]["downlink_msgs"]
+    assert a["transmissions"]["downlink_bytes"] == 61 * a["transmissions"]["downlink_msgs"]
     lead = a["lead_in"]      # the lead-in (0.5 s from rest onto the trajectory) is counted apart
     assert lead["duration_s"] == pytest.approx(0.5, abs=0.011) and 40 <= lead["uplink_msgs"] <= 51
     assert 0 < lead["downlink_msgs"] <= lead["uplink_msgs"]

@@ -11,6 +11,8 @@ from pathlib import Path
 
 import pytest
 
+from test_pre_refactor_equality import as_payload_v2
+
 from sea_hil.config import load_config
 from sea_hil.offline.session_engine import SessionRecords, run_engine, tracking_record
 from sea_hil.protocol.keys import Keys
@@ -38,7 +40,7 @@ def _cfg(path: Path | None, link: str | None, **extra: dict) -> object:
 @pytest.mark.parametrize("mode", ["et", "tt"])
 @pytest.mark.parametrize("link", [None, "delay=5ms"])
 def test_engine_equals_recorded_lockstep_sessions(mode, link):
-    fixture = json.loads((FIXTURES / f"run_{mode}_{'d5' if link else 'ideal'}.summary.json").read_text())
+    fixture = as_payload_v2(json.loads((FIXTURES / f"run_{mode}_{'d5' if link else 'ideal'}.summary.json").read_text()))
     cfg = _cfg(PAPER_PATH if PAPER_PATH.exists() else None, link)
     got = session_summary(run_engine(cfg, mode).data, mode)
     assert {k: got[k] for k in COMPARED} == {k: fixture[k] for k in COMPARED}

@@ -36,7 +36,7 @@ def test_summary_has_the_required_keys_and_figures(runs: dict, mode: str) -> Non
     assert s["duration_s"] == pytest.approx(10.0)
     tx = s["transmissions"]     # the session's schema: setpoints down, one state per 10 ms sample up
     assert tx["downlink_msgs"] == sum(s["events_by_reason"].values()) > 0
-    assert (tx["uplink_msgs"], tx["uplink_bytes"], tx["downlink_bytes"]) == (1000, 88 * 1000, 53 * tx["downlink_msgs"])
+    assert (tx["uplink_msgs"], tx["uplink_bytes"], tx["downlink_bytes"]) == (1000, 96 * 1000, 61 * tx["downlink_msgs"])
     assert set(s["timing"]) == {"cpu_s"}
     for key in ("max_abs_error_rad", "rms_error_rad"):
         vals = s["tracking"][key]

@@ -17,6 +17,7 @@ import argparse
 import json
 import math
 import queue
+import secrets
 import struct
 import sys
 import threading
@@ -39,32 +40,36 @@ class Wire:
     def __init__(self, layout: dict[str, Any]) -> None:
         self.magic, self.version = layout["magic"].encode(), layout["version"]
         self.header = struct.Struct(layout["header"]["format"])
+        self.header_names = [f["name"] for f in layout["header"]["fields"]]
+        self.epoch = secrets.randbits(64) | 1     # this controller's session epoch: random per start, never 0
         self.msgs = {m["name"]: m for m in layout["message"]}
         self.body = {name: struct.Struct(m["format"]) for name, m in self.msgs.items()}
         self.by_id = {m["type_id"]: name for name, m in self.msgs.items()}
         self.reasons = layout["enums"]["reason"]
 
     def decode(self, data: bytes) -> tuple[str, int, dict[str, Any]] | None:
-        """(type name, seq, fields by name) or None for anything malformed (magic, version, type, length, NaN)."""
+        """(type name, seq, fields by name, the header's `epoch` among them) or None for anything malformed (magic,
+        version, type, length, NaN)."""
         if len(data) < self.header.size:
             return None
-        magic, version, type_id, seq, _ = self.header.unpack_from(data)
-        name = self.by_id.get(type_id)
-        if magic != self.magic or version != self.version or name is None or len(data) != self.msgs[name]["size"]:
+        head = dict(zip(self.header_names, self.header.unpack_from(data)))
+        name = self.by_id.get(head["type"])
+        if head["magic"] != self.magic or head["version"] != self.version or name is None \
+                or len(data) != self.msgs[name]["size"]:
             return None
-        values, out = list(self.body[name].unpack_from(data, self.header.size)), {}
+        values, out = list(self.body[name].unpack_from(data, self.header.size)), {"epoch": head["epoch"]}
         if not all(math.isfinite(v) for v in values if isinstance(v, float)):
             return None         # NaN/inf: rejected like sea-hil's own decoder does
         for f in self.msgs[name]["fields"]:
             n = f.get("count", 1)
             out[f["name"]] = tuple(values[:n]) if n > 1 else values[0]
             del values[:n]
-        return name, seq, out
+        return name, head["seq"], out
 
     def encode(self, name: str, seq: int, *body: Any) -> bytes:
-        m = self.msgs[name]
-        return self.header.pack(self.magic, self.version, m["type_id"], seq, time.monotonic_ns()) + \
-            self.body[name].pack(*body)
+        head = {"magic": self.magic, "version": self.version, "type": self.msgs[name]["type_id"], "seq": seq,
+                "t_ns": time.monotonic_ns(), "epoch": self.epoch}
+        return self.header.pack(*(head[n] for n in self.header_names)) + self.body[name].pack(*body)
 
 
 class ExternalController:
@@ -84,10 +89,12 @@ class ExternalController:
         self._cond = threading.Condition()
         self.sub = session.declare_subscriber(f"{base}/state", self._on_state)
         self.last_seq: int | None = None
+        self.edge_epoch: int | None = None      # learned from the first state (docs/zenoh-protocol.md, epoch)
         self.last_answer: tuple[int, list[tuple[Any, bytes]]] | None = None
         self.setpoint_seq = 0
         self.done = False
-        self.counts = {"states": 0, "setpoints": 0, "rejected": 0, "ignored": 0, "resent_answers": 0, "unusable": 0}
+        self.counts = {"states": 0, "setpoints": 0, "rejected": 0, "ignored": 0, "resent_answers": 0, "unusable": 0,
+                       "foreign_epoch": 0}
 
     def _on_state(self, sample: zenoh.Sample) -> None:
         data = sample.payload.to_bytes()
@@ -123,6 +130,11 @@ class ExternalController:
             self.counts["rejected"] += 1
             return
         _, seq, st = msg
+        if self.edge_epoch is None:
+            self.edge_epoch = st["epoch"]
+        elif st["epoch"] != self.edge_epoch:   # another session's state (a replay) or a second sender: ignored
+            self.counts["foreign_epoch"] += 1
+            return
         ahead = None if self.last_seq is None else (seq - self.last_seq) & U32   # serial arithmetic, wraps
         if ahead == 0:          # a state seen before: in lockstep the edge re-sends one it is waiting for
             if self.lockstep and self.last_answer is not None and self.last_answer[0] == seq:

@@ -30,6 +30,12 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--node", type=int, default=1, help="driver node id")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint this process listens on (default: a free loopback port)")
+    p.add_argument("--secure", action="store_true",
+                   help="mutual TLS + access control on every Zenoh link: this process presents the edge's "
+                        "certificate, the controller child the controller's (docs/security.md)")
+    p.add_argument("--certs", type=Path, metavar="DIR",
+                   help="--secure with the certificates of `sea-hil certs --out DIR` (default: generated into "
+                        "OUT/certs); implies --secure")
     p.add_argument("--quiet", action="store_true", help="no progress display")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_link_args(p)
@@ -49,7 +55,8 @@ def _main(args: argparse.Namespace) -> int:
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,
-                      join_timeout_s=args.join_timeout)
+                      join_timeout_s=args.join_timeout, secure=args.secure or args.certs is not None,
+                      certs=args.certs)
     from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
     with SessionProgress(sys.stderr) as progress:
         summary = run_session(cfg, opts, log=progress)

@@ -41,13 +41,12 @@ from sea_hil.plant_emulator.integrator import rk4_core
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import SetpointPayload, StatePayload, encode
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.errors import SeaHilError
 
 _log = logging.getLogger("sea_hil.offline")
-STATE_BYTES = len(encode(StatePayload(1, 0, 0, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))))
-SETPOINT_BYTES = 53
+STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
 
 
 def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:

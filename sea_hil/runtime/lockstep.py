@@ -214,7 +214,7 @@ class LockstepControllerSync:
 
     def answer_extra(self, state_seq: int, setpoint_seq: int, sent: bool) -> list[tuple[Any, bytes]]:
         return [(self.ack_pub, encode(AckPayload(state_seq, time.monotonic_ns(), state_seq,
-                                                 setpoint_seq if sent else 0, sent)))]
+                                                 setpoint_seq if sent else 0, sent, epoch=self.ctrl.epoch)))]
 
     def answered(self, seq: int, answer: list[tuple[Any, bytes]]) -> None:
         self._last_answer = (seq, answer)

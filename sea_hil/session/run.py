@@ -3,7 +3,8 @@
 This process hosts the plant (driver node) and the edge on the CAN bus (embedded `virtual` bus by default, or
 `socketcan:vcan0`), plus the recorder; the remote controller runs in a separate process and reaches them over Zenoh
 (this process listens on a free loopback port, the controller connects). Both use `[zenoh]` of the config (mode,
-TLS, ACL); only the endpoints are the session's own (`tls/` when TLS is enabled). When the controller has finished
+TLS, ACL); only the endpoints are the session's own (`tls/` when TLS is enabled). `secure=True` (`--secure`)
+gives each its own certificate, mutual TLS and the ACL (`sea_hil.session.secure`). When the controller has finished
 its cycles everything is stopped (`SessionBuilder`, in reverse order of creation), the MCAP file is closed and
 summary.json and figures are written from it.
 """
@@ -30,6 +31,7 @@ from sea_hil.report.writer import write_report_figures
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
 from sea_hil.session.processes import end_process
+from sea_hil.session.secure import secure_profile
 
 
 @dataclass(frozen=True)
@@ -45,6 +47,8 @@ class RunOptions:
     progress: bool = True
     seed: int | None = None
     join_timeout_s: float = 300.0   # --controller external: wall time allowed for the outside controller to join
+    secure: bool = False            # mutual TLS + ACL, the edge's identity here, the controller's in the child
+    certs: Path | None = None       # secure: certificates of `sea-hil certs --out DIR`; None: generated in out/certs
     on_nodes: Callable[[Any, Any, Any], None] | None = None   # called with (plant, edge, controller) once they run
 
 
@@ -69,8 +73,12 @@ def controller_config(cfg: SeaHilConfig, endpoint: str) -> SeaHilConfig:
 
 def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = print) -> dict[str, Any]:
     opts.out.mkdir(parents=True, exist_ok=True)
+    child_cfg = cfg
+    if opts.secure:
+        profile = secure_profile(cfg, opts.out, opts.certs, opts.listen)
+        cfg, child_cfg = profile.host, profile.controller
     # the live view is served from this process's recorder: a controller started from these files must not
-    quiet = cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})
+    quiet = _without_live(cfg)
     cfg_path = opts.out / "config.toml"
     cfg_path.write_text(config_to_toml(quiet), encoding="utf-8")
     listen = listen_endpoints(cfg, opts)
@@ -85,7 +93,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
             child_path = opts.out / "controller.toml"
-            child_path.write_text(config_to_toml(controller_config(quiet, listen[0])), encoding="utf-8")
+            child = controller_config(_without_live(child_cfg), listen[0])
+            child_path.write_text(config_to_toml(child), encoding="utf-8")
             proc = subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL)
         b.callback(end_process, proc)
         _host_nodes(b, opts, session, proc, t0, log)
@@ -98,6 +107,10 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     write_summary(opts.out / "summary.json", summary)
     write_report_figures(data, opts.out)
     return summary
+
+
+def _without_live(cfg: SeaHilConfig) -> SeaHilConfig:
+    return cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})
 
 
 def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0: float,
@@ -116,7 +129,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0
     b.callback(rec.close)   # idempotent: closes the file if building the nodes failed
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
-                                    "inner": opts.inner, "can": spec})
+                                    "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
     recorder = b.recorder(rec, session, buses[2], tap_batch_s=0.002, time_base=time_base)
