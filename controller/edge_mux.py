@@ -5,14 +5,17 @@ go out on the shared bus handle.
 
 Frames for no served node: well-formed ones (another device's traffic on a shared bus) are counted
 (`foreign_frames`) and dropped, as a drive's acceptance filter would; malformed ones go to the first core, which
-rejects and counts them (`rejected_frames`) as a lone edge does. Real time: one thread wakes per frame instead of one
-per limb, so the python-can `virtual` bus copies each frame to one reader instead of N. Lockstep: a core blocks in
-its sync until its controller has answered; the next limb's frames wait meanwhile (each plant waits for all of its
-limbs anyway).
+rejects and counts them (`rejected_frames`) as a lone edge does. Real time (`workers=False`): the bus reader calls
+the core itself, one thread wakes per frame instead of one per limb, and the python-can `virtual` bus copies each
+frame to one reader instead of N. Lockstep (`workers=True`): a core blocks in its sync until its controller has
+answered, so each core runs in a worker thread of its own fed by a queue; otherwise one limb whose controller has
+finished its cycles (and answers no more) would stall the other limbs of its bus.
 """
 from __future__ import annotations
 
 import logging
+import queue
+import threading
 import time
 from collections.abc import Sequence
 from typing import Any
@@ -32,7 +35,7 @@ log = logging.getLogger("sea_hil.edge")
 class EdgeMux(Node):
     kind = "edge"
 
-    def __init__(self, bus: can.BusABC, edges: Sequence[EdgeNode]) -> None:
+    def __init__(self, bus: can.BusABC, edges: Sequence[EdgeNode], *, workers: bool = False) -> None:
         if not edges:
             raise ConfigError("an edge multiplexer needs at least one edge core")
         by_id = {e.node_id: e for e in edges}
@@ -43,6 +46,27 @@ class EdgeMux(Node):
         self.any_node = SeaCodec()
         self.foreign_frames = 0
         self.bus_errors = 0
+        self._queues: dict[int, queue.SimpleQueue[tuple[can.Message, int]]] = \
+            {e.node_id: queue.SimpleQueue() for e in edges} if workers else {}
+        self._workers: list[threading.Thread] = []
+
+    def _on_start(self, duration_s: float | None) -> None:
+        self._workers = [threading.Thread(target=self._work, args=(e, self._queues[e.node_id]),
+                                          name=f"edge-{e.node_id}", daemon=True) for e in self.edges if self._queues]
+        for t in self._workers:
+            t.start()
+
+    def _on_stop(self) -> None:
+        for t in self._workers:
+            t.join(timeout=self.join_timeout_s)
+
+    def _work(self, edge: EdgeNode, q: queue.SimpleQueue[tuple[can.Message, int]]) -> None:
+        while not self.stop_event.is_set():
+            try:
+                msg, rx_ns = q.get(timeout=0.05)
+            except queue.Empty:
+                continue
+            edge.on_can(msg, rx_ns)
 
     def _step(self) -> bool:
         try:
@@ -68,7 +92,11 @@ class EdgeMux(Node):
             else:
                 self.foreign_frames += 1
                 return
-        edge.on_can(msg, rx_ns)
+        q = self._queues.get(edge.node_id)
+        if q is not None:
+            q.put((msg, rx_ns))
+        else:
+            edge.on_can(msg, rx_ns)
 
     def stop(self) -> None:
         super().stop()

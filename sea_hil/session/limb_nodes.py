@@ -55,7 +55,7 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
         edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb))
                  for limb in group]
         nodes.edges += edges
-        nodes.runners += edges if len(edges) == 1 else [b.add(EdgeMux(edge_bus, edges))]
+        nodes.runners += edges if len(edges) == 1 else [b.add(EdgeMux(edge_bus, edges, workers=b.lockstep))]
     return nodes
 
 
