@@ -91,8 +91,8 @@ def main(argv: list[str] | None = None) -> int:
                        f"or one EdgeMux thread) in one process (1 s warm-up not counted), Zenoh to a setpoint echo "
                        f"process; no recorder. Largest passing count per layout: "
                        + ", ".join(f"{lay} {min(b)}" for lay, b in bests.items()) +
-                       f". One limb needs {bits_s / 1e3:.0f} worst-case kbit/s of classic CAN at "
-                       f"{cfg.can.feedback_rate_hz:g} Hz, so a real {cfg.can.bitrate_bps / 1e6:g} Mbit/s bus carries "
+                       f". One limb needs {bits_s / cfg.can.feedback_rate_hz:.0f} worst-case CAN bits per sample "
+                       f"({bits_s / 1e3:.0f} kbit/s at {cfg.can.feedback_rate_hz:g} Hz, heartbeats included), so a real {cfg.can.bitrate_bps / 1e6:g} Mbit/s bus carries "
                        f"at most {bus_limit:.2f} limbs (`sea-hil run --limbs N` puts one per bus); the virtual bus "
                        "has no bitrate limit. cpu_us_per_limb_sample = CPU us of this process per handled limb "
                        "sample (driver step + edge inner loop + CAN + Zenoh).")
