@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -37,23 +38,28 @@ def state_to_setpoint_latency_us(data: SessionData) -> np.ndarray:
     return np.array([x for x in out if x >= 0])
 
 
+FIGURES = ("tracking", "inter_event", "latency")
+
+
 def _limb_figures(data: SessionData, out: Path) -> list[Path]:
     """Tracking, inter-event and latency figures: of the session with one limb; with several, the first limb's
     under the 1-limb names and every limb's as `<figure>_<limb>.png`."""
     limbs = recorded_limbs(data)
     views = [("", "session", data)] if len(limbs) == 1 else \
         [(f"_{name}", name, limb_view(data, name, node_id)) for name, node_id, _ in limbs]
-    if len(limbs) > 1:
-        views.insert(0, ("", limbs[0][0], views[0][2]))
     files: list[Path] = []
     for suffix, title, view in views:
         tr = tracking_arrays(view)
-        names = [out / f"{stem}{suffix}.png" for stem in ("tracking", "inter_event", "latency")]
+        names = [out / f"{stem}{suffix}.png" for stem in FIGURES]
         tracking_figure(names[0], tr["t_s"], tr["theta_rad"], tr["desired_rad"], title)
         inter_event_figure(names[1], tr["event_t_s"], title)
         histogram_cdf_figure(names[2], state_to_setpoint_latency_us(view), "state sent -> setpoint sent [us]",
                              f"{title}: closed-loop latency")
         files += names
+    if len(limbs) > 1:   # the 1-limb names: the first limb's figures
+        for stem, src in zip(FIGURES, files):
+            shutil.copyfile(src, out / f"{stem}.png")
+            files.append(out / f"{stem}.png")
     return files
 
 
