@@ -1,10 +1,13 @@
 """A real-time rig of N limbs in one process, composed by the same `SessionBuilder` as `sea-hil run`: one `PlantNode`
-serving node ids 1..N on one python-can `virtual` bus, and one `EdgeNode` (inner loop at the feedback rate) per limb,
-each on its own bus handle and its own Zenoh limb key. The remote side is a setpoint echo child process (this file with
+serving node ids 1..N on one python-can `virtual` bus (the batched driver: one schedule for all limbs), and one edge
+core (`EdgeNode`, inner loop at the feedback rate) per limb on its own Zenoh limb key. Layouts (`layout`):
+`threads` -- each core is a node with its own thread and bus handle (issue 17's baseline); `mux` -- one `EdgeMux`
+reads the bus once and serves every core in its thread (one edge per bus, as `sea-hil run` composes a shared bus). The remote side is a setpoint echo child process (this file with
 `--feeder ENDPOINT`) that answers every state of every limb with a setpoint holding the measured spring deflection
 (so each edge keeps commanding; 100 setpoints/s per limb, the TT worst case). No recorder runs.
 
 The first `warmup_s` (Zenoh connection, first setpoint, frames queued meanwhile) are run but not counted.
+Closed-loop latency: the edges' `latency` histogram (state published -> setpoint arrived, wall clock).
 Edge timing comes from the edge's own loop-time histogram (`EdgeNode.counters.loop`, `loop_overruns`): response =
 VOLTAGE_CMD sent minus the bus timestamp of the feedback frame that completed the sample (on the `virtual` bus: the
 driver's send time) -- bus queueing + wake-up + decode + inner loop + encode + send.
@@ -26,6 +29,7 @@ import zenoh  # noqa: E402
 
 from benchlib import stop_process, wait_ready  # noqa: E402
 from sea_hil.controller.edge import EdgeNode  # noqa: E402
+from sea_hil.controller.edge_mux import EdgeMux  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
 from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
 from sea_hil.stats.histogram import LogHistogram  # noqa: E402
@@ -71,6 +75,9 @@ class RigResult:
     edge_p50_us: float
     edge_p99_us: float
     edge_max_us: float
+    latency_p50_us: float = -1.0
+    latency_p99_us: float = -1.0
+    layout: str = "threads"
 
     @property
     def driver_miss_rate(self) -> float:
@@ -98,12 +105,19 @@ def _reset(plant: PlantNode, edges: list[EdgeNode]) -> tuple[int, int]:
     (feedback, commands) counts so far, to be subtracted."""
     plant.lateness, plant.stats = LogHistogram(), TickStats()
     for e in edges:
-        e.counters.loop, e.counters.loop_overruns = LogHistogram(), 0
+        e.counters.loop, e.counters.loop_overruns, e.counters.latency = LogHistogram(), 0, LogHistogram()
     return sum(e.counters.feedback for e in edges), sum(e.counters.commands_sent for e in edges)
 
 
-def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: float = 1.0) -> RigResult:
+def _us(h: LogHistogram, q: float) -> float:
+    return h.percentile(q) * 1e6 if h.count else -1.0
+
+
+def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: float = 1.0,
+            layout: str = "threads") -> RigResult:
     """Run `limbs` limbs in real time for `warmup_s` (not counted) + `duration_s` of wall time; timing statistics."""
+    if layout not in ("threads", "mux"):
+        raise ValueError(f"layout must be 'threads' or 'mux', got {layout!r}")
     cfg = load_config(overrides={"can": {"feedback_rate_hz": rate_hz}})
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     channel = f"virtual:bench-rig-{uuid.uuid4().hex}"
@@ -114,28 +128,28 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
         proc = subprocess.Popen([sys.executable, __file__, "--feeder", endpoint], stdout=subprocess.PIPE)
         b.callback(stop_process, proc)
         plant_bus = b.bus(channel)
-        buses = [b.bus(channel) for _ in ids]
+        buses = [b.bus(channel) for _ in ids] if layout == "threads" else [b.bus(channel)] * limbs
         wait_ready(proc)
         plant = b.plant(plant_bus, ids)
         edges: list[EdgeNode] = [b.edge(bus, session, n, cfg=_limb_cfg(cfg, n)) for n, bus in zip(ids, buses)]
-        for e in edges:
-            e.start()
+        for runner in edges if layout == "threads" else [b.add(EdgeMux(buses[0], edges))]:
+            runner.start()
         if warmup_s > 0:    # start-up (connections, first setpoint, queued frames) is not steady-state timing
             plant.run(warmup_s)
             warm = _reset(plant, edges)
         cpu0, t0 = time.process_time(), time.monotonic()
         plant.run(duration_s)   # the schedule restarts from now; driver state carries on
         wall_s, cpu_s = time.monotonic() - t0, time.process_time() - cpu0
-    resp = LogHistogram()
+    resp, closed = LogHistogram(), LogHistogram()
     for e in edges:
         resp.merge(e.counters.loop)
+        closed.merge(e.counters.latency)
     lat = plant.lateness
     late = sum(e.counters.loop_overruns for e in edges)
     return RigResult(limbs, wall_s, cpu_s, plant.stats.ticks, plant.stats.overruns, lat.percentile(50) * 1e6,
                      lat.percentile(99) * 1e6, lat.max * 1e6, sum(e.counters.feedback for e in edges) - warm[0],
-                     sum(e.counters.commands_sent for e in edges) - warm[1], late,
-                     resp.percentile(50) * 1e6 if resp.count else -1.0,
-                     resp.percentile(99) * 1e6 if resp.count else -1.0, resp.max * 1e6 if resp.count else -1.0)
+                     sum(e.counters.commands_sent for e in edges) - warm[1], late, _us(resp, 50), _us(resp, 99),
+                     resp.max * 1e6 if resp.count else -1.0, _us(closed, 50), _us(closed, 99), layout)
 
 
 if __name__ == "__main__":

@@ -33,7 +33,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_closed_loop_latency", "3", ["--runs", "5"], ["--quick"], 75),
     ("bench_driver_timing", "4", ["--duration", "60", "--edge", "--load"], ["--quick", "--edge", "--load"], 135),
     ("bench_bandwidth", "5", ["--runs", "3"], ["--quick"], 55),
-    ("bench_scale", "6", ["--duration", "10"], ["--quick"], 90),
+    ("bench_scale", "6", ["--duration", "10"], ["--quick"], 130),   # 5 counts x 2 layouts x 11 s
     ("bench_mcap", "7", ["--runs", "3"], ["--quick"], 30),
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),

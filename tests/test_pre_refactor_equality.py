@@ -56,6 +56,17 @@ V1_BYTES = (("transmissions", "uplink_msgs", "uplink_bytes", MsgType.STATE),
             ("lead_in", "downlink_msgs", "downlink_bytes", MsgType.SETPOINT),
             ("edge", "uplink_msgs", "uplink_bytes", MsgType.STATE))
 SAMPLE_PERIOD_S = 0.01
+# blocks added since (issue 17: every limb): with one limb, `limbs` holds that limb's transmissions and tracking and
+# `limbs_total` the same, derived from the top-level blocks below (checked, never dropped); timing.driver is new too
+SESSION_ADDED = ("limbs", "limbs_total")
+TIMING_ADDED = ("driver",)
+
+
+def one_limb_blocks(summary: dict[str, Any]) -> dict[str, Any]:
+    """What `limbs` and `limbs_total` must be for the 1-limb session `summary` (without the limb's own timing)."""
+    tx, tr = summary["transmissions"], summary["tracking"]
+    return {"limbs": [{"limb": "limb1", "node_id": 1, "bus": "virtual:sea-hil", "transmissions": tx, "tracking": tr}],
+            "limbs_total": {"limbs": 1, "buses": 1, "transmissions": tx, "tracking": tr}}
 
 
 def _load(path: Path) -> dict[str, Any]:
@@ -116,7 +127,7 @@ def old_session_as_new(old: dict[str, Any]) -> tuple[dict[str, Any], set[str], s
     new["transmissions"] = with_totals(new["transmissions"])
     new["lead_in"] = with_totals(new["lead_in"])
     edge_timing = {EDGE_RENAMED.get(k, k) for k in OLD_EDGE_TIMING if k in old["edge"]}
-    return new, {*OLD_TIMING, "edge"}, edge_timing
+    return new, {*OLD_TIMING, "edge", *TIMING_ADDED}, edge_timing
 
 
 def old_offline_as_new(old: dict[str, Any]) -> dict[str, Any]:
@@ -136,6 +147,7 @@ def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, li
     jsonschema.validate(new, SUMMARY_SCHEMA)
     assert set(new["timing"]) == timing_keys and set(new["timing"]["edge"]) == edge_timing_keys
     got = deterministic(new)
+    assert {k: got.pop(k) for k in SESSION_ADDED} == one_limb_blocks(got)
     assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
     diff = {k: (got[k], expected[k]) for k in expected if got[k] != expected[k]}
     assert not diff, diff

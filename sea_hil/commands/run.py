@@ -27,7 +27,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="where the backstepping voltage loop runs (edge = next to CAN at 1 kHz; remote = in the "
                         "controller at the 10 ms sample rate, voltages tunnelled to CAN)")
     p.add_argument("--can", metavar="SPEC", help="CAN bus: virtual:NAME (default), socketcan:vcan0, udp_multicast:GROUP")
-    p.add_argument("--node", type=int, default=1, help="driver node id")
+    p.add_argument("--node", type=int, default=1, help="driver node id (of the first limb)")
+    p.add_argument("--limbs", type=int, default=None, metavar="N",
+                   help="emulate the default limb N times (node ids --node.., limb1..limbN), over as many CAN buses "
+                        "as the bus-load model needs (docs/session.md, 'Several limbs'); default: [[limbs]] or 1")
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint this process listens on (default: a free loopback port)")
     p.add_argument("--secure", action="store_true",
@@ -53,7 +56,7 @@ def _main(args: argparse.Namespace) -> int:
         raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args, live_overrides(args))
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
-                      inner=args.inner, can=args.can, node_id=args.node, listen=tuple(args.listen),
+                      inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,
                       join_timeout_s=args.join_timeout, secure=args.secure or args.certs is not None,
                       certs=args.certs)

@@ -85,5 +85,12 @@ def config_to_toml(cfg: SeaHilConfig) -> str:
         for k, v in tables.items():
             emit(f"{prefix}.{k}" if prefix else k, v)
 
-    emit("", cfg.model_dump(mode="python"))
+    d = cfg.model_dump(mode="python")
+    arrays = {k: d.pop(k) for k in [k for k, v in d.items() if isinstance(v, (list, tuple))]}  # [[limbs]]
+    emit("", d)
+    for k, items in arrays.items():
+        for item in items:
+            lines.append(f"[[{k}]]")
+            lines.extend(f"{ik} = {fmt(iv)}" for ik, iv in item.items())
+            lines.append("")
     return "\n".join(lines)

@@ -7,6 +7,7 @@ from pydantic import field_validator, model_validator
 
 from sea_hil.config.base import _Frozen
 from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfig
+from sea_hil.config.limbs import LimbConfig, check_limbs
 from sea_hil.config.live import LiveConfig
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
@@ -26,6 +27,12 @@ class SeaHilConfig(_Frozen):
     record: RecordConfig = RecordConfig()
     live: LiveConfig = LiveConfig()
     safety: SafetyConfig = SafetyConfig()
+    limbs: tuple[LimbConfig, ...] = ()   # [[limbs]]; empty = the one default limb (sea_hil/config/limbs.py)
+
+    @field_validator("limbs")
+    @classmethod
+    def _limbs(cls, v: tuple[LimbConfig, ...]) -> tuple[LimbConfig, ...]:
+        return check_limbs(v)
 
     @field_validator("plant")
     @classmethod

@@ -149,6 +149,12 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
     lat = field(summary, "latency_us", default=None)
     if isinstance(lat, Mapping) and lat.get("p50", -1) >= 0:
         rows.append(("latency p50 / p99", f"{lat['p50'] / 1000:.2f} / {lat.get('p99', 0) / 1000:.2f} ms"))
+    limbs = summary.get("limbs", [])
+    for e in limbs if len(limbs) > 1 else []:   # several limbs: one row each
+        err, lat_e = e["tracking"]["max_abs_error_rad"], e["timing"]["latency_us"]
+        rows.append((f"limb {e['limb']} (node {e['node_id']}, {e['bus']})",
+                     f"{e['transmissions']['downlink_msgs']} setpoints, max error {err[0]:.4f} / {err[1]:.4f} rad, "
+                     f"latency p99 {lat_e['p99'] / 1000:.2f} ms"))
     wall = field(summary, "wall_s", default=None)
     cpu = summary.get("cpu_s")
     for what, value in (("wall time", wall), ("CPU time", cpu)):

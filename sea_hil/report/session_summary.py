@@ -9,7 +9,10 @@ Phases, by the controller's time t of the state a message carries or answers (t 
 
 Everything is deterministic in lockstep except the block under `timing` (sea_hil/report/summary.py): the closed-loop
 latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIMING_KEYS`, `EDGE_TIMING_PREFIXES`);
-the edge's other final `/stats` counters are under `edge`."""
+the edge's other final `/stats` counters are under `edge`.
+
+Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb's (the 1-limb layout), `limbs` has
+every limb's transmissions, tracking and latency, `limbs_total` the sums and the worst tracking."""
 from __future__ import annotations
 
 from typing import Any, Callable
@@ -17,6 +20,7 @@ from typing import Any, Callable
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData
+from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 
 # edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
@@ -100,6 +104,23 @@ def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
 
 
 def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
+    """summary.json of a session recording, every limb (see the module docstring)."""
+    limbs = recorded_limbs(data)
+    if len(limbs) == 1:
+        per = [one_limb_summary(data, controller)]
+    else:
+        per = [one_limb_summary(limb_view(data, name, node_id), controller) for name, node_id, _ in limbs]
+    summary = per[0]
+    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per)]
+    summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
+    driver = driver_block(data)
+    if driver is not None:
+        summary[TIMING_KEY]["driver"] = driver
+    return summary
+
+
+def one_limb_summary(data: SessionData, controller: str) -> dict[str, Any]:
+    """The 1-limb blocks of `data` (one limb's view of the recording)."""
     tr = tracking_arrays(data)
     phase = _phase_of(data, _unique(data.messages.get("/tracking", []), "state_seq"))
     down_all = _unique(data.messages.get("/zenoh/setpoint", [])) + _unique(data.messages.get("/zenoh/voltage", []))

@@ -43,8 +43,12 @@ def inter_event_block(event_t_s: np.ndarray) -> dict[str, float]:
 
 
 def deterministic(summary: dict[str, Any]) -> dict[str, Any]:
-    """The summary without its `timing` block: what must be identical between two lockstep (or offline) runs."""
-    return {k: v for k, v in summary.items() if k != TIMING_KEY}
+    """The summary without its `timing` blocks (the top-level one and each limb's): what must be identical between
+    two lockstep (or offline) runs."""
+    out = {k: v for k, v in summary.items() if k != TIMING_KEY}
+    if "limbs" in out:
+        out["limbs"] = [{k: v for k, v in e.items() if k != TIMING_KEY} for e in out["limbs"]]
+    return out
 
 
 def write_summary(path: Path, summary: dict[str, Any]) -> None:

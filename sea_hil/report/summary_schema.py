@@ -25,10 +25,16 @@ TRACKING = _object({"max_abs_error_rad": _PAIR, "rms_error_rad": _PAIR})
 TIMING = _object({
     "cpu_s": _NUMBER,                                                        # offline
     "wall_s": _NUMBER,                                                       # `run` (not `report`)
-    "latency_us": _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")}),
+    "latency_us": _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")}),   # of the first limb
     "latency_samples": _COUNT,
     "edge": {"type": "object", "additionalProperties": _NUMBER},             # wall-time-derived edge counters
+    "driver": _object({"ticks": _COUNT, "tick_misses": _COUNT}),             # `run`: summed over the buses' drivers
 }, required=())
+LATENCY = _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")})
+LIMB = _object({"limb": {"type": "string"}, "node_id": _COUNT, "bus": {"type": "string"},
+                "transmissions": TRANSMISSIONS, "tracking": TRACKING,
+                "timing": _object({"latency_us": LATENCY})})               # the limb's wall-time-derived part
+LIMBS_TOTAL = _object({"limbs": _COUNT, "buses": _COUNT, "transmissions": TRANSMISSIONS, "tracking": TRACKING})
 
 SUMMARY_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
@@ -49,10 +55,12 @@ SUMMARY_SCHEMA: dict[str, Any] = {
         "lead_in": _object({"duration_s": _NUMBER, **TRANSMISSIONS["properties"], "tracking": TRACKING}),
         "uplink_outside_msgs": _COUNT,
         "edge": {"type": "object", "additionalProperties": _NUMBER},         # deterministic edge counters
+        "limbs": {"type": "array", "items": LIMB, "minItems": 1},           # sessions: every limb
+        "limbs_total": LIMBS_TOTAL,                                           # sessions: all limbs
         "lockstep": {"type": "boolean"},                                     # `run` only
         "inner": {"enum": ["edge", "remote"]},                               # `run` only
     }, required=("controller", "duration_s", "transmissions", "events_by_reason", "tracking", "inter_event_s",
                  "max_abs_voltage_v", "timing")),
     "anyOf": [{"required": ["saturated_steps", "quantised"]},                  # offline
-              {"required": ["lead_in", "uplink_outside_msgs", "edge"]}],       # session
+              {"required": ["lead_in", "uplink_outside_msgs", "edge", "limbs", "limbs_total"]}],       # session
 }

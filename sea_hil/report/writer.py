@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import shutil
 from pathlib import Path
 from typing import Any
 
@@ -10,6 +11,7 @@ import numpy as np
 from sea_hil.recorder.writer import SessionData, read_session
 from sea_hil.stats.can_bits import can_frame_bits
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
+from sea_hil.report.limbs import limb_view, recorded_limbs
 from sea_hil.report.session_summary import session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary
 
@@ -36,15 +38,39 @@ def state_to_setpoint_latency_us(data: SessionData) -> np.ndarray:
     return np.array([x for x in out if x >= 0])
 
 
+FIGURES = ("tracking", "inter_event", "latency")
+
+
+def _limb_figures(data: SessionData, out: Path) -> list[Path]:
+    """Tracking, inter-event and latency figures: of the session with one limb; with several, the first limb's
+    under the 1-limb names and every limb's as `<figure>_<limb>.png`."""
+    limbs = recorded_limbs(data)
+    views = [("", "session", data)] if len(limbs) == 1 else \
+        [(f"_{name}", name, limb_view(data, name, node_id)) for name, node_id, _ in limbs]
+    files: list[Path] = []
+    for suffix, title, view in views:
+        tr = tracking_arrays(view)
+        names = [out / f"{stem}{suffix}.png" for stem in FIGURES]
+        tracking_figure(names[0], tr["t_s"], tr["theta_rad"], tr["desired_rad"], title)
+        inter_event_figure(names[1], tr["event_t_s"], title)
+        histogram_cdf_figure(names[2], state_to_setpoint_latency_us(view), "state sent -> setpoint sent [us]",
+                             f"{title}: closed-loop latency")
+        files += names
+    if len(limbs) > 1:   # the 1-limb names: the first limb's figures
+        for stem, src in zip(FIGURES, files):
+            shutil.copyfile(src, out / f"{stem}.png")
+            files.append(out / f"{stem}.png")
+    return files
+
+
+def _bus_of_node(data: SessionData) -> dict[int, str]:
+    return {node_id: bus for _, node_id, bus in recorded_limbs(data)}
+
+
 def write_report_figures(data: SessionData, out: Path) -> list[Path]:
     out.mkdir(parents=True, exist_ok=True)
-    tr = tracking_arrays(data)
-    files = [out / "tracking.png", out / "inter_event.png", out / "latency.png", out / "bandwidth.png",
-             out / "bus_load.png"]
-    tracking_figure(files[0], tr["t_s"], tr["theta_rad"], tr["desired_rad"], "session")
-    inter_event_figure(files[1], tr["event_t_s"], "session")
-    histogram_cdf_figure(files[2], state_to_setpoint_latency_us(data), "state sent -> setpoint sent [us]",
-                         "closed-loop latency")
+    files = _limb_figures(data, out)
+    files += [out / "bandwidth.png", out / "bus_load.png"]
     all_msgs = [m for v in data.messages.values() for m in v]
     t0 = min((m.log_time_ns for m in all_msgs), default=0)
     series: dict[str, np.ndarray] = {}
@@ -55,10 +81,18 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
         if len(t_axis_i) > len(t_axis):
             t_axis = t_axis_i
         series[name] = rate
-    series_figure(files[3], t_axis, series, "payload bytes/s", "Zenoh bandwidth")
+    series_figure(files[-2], t_axis, series, "payload bytes/s", "Zenoh bandwidth")
     bitrate = float(data.metadata.get("sea-hil.config", {}).get("can.bitrate_bps", 1_000_000))
-    tb, bits = _bins(data.messages.get("/can/raw", []), lambda p: can_frame_bits(int(p["dlc"])), t0)
-    series_figure(files[4], tb, {"bus load %": 100.0 * bits / bitrate}, "load [%]", "CAN bus load (worst-case stuffing)")
+    raw, bus_of = data.messages.get("/can/raw", []), _bus_of_node(data)
+    loads: dict[str, np.ndarray] = {}
+    tb = np.zeros(0)
+    for bus in dict.fromkeys(bus_of.values()):   # every bus (frames of unknown node ids: the first bus)
+        first = bus == next(iter(bus_of.values()))
+        msgs = [m for m in raw if bus_of.get(m.payload.get("node_id"), bus if first else None) == bus]
+        t_i, bits = _bins(msgs, lambda p: can_frame_bits(int(p["dlc"])), t0)
+        tb = t_i if len(t_i) > len(tb) else tb
+        loads["bus load %" if len(bus_of) == 1 else f"{bus} load %"] = 100.0 * bits / bitrate
+    series_figure(files[-1], tb, loads, "load [%]", "CAN bus load (worst-case stuffing)")
     return files
 
 
@@ -70,6 +104,19 @@ def _lead_in_rows(summary: dict[str, Any]) -> list[str]:
     return [f"| lead-in (before the cycles, not counted above): duration [s] / downlink / uplink messages | "
             f"{lead['duration_s']:.2f} / {lead['downlink_msgs']} / {lead['uplink_msgs']} |",
             f"| lead-in max abs tracking error hip / knee [rad] | {err[0]:.5f} / {err[1]:.5f} |"]
+
+
+def _limb_rows(summary: dict[str, Any]) -> list[str]:
+    limbs = summary.get("limbs") or []
+    if len(limbs) < 2:
+        return []
+    rows = ["", "| limb | node id | bus | downlink / uplink msgs | max abs error hip / knee [rad] | latency p50 / p99 [us] |",
+            "|---|---|---|---|---|---|"]
+    for e in limbs:
+        tx, err, lat = e["transmissions"], e["tracking"]["max_abs_error_rad"], e["timing"]["latency_us"]
+        rows.append(f"| {e['limb']} | {e['node_id']} | {e['bus']} | {tx['downlink_msgs']} / {tx['uplink_msgs']} | "
+                    f"{err[0]:.5f} / {err[1]:.5f} | {lat['p50']:.0f} / {lat['p99']:.0f} |")
+    return rows
 
 
 def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
@@ -91,6 +138,7 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
              f"| max abs voltage [V] | {summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f} |",
              f"| closed-loop latency p50 / p99 / max [us] | {lat['p50']:.0f} / {lat['p99']:.0f} / {lat['max']:.0f} |",
              *_lead_in_rows(summary),
+             *_limb_rows(summary),
              "", "Figures: tracking.png (paper Fig. 2/3), inter_event.png (Fig. 4), latency.png, bandwidth.png, "
              "bus_load.png", ""]
     return "\n".join(lines)

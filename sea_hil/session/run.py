@@ -30,6 +30,8 @@ from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
+from sea_hil.session import limb_nodes
+from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process
 from sea_hil.session.secure import secure_profile
 
@@ -43,6 +45,7 @@ class RunOptions:
     inner: str = "edge"
     can: str | None = None
     node_id: int = 1
+    limbs: int | None = None   # --limbs N: the default limb N times (sea_hil/session/limbs.py); None: [[limbs]] or 1
     listen: tuple[str, ...] = ()
     progress: bool = True
     seed: int | None = None
@@ -82,6 +85,9 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     cfg_path = opts.out / "config.toml"
     cfg_path.write_text(config_to_toml(quiet), encoding="utf-8")
     listen = listen_endpoints(cfg, opts)
+    limbs = session_limbs(cfg, opts.limbs, opts.node_id, opts.can)
+    if opts.controller == "external" and len(limbs) > 1:
+        raise SeaHilError(f"--controller external serves one limb, not {len(limbs)}")
     t0 = time.monotonic()
     with SessionBuilder(cfg, lockstep=opts.lockstep) as b:
         # this process is what the controller connects to: a peer even when the nodes' config says client (a
@@ -91,16 +97,20 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
         if opts.controller == "external":   # no child: wait for an outside controller (sea_hil/session/external.py)
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
-        else:   # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            child_path = opts.out / "controller.toml"
-            child = controller_config(_without_live(child_cfg), listen[0])
-            child_path.write_text(config_to_toml(child), encoding="utf-8")
-            proc = subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL)
-        b.callback(end_process, proc)
-        _host_nodes(b, opts, session, proc, t0, log)
+        else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
+            procs = []
+            for stem, limb_cfg in limb_nodes.controller_configs(controller_config(_without_live(child_cfg), listen[0]), limbs):
+                child_path = opts.out / f"{stem}.toml"
+                child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
+                procs.append(subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
+                b.callback(end_process, procs[-1])
+            proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
+        if isinstance(proc, OutsideController):
+            b.callback(end_process, proc)
+        _host_nodes(b, opts, session, proc, limbs, t0, log)
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
-    summary = session_summary(data, opts.controller)
+    summary = session_summary(data, opts.controller)   # every limb (`limbs`, `limbs_total`)
     summary["timing"]["wall_s"] = wall_s
     summary["lockstep"] = opts.lockstep
     summary["inner"] = opts.inner
@@ -113,7 +123,7 @@ def _without_live(cfg: SeaHilConfig) -> SeaHilConfig:
     return cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})
 
 
-def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0: float,
+def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, limbs: tuple[Limb, ...], t0: float,
                 log: Callable[..., None]) -> None:
     """Plant, edge and recorder in this process until the controller `proc` (a child process, or the outside
     controller's watch) has finished its cycles. Closing (the builder's stack, last in first out): the controller
@@ -121,7 +131,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0
     closed, then buses go."""
     cfg = b.cfg
     spec = opts.can or cfg.can.interface
-    buses = [b.bus(spec), b.bus(spec), b.bus(spec)]
+    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner)   # every bus: plant, edge(s), tap
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
@@ -130,18 +140,20 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
+    rec.add_metadata("sea-hil.limbs", nodes.metadata())
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
-    recorder = b.recorder(rec, session, buses[2], tap_batch_s=0.002, time_base=time_base)
-    plant = b.plant(buses[0], (opts.node_id,))
-    edge = b.edge(buses[1], session, opts.node_id, inner=opts.inner)
-    b.callback(_finish, rec, plant, edge, recorder, opts.lockstep)
-    b.callback(end_process, proc)
-    recorder.start()
-    plant.start()
-    edge.start()
+    recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.002, time_base=time_base)
+                 for i, tap in enumerate(nodes.taps)]
+    edge = nodes.edges[0]
+    b.callback(_finish, rec, nodes, recorders, opts.lockstep)
+    for p in getattr(proc, "procs", [proc]):
+        b.callback(end_process, p)
+    for recorder in recorders:
+        recorder.start()
+    limb_nodes.start(nodes)
     if opts.on_nodes is not None:   # the public API's handle on a running session (sea_hil.api.Session)
-        opts.on_nodes(plant, edge, proc)
+        opts.on_nodes(nodes.plants[0], edge, proc)
     extra_s = waited_s + (opts.join_timeout_s if opts.controller == "external" else 0.0)
     _wait_for_controller(proc, edge, opts, cfg, t0, extra_s, log)
 
@@ -168,20 +180,17 @@ def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConf
         raise SeaHilError(f"controller process exited with status {proc.returncode}")
 
 
-def _finish(rec: RecorderProcess, plant: Any, edge: Any, recorder: Any, lockstep: bool) -> None:
-    """Stop plant and edge, then the recorder's taps; record the edge's final stats (`/stats`, metadata; in lockstep
-    at the edge's sample time, the recording's clock), close the MCAP file with the plant's and recorder's counters."""
-    for node in (plant, edge):
-        node.stop()
-    for node in (plant, edge):
-        node.join()
-    recorder.stop()
-    recorder.join()
-    now_ns = edge.sample_t_ns if lockstep else time.time_ns()
-    rec.record("/stats", now_ns, now_ns, edge.stats_record(final=True))
-    rec.add_metadata("sea-hil.edge", {k: str(v) for k, v in edge.stats_dict().items()})
-    rec.close(final_stats={"plant_overruns": plant.stats.overruns, "plant_ticks": plant.stats.ticks,
-                           **recorder.counters()})
+def _finish(rec: RecorderProcess, nodes: limb_nodes.LimbNodes, recorders: list[Any], lockstep: bool) -> None:
+    """Stop plants and edges, then the recorder's taps; record each limb's final edge stats (`/stats`, metadata; in
+    lockstep at the edge's sample time, the recording's clock), close the MCAP file with the plants' and the first
+    recorder's counters (the recorder process counts the CAN frames of every tap)."""
+    limb_nodes.stop_and_join(nodes)
+    for recorder in recorders:
+        recorder.stop()
+    for recorder in recorders:
+        recorder.join()
+    limb_nodes.record_edge_finals(rec, nodes, lockstep)
+    rec.close(final_stats={**nodes.final_stats(), **recorders[0].counters()})
 
 
 def print_summary(summary: dict[str, Any]) -> None:

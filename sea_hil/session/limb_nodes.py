@@ -1,0 +1,109 @@
+"""The nodes of N limbs in `sea-hil run`'s host process, bus by bus (`sea_hil.session.limbs` says which limb sits on
+which bus): per bus one driver node serving all its limbs' node ids (`PlantNode`, one thread, one schedule), one edge
+(an `EdgeNode` when the bus carries one limb, as before; an `EdgeMux` hosting one edge core per limb otherwise) and
+one recorder tap; the first tap also records Zenoh. One limb gives exactly the composition of the 1-limb session.
+"""
+from __future__ import annotations
+
+import subprocess
+import time
+from dataclasses import dataclass, field
+from typing import Any
+
+from sea_hil.config import SeaHilConfig
+from sea_hil.session.builder import SessionBuilder
+from sea_hil.session.limbs import Limb, buses_of, limb_config
+
+
+@dataclass
+class LimbNodes:
+    limbs: tuple[Limb, ...]
+    plants: list[Any] = field(default_factory=list)      # one per bus, in bus order
+    edges: list[Any] = field(default_factory=list)       # one EdgeNode (core) per limb, in limb order
+    runners: list[Any] = field(default_factory=list)     # what runs a thread: a bus's EdgeNode or EdgeMux
+    taps: list[Any] = field(default_factory=list)        # one recorder tap bus per bus
+
+    @property
+    def buses(self) -> list[str]:
+        return list(buses_of(self.limbs))
+
+    def final_stats(self) -> dict[str, Any]:
+        """The drivers' counters for the recording's final metadata: totals (`plant_ticks`, `plant_overruns`, the
+        1-limb keys) and, with several buses, per bus (`bus<i>_plant_ticks`, ...)."""
+        out: dict[str, Any] = {"plant_overruns": sum(p.stats.overruns for p in self.plants),
+                               "plant_ticks": sum(p.stats.ticks for p in self.plants)}
+        if len(self.plants) > 1:
+            for i, p in enumerate(self.plants):
+                out.update({f"bus{i}_plant_ticks": p.stats.ticks, f"bus{i}_plant_overruns": p.stats.overruns})
+        return out
+
+    def metadata(self) -> dict[str, str]:
+        """`sea-hil.limbs` metadata: limb name -> "node_id bus" (the summary's limb table reads it back)."""
+        return {limb.name: f"{limb.node_id} {limb.bus}" for limb in self.limbs}
+
+
+def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], inner: str) -> LimbNodes:
+    """Open every bus's handles and build its plant and edge (owned by `b`); nothing is started."""
+    from sea_hil.controller.edge_mux import EdgeMux
+    nodes = LimbNodes(limbs)
+    groups = buses_of(limbs)
+    handles = {spec: (b.bus(spec), b.bus(spec), b.bus(spec)) for spec in groups}   # plant, edge, recorder tap
+    for spec, group in groups.items():
+        plant_bus, edge_bus, tap = handles[spec]
+        nodes.taps.append(tap)
+        nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
+        edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb))
+                 for limb in group]
+        nodes.edges += edges
+        nodes.runners += edges if len(edges) == 1 else [b.add(EdgeMux(edge_bus, edges, workers=b.lockstep))]
+    return nodes
+
+
+def start(nodes: LimbNodes) -> None:
+    for node in (*nodes.plants, *nodes.runners):
+        node.start()
+
+
+def stop_and_join(nodes: LimbNodes) -> None:
+    for node in (*nodes.plants, *nodes.runners):
+        node.stop()
+    for node in (*nodes.plants, *nodes.runners):
+        node.join()
+
+
+def record_edge_finals(rec: Any, nodes: LimbNodes, lockstep: bool) -> None:
+    """Each limb's final edge stats on `/stats` (they carry its `node_id`; in lockstep at its sample time) and as metadata
+    (`sea-hil.edge` for the first limb, the 1-limb name; `sea-hil.edge.<limb>` for the others)."""
+    for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges)):
+        now_ns = edge.sample_t_ns if lockstep else time.time_ns()
+        rec.record("/stats", now_ns, now_ns, edge.stats_record(final=True))   # carries the limb's `node_id`
+        rec.add_metadata("sea-hil.edge" if i == 0 else f"sea-hil.edge.{limb.name}",
+                         {k: str(v) for k, v in edge.stats_dict().items()})
+
+
+class ControllerGroup:
+    """Several controller child processes waited for as one (`wait`, `returncode`: the first failure, else 0)."""
+
+    def __init__(self, procs: list[subprocess.Popen]) -> None:
+        self.procs = procs
+
+    def wait(self, timeout: float | None = None) -> int:
+        deadline = None if timeout is None else time.monotonic() + timeout
+        for p in self.procs:
+            p.wait(timeout=None if deadline is None else max(deadline - time.monotonic(), 0.0))
+        return self.returncode
+
+    @property
+    def returncode(self) -> int | None:
+        codes = [p.returncode for p in self.procs]
+        if any(c is None for c in codes):
+            return None
+        return next((c for c in codes if c != 0), 0)
+
+
+def controller_configs(cfg: SeaHilConfig, limbs: tuple[Limb, ...]) -> list[tuple[str, SeaHilConfig]]:
+    """(file stem, config) of each limb's controller child: `controller` for one limb (the 1-limb name),
+    `controller_<limb>` otherwise."""
+    if len(limbs) == 1:
+        return [("controller", limb_config(cfg, limbs[0]))]
+    return [(f"controller_{limb.name}", limb_config(cfg, limb)) for limb in limbs]

@@ -1,0 +1,115 @@
+"""Limbs as data: which limbs a session emulates and on which CAN bus each one sits.
+
+`session_limbs(cfg, n, node_id)` is the one place the list is made: `[[limbs]]` of the config as given, else the
+default limb (`[zenoh] limb`, `node_id`, `[can] interface`) -- once, or `n` times with `--limbs N`
+(`expand_limbs`). Expanded limbs get node ids `node_id, node_id + 1, ...`, names `<stem>1..` (`limb1`, `limb2`,
+...: the first keeps the 1-limb keys) and buses from the bus-load model: a bus carries as many limbs as fit below
+`MAX_BUS_LOAD` of its bit rate (`limbs_per_bus`, worst-case bits of one limb's frames from
+`sea_hil.stats.can_bits`); classic CAN at 1 Mbit/s: 510 kbit/s per limb, one limb per bus (1.96 would fit at 100 %).
+Bus channels count up from the configured one (`bus_specs`): `virtual:NAME` -> `virtual:NAME0, NAME1, ...`,
+`socketcan:vcan0` -> `vcan0, vcan1, ...`, `udp_multicast:239.74.163.2` -> `.2, .3, ...`; one bus keeps its spec.
+"""
+from __future__ import annotations
+
+import ipaddress
+import math
+import re
+from dataclasses import dataclass
+
+from sea_hil.config import SeaHilConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.can_frames import NODE_ID_MAX
+from sea_hil.protocol.canbus import parse_can_spec
+
+MAX_BUS_LOAD = 0.8   # planned worst-case load of a bus at most (a session warns above 80 %, issue 17)
+
+
+@dataclass(frozen=True)
+class Limb:
+    name: str
+    node_id: int
+    bus: str
+
+
+def limb_bits_per_s(cfg: SeaHilConfig) -> float:
+    """Worst-case CAN bits per second of one limb: per feedback sample its feedback frames and one VOLTAGE_CMD,
+    plus its heartbeats (`can_frame_bits`, worst-case stuffing)."""
+    from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+    from sea_hil.protocol.can_frames import Heartbeat, DriverState, ErrorFlags
+    from sea_hil.stats.can_bits import can_frame_bits
+    codec, zero = SeaCodec([1]), (0.0, 0.0)
+    per_sample = codec.encode_feedback(Feedback(1, 0, 0, zero, zero, zero, zero)) + [codec.encode(VoltageCmd(1, zero, 0))]
+    heartbeat = codec.encode(Heartbeat(1, DriverState(0), ErrorFlags(0), 0, 0, 0))
+
+    def bits(m: object) -> int:
+        return can_frame_bits(m.dlc, m.is_extended_id)  # type: ignore[attr-defined]
+    return cfg.can.feedback_rate_hz * sum(map(bits, per_sample)) + cfg.can.heartbeat_rate_hz * bits(heartbeat)
+
+
+def limbs_per_bus(cfg: SeaHilConfig, max_load: float = MAX_BUS_LOAD) -> int:
+    """How many limbs one bus carries below `max_load` of `[can] bitrate_bps` (at least one)."""
+    return max(1, math.floor(max_load * cfg.can.bitrate_bps / limb_bits_per_s(cfg)))
+
+
+def bus_specs(spec: str, count: int) -> list[str]:
+    """`count` bus specs counting up from `spec` (see the module docstring); `[spec]` for one."""
+    if count == 1:
+        return [spec]
+    interface, channel = parse_can_spec(spec)
+    if interface == "udp_multicast":
+        base = ipaddress.ip_address(channel)
+        return [f"{interface}:{base + i}" for i in range(count)]
+    m = re.fullmatch(r"(.*?)(\d*)", channel)
+    assert m is not None
+    stem, first = m.group(1), int(m.group(2) or 0)
+    out = [f"{interface}:{stem}{first + i}" for i in range(count)]
+    for s in out:
+        parse_can_spec(s)   # e.g. a socketcan name grown past 15 characters
+    return out
+
+
+def _stem(name: str) -> str:
+    return name.rstrip("0123456789") or name
+
+
+def expand_limbs(cfg: SeaHilConfig, n: int, node_id: int = 1, spec: str | None = None) -> tuple[Limb, ...]:
+    """The default limb `n` times: node ids from `node_id`, names `<stem>1..n`, spread over as many buses (counted
+    up from `spec`, default `[can] interface`) as the bus-load model needs; limbs fill a bus before the next."""
+    if n < 1:
+        raise ConfigError(f"--limbs must be >= 1, got {n}")
+    if node_id + n - 1 > NODE_ID_MAX:
+        raise ConfigError(f"{n} limbs from node id {node_id} exceed the largest node id {NODE_ID_MAX}")
+    spec = spec or cfg.can.interface
+    if n == 1:
+        return (Limb(cfg.zenoh.limb, node_id, spec),)
+    per_bus = limbs_per_bus(cfg)
+    buses = bus_specs(spec, math.ceil(n / per_bus))
+    stem = _stem(cfg.zenoh.limb)
+    return tuple(Limb(f"{stem}{i + 1}", node_id + i, buses[i // per_bus]) for i in range(n))
+
+
+def session_limbs(cfg: SeaHilConfig, n: int | None = None, node_id: int = 1, spec: str | None = None
+                  ) -> tuple[Limb, ...]:
+    """The session's limbs: `[[limbs]]` when configured (then `n`, if given, must not contradict it), else the
+    default limb expanded `n` times (once without `n`)."""
+    if cfg.limbs:
+        if n is not None and n != len(cfg.limbs):
+            raise ConfigError(f"--limbs {n} contradicts the {len(cfg.limbs)} [[limbs]] of the config")
+        return tuple(Limb(lc.name, lc.node_id, lc.bus or spec or cfg.can.interface) for lc in cfg.limbs)
+    return expand_limbs(cfg, n or 1, node_id, spec)
+
+
+def buses_of(limbs: tuple[Limb, ...]) -> dict[str, tuple[Limb, ...]]:
+    """Bus spec -> its limbs, in order of first appearance."""
+    out: dict[str, tuple[Limb, ...]] = {}
+    for limb in limbs:
+        out[limb.bus] = out.get(limb.bus, ()) + (limb,)
+    return out
+
+
+def limb_config(cfg: SeaHilConfig, limb: Limb) -> SeaHilConfig:
+    """The config of one limb's nodes: its Zenoh key chunk, its node id and bus."""
+    return cfg.model_copy(update={"zenoh": cfg.zenoh.model_copy(update={"limb": limb.name}),
+                                  "can": cfg.can.model_copy(update={"interface": limb.bus,
+                                                                    "node_ids": (limb.node_id,)}),
+                                  "limbs": ()})
