@@ -50,9 +50,9 @@ def command_ids() -> frozenset[int]:
 
 
 def is_foreign(msg: can.Message, served: Container[int], cmd_ids: frozenset[int]) -> bool:
-    """True for a classic data frame whose 11-bit id names a DBC command of a valid node id not in `served`: the
-    id alone decides (an acceptance filter never looks at another node's payload)."""
-    if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd:
+    """True for a data frame (classic or FD) whose 11-bit id names a DBC command of a valid node id not in `served`:
+    the id alone decides (an acceptance filter never looks at another node's payload)."""
+    if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
         return False
     node_id = msg.arbitration_id >> CMD_BITS
     return (0 <= msg.arbitration_id <= 0x7FF and NODE_ID_MIN <= node_id <= NODE_ID_MAX and node_id not in served
@@ -69,7 +69,7 @@ class PlantNode(Node):
         super().__init__()
         self.cfg = cfg
         self.bus = bus
-        self.codec = SeaCodec(node_ids)
+        self.codec = SeaCodec.for_bus(cfg.can, node_ids)
         self.cmd_ids = command_ids()
         p = limb_params(cfg.plant)
         cc = cfg.can

@@ -8,7 +8,7 @@ from typing import Any
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData, read_session
-from sea_hil.stats.can_bits import can_frame_bits
+from sea_hil.stats.can_bits import nominal_bits
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.session_summary import session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary
@@ -56,8 +56,10 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
             t_axis = t_axis_i
         series[name] = rate
     series_figure(files[3], t_axis, series, "payload bytes/s", "Zenoh bandwidth")
-    bitrate = float(data.metadata.get("sea-hil.config", {}).get("can.bitrate_bps", 1_000_000))
-    tb, bits = _bins(data.messages.get("/can/raw", []), lambda p: can_frame_bits(int(p["dlc"])), t0)
+    meta = data.metadata.get("sea-hil.config", {})
+    bitrate, data_rate = int(meta.get("can.bitrate_bps", 1_000_000)), int(meta.get("can.data_bitrate_bps", 5_000_000))
+    tb, bits = _bins(data.messages.get("/can/raw", []), lambda p: nominal_bits(
+        int(p["dlc"]), fd=bool(p.get("is_fd")), bitrate_bps=bitrate, data_bitrate_bps=data_rate), t0)
     series_figure(files[4], tb, {"bus load %": 100.0 * bits / bitrate}, "load [%]", "CAN bus load (worst-case stuffing)")
     return files
 

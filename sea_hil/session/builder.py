@@ -50,7 +50,7 @@ class SessionBuilder:
 
     def bus(self, spec: str | None = None) -> can.BusABC:
         """A CAN bus handle (`spec`, default `cfg.can.interface`), shut down on close."""
-        bus = open_bus(spec or self.cfg.can.interface)
+        bus = open_bus(spec or self.cfg.can.interface, fd=self.cfg.can.fd)
         self._stack.callback(bus.shutdown)
         return bus
 
