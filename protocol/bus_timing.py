@@ -117,9 +117,10 @@ class BusArbiter:
 
     def stats(self, elapsed_ns: int | None = None) -> dict[str, Any]:
         """Per-id frames, queueing delay and latency (microseconds: p50, p99, max), and the bus load."""
-        def us(h: LogHistogram) -> dict[str, float]:
+        def us(h: LogHistogram) -> dict[str, float]:   # values are recorded + 1 ns (a log histogram has no 0)
             d = h.to_dict()
-            return {k: round(float(d[k]) * 1e6, 3) if d[k] is not None else -1.0 for k in ("p50", "p99", "max")}
+            return {k: -1.0 if d[k] is None else 0.0 if d[k] < 1e-8 else round(float(d[k]) * 1e6, 3)
+                    for k in ("p50", "p99", "max")}
         span = elapsed_ns if elapsed_ns else self.busy_until_ns
         return {"bitrate_bps": self.rates.bitrate_bps, "data_bitrate_bps": self.rates.data_bitrate_bps,
                 "frames": self.frames, "load_pct": 100.0 * self.busy_ns / span if span else 0.0,

@@ -10,7 +10,8 @@ All handles of one channel in this process share one timeline (`timeline_for`), 
   that clock, a frame it receives moves the clock to the frame's delivery time, `advance_sim_time` moves it to a
   sample time (the driver before it publishes a sample). Frames go from handle to handle inside the process (not
   through the raw bus). The next frame is put on the simulated wire only when every handle is waiting in `recv`
-  with nothing to read, so every frame that could join its arbitration has been sent; one frame at a time.
+  with nothing to read (except `listen_only` ones: a recorder), so every frame that could join its arbitration has
+  been sent; one frame at a time.
   A frame equal (id and data) to the last one its handle sent with that id is a lockstep re-send: it takes no bus
   time and arrives stamped like the original. `rx_time_ns` is the simulated delivery time of the last frame read.
 """
@@ -39,6 +40,7 @@ class TimedBus:
         self.sim_now_ns = 0
         self.rx_time_ns = 0
         self.waiting = False
+        self.listen_only = False    # lockstep: never answers a frame, so the simulation does not wait for it
         self.last_sent: dict[int, tuple[bytes, int]] = {}   # lockstep: id -> (data, delivery ns) of the last frame
         self.closed = False
         timeline.attach(self)
@@ -167,7 +169,7 @@ class LockstepTimeline(_Timeline):
 
     def _advance(self) -> None:
         """Put frames on the simulated wire while every handle waits with nothing to read."""
-        while self.arbiter.pending and all(o.waiting and not o.inbox for o in self.handles):
+        while self.arbiter.pending and all(o.waiting and not o.inbox or o.listen_only for o in self.handles):
             tx = self.arbiter.next_transmission()
             assert tx is not None
             sender: TimedBus = tx.token

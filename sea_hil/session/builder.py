@@ -99,6 +99,8 @@ class SessionBuilder:
     def recorder(self, rec: Any, session: zenoh.Session | None, bus: can.BusABC | None = None,
                  **kw: Any) -> Any:
         from sea_hil.recorder.node import RecorderNode
+        if isinstance(bus, TimedBus):
+            bus.listen_only = True   # the bus-timing model does not wait for a recorder (it never answers)
         return self.add(RecorderNode(rec, session, self.cfg.zenoh.prefix, bus, **kw))
 
     # ---- lifecycle ------------------------------------------------------------------------------------------------
