@@ -82,12 +82,15 @@ class BusArbiter:
         self._ids: dict[int, _IdStats] = {}
         self.busy_ns = 0
         self.frames = 0
+        self.first_ready_ns: int | None = None
 
     @property
     def pending(self) -> int:
         return len(self._pending)
 
     def submit(self, ready_ns: int, msg: can.Message, token: Any = None) -> None:
+        if self.first_ready_ns is None:
+            self.first_ready_ns = int(ready_ns)
         heapq.heappush(self._pending, (int(ready_ns), next(self._order), priority(msg), msg, token))
 
     def next_start_ns(self) -> int | None:
@@ -115,13 +118,14 @@ class BusArbiter:
         s.latency.record(max((end - ready) * 1e-9, 1e-9))
         return Transmission(ready, start, end, msg, token)
 
-    def stats(self, elapsed_ns: int | None = None) -> dict[str, Any]:
-        """Per-id frames, queueing delay and latency (microseconds: p50, p99, max), and the bus load."""
+    def stats(self) -> dict[str, Any]:
+        """Per-id frames, queueing delay and latency (microseconds: p50, p99, max), and the bus load (busy time over
+        first frame ready .. last frame delivered)."""
         def us(h: LogHistogram) -> dict[str, float]:   # values are recorded + 1 ns (a log histogram has no 0)
             d = h.to_dict()
             return {k: -1.0 if d[k] is None else 0.0 if d[k] < 1e-8 else round(float(d[k]) * 1e6, 3)
                     for k in ("p50", "p99", "max")}
-        span = elapsed_ns if elapsed_ns else self.busy_until_ns
+        span = self.busy_until_ns - (self.first_ready_ns or 0)
         return {"bitrate_bps": self.rates.bitrate_bps, "data_bitrate_bps": self.rates.data_bitrate_bps,
                 "frames": self.frames, "load_pct": 100.0 * self.busy_ns / span if span else 0.0,
                 "per_id": [{"can_id": k, "frames": s.frames, "queue_us": us(s.queue), "latency_us": us(s.latency)}
