@@ -156,3 +156,16 @@ def test_real_time_timeline_never_delivers_early_and_orders_by_id() -> None:
 def test_lockstep_model_needs_an_in_process_bus() -> None:
     with pytest.raises(ConfigError, match="virtual bus"):
         make_timeline(load_config(None).can, "socketcan:vcan0", lockstep=True)
+
+
+def test_session_builder_warns_and_shares_one_timing_model(caplog: pytest.LogCaptureFixture) -> None:
+    from sea_hil.session.builder import SessionBuilder
+    spec = f"virtual:builder-{uuid.uuid4().hex[:8]}"
+    cfg = load_config(None, {"can": {"node_ids": [1, 2], "emulate_bitrate": True}})
+    with caplog.at_level(logging.WARNING, "sea_hil.can"), SessionBuilder(cfg, lockstep=True) as b:
+        one, two = b.bus(spec), b.bus(spec)
+        assert isinstance(one, TimedBus) and one.timeline is two.timeline and one.simulated
+        assert set(b.bus_timing()) == {spec}
+    assert caplog.text.count("planned at 102.3 % load") == 1 and one.closed and two.closed
+    with SessionBuilder(load_config(None), lockstep=False) as b:
+        assert not isinstance(b.bus(spec), TimedBus) and b.bus_timing() == {}
