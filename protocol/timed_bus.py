@@ -64,7 +64,12 @@ class TimedBus:
             self.raw.shutdown()
 
     def timing_stats(self) -> dict[str, float]:
-        return self.timeline.arbiter.flat_stats()
+        """The bus's `/stats` fields (`BusArbiter.flat_stats`; real time: + `can_late_deliveries`, frames put on the
+        bus more than 100 us after their transmission's end, i.e. the host could not keep up)."""
+        out = self.timeline.arbiter.flat_stats()
+        if isinstance(self.timeline, RealTimeTimeline):
+            out["can_late_deliveries"] = self.timeline.late
+        return out
 
     def __getattr__(self, name: str) -> Any:
         return getattr(self.raw, name)
