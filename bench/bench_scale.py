@@ -22,7 +22,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 from benchlib import bench_args, emit, record  # noqa: E402
 from limbrig import RigResult, run_rig  # noqa: E402
 from sea_hil.config import load_config  # noqa: E402
-from sea_hil.session.limbs import limb_bits_per_s  # noqa: E402
+from sea_hil.session.limbs import limb_load_pct  # noqa: E402
 
 MAX_MISS = 0.001
 MAX_CLOSED_LOOP_P99_US = 3000.0
@@ -78,8 +78,7 @@ def main(argv: list[str] | None = None) -> int:
             details += [{"run": i + 1, **r.as_dict(), "cpu_us_per_limb_sample": cpu_us_per_limb_sample(r),
                          "pass": passes(r)} for r in results]
     cfg = load_config()
-    bits_s = limb_bits_per_s(cfg)
-    bus_limit = cfg.can.bitrate_bps / bits_s
+    bus_limit = 100.0 / limb_load_pct(cfg)
     best_layout = max(layouts, key=lambda lay: min(bests[lay]))
     per_run = bests[best_layout]
     rec = record("6", "limbs in real time at 1 kHz on one machine", runs=runs,
@@ -91,9 +90,9 @@ def main(argv: list[str] | None = None) -> int:
                        f"or one EdgeMux thread) in one process (1 s warm-up not counted), Zenoh to a setpoint echo "
                        f"process; no recorder. Largest passing count per layout: "
                        + ", ".join(f"{lay} {min(b)}" for lay, b in bests.items()) +
-                       f". One limb needs {bits_s / cfg.can.feedback_rate_hz:.0f} worst-case CAN bits per sample "
-                       f"({bits_s / 1e3:.0f} kbit/s at {cfg.can.feedback_rate_hz:g} Hz, heartbeats included), so a real {cfg.can.bitrate_bps / 1e6:g} Mbit/s bus carries "
-                       f"at most {bus_limit:.2f} limbs (`sea-hil run --limbs N` puts one per bus); the virtual bus "
+                       f". One limb plans {100.0 / bus_limit:.1f} % of a bus (worst-case stuffing, "
+                       f"{cfg.can.feedback_rate_hz:g} Hz, heartbeats included; profile of [can]), so a real "
+                       f"{cfg.can.bitrate_bps / 1e6:g} Mbit/s bus carries at most {bus_limit:.2f} limbs (`sea-hil run --limbs N` puts one per bus); the virtual bus "
                        "has no bitrate limit. cpu_us_per_limb_sample = CPU us of this process per handled limb "
                        "sample (driver step + edge inner loop + CAN + Zenoh).")
     emit([rec], args.json)

@@ -1,7 +1,7 @@
 """The edge node: CAN <-> Zenoh bridge next to the driver, running the backstepping inner loop at the driver's
 feedback rate with the latest setpoint v_x(t_i) held.
 
-Per feedback sample (three CAN frames assembled): publish the state to Zenoh every outer sample (`StatePublisher`,
+Per feedback sample (one CAN FD frame, or three classic frames assembled): publish the state to Zenoh every outer sample (`StatePublisher`,
 uplink link emulator), meet the controller as the clock says (`sync`), take setpoints that have arrived
 (`SetpointIntake`, downlink link emulator), compute the voltage and send VOLTAGE_CMD (`CommandPath`). With
 `inner="remote"` the voltages come from the controller over Zenoh and are tunnelled to CAN as received (held).
@@ -55,7 +55,7 @@ class EdgeNode(Node):
             raise ValueError("inner must be 'edge' or 'remote'")
         super().__init__()
         self.cfg, self.bus, self.node_id = cfg, bus, node_id
-        self.codec = SeaCodec([node_id])
+        self.codec = SeaCodec.for_bus(cfg.can, [node_id])
         self.assembler = FeedbackAssembler()
         self.keys = Keys.from_config(cfg.zenoh)
         self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
@@ -119,8 +119,8 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-        elif isinstance(frame, FEEDBACK_PARTS):
-            fb = self.assembler.push(frame)
+        elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
+            fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:
                 with self.lock:
                     self._on_feedback(fb, now_ns)

@@ -83,4 +83,7 @@ def edge_stats(edge: Any) -> dict[str, float]:
                **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
                loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
                uplink_pending=pub.uplink.pending)
+    timing = getattr(edge.bus, "timing_stats", None)   # [can] emulate_bitrate: queueing delay per CAN id
+    if timing is not None:
+        out.update(timing())
     return out

@@ -50,9 +50,9 @@ def command_ids() -> frozenset[int]:
 
 
 def is_foreign(msg: can.Message, served: Container[int], cmd_ids: frozenset[int]) -> bool:
-    """True for a classic data frame whose 11-bit id names a DBC command of a valid node id not in `served`: the
-    id alone decides (an acceptance filter never looks at another node's payload)."""
-    if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd:
+    """True for a data frame (classic or FD) whose 11-bit id names a DBC command of a valid node id not in `served`:
+    the id alone decides (an acceptance filter never looks at another node's payload)."""
+    if msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame:
         return False
     node_id = msg.arbitration_id >> CMD_BITS
     return (0 <= msg.arbitration_id <= 0x7FF and NODE_ID_MIN <= node_id <= NODE_ID_MAX and node_id not in served
@@ -69,7 +69,8 @@ class PlantNode(Node):
         super().__init__()
         self.cfg = cfg
         self.bus = bus
-        self.codec = SeaCodec(node_ids)
+        self.sim_bus = bool(getattr(bus, "simulated", False))   # lockstep bus-timing model: simulated arrival times
+        self.codec = SeaCodec.for_bus(cfg.can, node_ids)
         self.cmd_ids = command_ids()
         p = limb_params(cfg.plant)
         cc = cfg.can
@@ -119,6 +120,9 @@ class PlantNode(Node):
             log.warning("%s (%d bus errors so far)", what, self.stats.bus_errors)
 
     def publish(self, drv: DriverCore, feedback: Feedback) -> None:
+        if self.sim_bus:   # the sample's frames leave at its sample time; commands act from their simulated arrival
+            self.bus.advance_sim_time(drv.sample_t_ns)
+            drv.period_start_ns = drv.sample_t_ns
         try:
             msgs = self.codec.encode_feedback(feedback, saturate=True)
         except MalformedFrame as err:   # e.g. a diverged (NaN) model: report, keep the node alive
@@ -134,6 +138,8 @@ class PlantNode(Node):
         self.publish(drv, feedback)
 
     def heartbeats(self) -> None:
+        if self.sim_bus:
+            self.bus.advance_sim_time(max(drv.sample_t_ns for drv in self.drivers.values()))
         for drv in self.drivers.values():
             self._send(self.codec.encode(drv.heartbeat()))
 
@@ -156,7 +162,7 @@ class PlantNode(Node):
                 self.stop_event.wait(min(remaining * 1e-9, 0.01))
                 continue
             if msg is not None:
-                self._on_message(msg, time.monotonic_ns())
+                self._on_message(msg, self.bus.rx_time_ns if self.sim_bus else time.monotonic_ns())
 
     # ---- the node hooks -----------------------------------------------------------------------------------------
     def _on_start(self, duration_s: float | None) -> None:

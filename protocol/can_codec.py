@@ -1,7 +1,10 @@
 """Encode/decode the sea-hil CAN frames. `protocol/sea.dbc` is the single source of truth (docs/can-protocol.md).
 
 `can_id = node_id << 5 | cmd_id`; the DBC holds the node-1 ids and is loaded with frame-id mask 0x1F, so one
-definition serves every node. Encoding is strict (out-of-range, NaN, wrong type -> `MalformedFrame`; callers
+definition serves every node. Two profiles (`fd`): classic CAN (VOLTAGE_CMD, three feedback frames per sample) and
+CAN FD (VOLTAGE_CMD_FD and one FEEDBACK_FD frame per sample, sent with the bit rate switch; ESTOP, CLEAR_ERRORS,
+DEFLECTION_SETPOINT and HEARTBEAT stay classic frames on the FD bus); `fd=None` decodes both (recorders, monitors)
+and encodes classic. A frame's FD flag must match its DBC message. Encoding is strict (out-of-range, NaN, wrong type -> `MalformedFrame`; callers
 saturate first, see `SeaCodec.saturate`); decoding checks id, DLC, reserved bits, ranges and enum values.
 The frame types (`sea_hil.protocol.can_frames`) and feedback assembly (`sea_hil.protocol.can_assembly`) are re-exported here.
 """
@@ -21,7 +24,7 @@ from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
 from sea_hil.protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
                                  SEQ_MODULUS, T_US_MODULUS, ClearErrors, DeflectionSetpoint, DriverState, ErrorFlags,
                                  EStop, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Frame,
-                                 Heartbeat, Pair, VoltageCmd, can_id_of, check_node_id)
+                                 Heartbeat, Pair, VoltageCmd, can_id_of, check_node_id, profile_messages)
 from sea_hil.errors import ConfigError, MalformedFrame
 
 __all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",
@@ -59,13 +62,14 @@ class _Layout:
     dlc: int
     used_mask: int
     sigs: tuple[_Sig, ...]
+    is_fd: bool
     # per signal (sig, name, min, max, is_int, clampable, min - tol, max + tol, plain): the hot paths' precomputed
     # view of `sigs`; `plain` = no enum, so a finite in-range value needs no further check
     plan: tuple[tuple[Any, ...], ...] = ()
 
 
-def _layout(db: Any, cls: type) -> _Layout:
-    msg = db.get_message_by_name(cls.DBC)
+def _layout(db: Any, cls: type, name: str) -> _Layout:
+    msg = db.get_message_by_name(name)
     sigs, used = [], 0
     for s in msg.signals:
         if s.byte_order != "little_endian" or s.minimum is None or s.maximum is None:
@@ -76,18 +80,29 @@ def _layout(db: Any, cls: type) -> _Layout:
         sigs.append(_Sig(s.name, s.minimum, s.maximum, abs(s.scale) * 1e-6, is_int, choices))
     plan = tuple((s, s.name, s.minimum, s.maximum, s.is_int, s.clampable, s.minimum - s.tol, s.maximum + s.tol,
                   s.choices is None) for s in sigs)
-    return _Layout(cls, msg, msg.frame_id & CMD_MASK, msg.length, used, tuple(sigs), plan)
+    return _Layout(cls, msg, msg.frame_id & CMD_MASK, msg.length, used, tuple(sigs), bool(msg.is_fd), plan)
 
 
 class SeaCodec:
-    """Dataclass <-> `can.Message` for the sea-hil protocol; `node_ids` restricts which nodes decode accepts."""
+    """Dataclass <-> `can.Message` for the sea-hil protocol; `node_ids` restricts which nodes decode accepts, `fd`
+    picks the profile (None: decode both, encode classic), `bitrate_switch` the BRS bit of the FD frames sent."""
 
-    def __init__(self, node_ids: Iterable[int] | None = None) -> None:
+    def __init__(self, node_ids: Iterable[int] | None = None, *, fd: bool | None = False,
+                 bitrate_switch: bool = True) -> None:
         self._db = load_database()
         self._node_ids = None if node_ids is None else frozenset(check_node_id(n) for n in node_ids)
-        layouts = [_layout(self._db, cls) for cls in FRAME_TYPES]
-        self._by_cls = {lay.cls: lay for lay in layouts}
-        self._by_cmd = {lay.cmd_id: lay for lay in layouts}
+        self.fd, self.bitrate_switch = fd, bitrate_switch
+        profiles = (False, True) if fd is None else (fd,)
+        layouts = {p: [_layout(self._db, cls, name) for cls, name in profile_messages(p).items()] for p in profiles}
+        self._by_cls = {lay.cls: lay for lay in layouts[bool(fd)]}
+        self._by_cmd = {lay.cmd_id: lay for p in profiles for lay in layouts[p]}
+        self._other = {lay.cmd_id: lay.message.name for p in (False, True) if p not in profiles
+                       for lay in (_layout(self._db, c, n) for c, n in profile_messages(p).items())}
+
+    @classmethod
+    def for_bus(cls, can_cfg: Any, node_ids: Iterable[int] | None = None) -> SeaCodec:
+        """The codec of the profile `[can]` configures (`fd`; bit rate switch when the data rate is higher)."""
+        return cls(node_ids, fd=can_cfg.fd, bitrate_switch=can_cfg.data_bitrate_bps > can_cfg.bitrate_bps)
 
     def encode(self, obj: Frame, *, saturate: bool = False) -> can.Message:
         """Strict encoding (`MalformedFrame` on anything out of range); `saturate=True` clamps first, like
@@ -109,11 +124,15 @@ class SeaCodec:
             data = lay.message.encode(values, strict=True)  # cantools range checks (strict), no name lookup
         except (EncodeError, TypeError, ValueError, OverflowError, KeyError) as err:
             raise MalformedFrame(f"cannot encode {lay.message.name} for node {node_id}: {err}") from err
-        msg = can.Message(arbitration_id=node_id << CMD_BITS | lay.cmd_id, data=data, is_extended_id=False)
+        msg = can.Message(arbitration_id=node_id << CMD_BITS | lay.cmd_id, data=data, is_extended_id=False,
+                          is_fd=lay.is_fd, bitrate_switch=lay.is_fd and self.bitrate_switch)
         msg.data = data  # type: ignore[assignment]  # immutable bytes: python-can's virtual bus deep-copies the
         return msg       # message once per receiver, and a deepcopy of bytes is free (of a bytearray it is not)
 
     def encode_feedback(self, fb: Feedback, *, saturate: bool = False) -> list[can.Message]:
+        """The frames of one sample: one FEEDBACK_FD (CAN FD profile) or the three classic parts."""
+        if Feedback in self._by_cls:
+            return [self.encode(fb, saturate=saturate)]
         return [self.encode(p, saturate=saturate) for p in fb.parts()]
 
     def decode(self, msg: can.Message) -> Frame:
@@ -124,12 +143,20 @@ class SeaCodec:
     def decode_raw(self, can_id: int, data: bytes, dlc: int, *, is_extended: bool = False, is_error: bool = False,
                    is_remote: bool = False, is_fd: bool = False) -> Frame:
         """`decode` on the parts of a frame (as recorded); `MalformedFrame` saying why it is not acceptable."""
-        if is_error or is_remote or is_extended or is_fd:
-            kind = "error" if is_error else "remote" if is_remote else "extended-id" if is_extended else "CAN FD"
+        if is_error or is_remote or is_extended:
+            kind = "error" if is_error else "remote" if is_remote else "extended-id"
             raise MalformedFrame(f"{kind} frame (id 0x{can_id:X}) not accepted")
         node_id, lay = can_id >> CMD_BITS, self._by_cmd.get(can_id & CMD_MASK)
         if not 0 <= can_id <= 0x7FF or lay is None or node_id < NODE_ID_MIN:
+            other = self._other.get(can_id & CMD_MASK) if 0 <= can_id <= 0x7FF else None
+            if other is not None:
+                raise MalformedFrame(f"{other} (id 0x{can_id:03X}) belongs to the "
+                                     f"{'classic' if self.fd else 'CAN FD'} profile; this node runs "
+                                     f"{'CAN FD' if self.fd else 'classic CAN'} ([can] fd)")
             raise MalformedFrame(f"unknown CAN id 0x{can_id:03X}")
+        if is_fd != lay.is_fd:
+            raise MalformedFrame(f"{'CAN FD' if is_fd else 'classic'} frame (id 0x{can_id:03X}) not accepted: "
+                                 f"{lay.message.name} is a {'CAN FD' if lay.is_fd else 'classic'} frame")
         if self._node_ids is not None and node_id not in self._node_ids:
             raise MalformedFrame(f"{lay.message.name} for node {node_id}, which is not served")
         if len(data) != lay.dlc or dlc != len(data):
@@ -153,7 +180,7 @@ class SeaCodec:
     def saturate(self, obj: Any) -> tuple[Any, bool]:
         """Copy of `obj` with every physical value and counter clamped to its DBC range (not seq/t_us, enums, NaN);
         the flag says whether anything changed."""
-        if isinstance(obj, Feedback):
+        if isinstance(obj, Feedback) and Feedback not in self._by_cls:
             res = [self.saturate(p) for p in obj.parts()]
             return Feedback.from_parts(*(p for p, _ in res)), any(c for _, c in res)
         lay = self._layout_of(type(obj))

@@ -1,7 +1,10 @@
 """The sea-hil CAN frame types (one frozen dataclass per DBC message), ids and rolling-counter constants.
 
-`can_id = node_id << 5 | cmd_id`. Each frame class names its DBC message (`DBC`) and maps its fields to DBC signals
-(`FIELDS`); encoding/decoding lives in `sea_hil.protocol.can_codec`, pairing the feedback frames in `sea_hil.protocol.can_assembly`.
+`can_id = node_id << 5 | cmd_id`. Each frame class names its DBC message per profile (`DBC`: classic CAN, `DBC_FD`:
+the CAN FD profile; "" = not in that profile) and maps its fields to DBC signals (`FIELDS`); encoding/decoding lives
+in `sea_hil.protocol.can_codec`, pairing the classic feedback frames in `sea_hil.protocol.can_assembly`. A `Feedback`
+sample is three classic frames (`parts()`) or one CAN FD frame (FEEDBACK_FD); a `VoltageCmd` is VOLTAGE_CMD or
+VOLTAGE_CMD_FD.
 """
 from __future__ import annotations
 
@@ -51,6 +54,7 @@ _FLAG_SIGNALS = tuple((f, "err_" + (f.name or "").lower()) for f in ErrorFlags)
 class _Signals:
     """Mixin: dataclass field <-> DBC signal mapping declared by `FIELDS` (a pair field maps to two signals)."""
     DBC: ClassVar[str]
+    DBC_FD: ClassVar[str | None] = None   # None: the same message as `DBC` in the CAN FD profile
     FIELDS: ClassVar[tuple[tuple[str, str | tuple[str, str]], ...]] = ()
 
     def to_signals(self) -> dict[str, Any]:
@@ -87,6 +91,7 @@ class VoltageCmd(_Signals):
     voltage_v: Pair
     seq: int
     DBC: ClassVar[str] = "VOLTAGE_CMD"
+    DBC_FD: ClassVar[str | None] = "VOLTAGE_CMD_FD"
     FIELDS: ClassVar = (("voltage_v", ("voltage1", "voltage2")), ("seq", "seq"))
 
 
@@ -131,12 +136,14 @@ class FeedbackAngle(_Signals):
     t_us: int
     theta_rad: Pair
     DBC: ClassVar[str] = "FEEDBACK_ANGLE"
+    DBC_FD: ClassVar[str | None] = ""
     FIELDS: ClassVar = (("seq", "seq"), ("t_us", "t_us"), ("theta_rad", ("theta1", "theta2")))
 
 
 @dataclass(frozen=True)
 class _FeedbackJoint(_Signals):
     """Feedback of one SEA (one joint): joint velocity, spring deflection, nut velocity."""
+    DBC_FD: ClassVar[str | None] = ""
     node_id: int
     seq: int
     omega_rad_s: float
@@ -159,8 +166,9 @@ class FeedbackJoint2(_FeedbackJoint):
 
 
 @dataclass(frozen=True)
-class Feedback:
-    """One driver sample, carried by three frames sharing `seq`. `t_us` is the rolling 16-bit value (`unwrap_us`)."""
+class Feedback(_Signals):
+    """One driver sample: three classic frames sharing `seq` (`parts()`), or one FEEDBACK_FD frame. `t_us` is the
+    rolling 16-bit value (`unwrap_us`)."""
     node_id: int
     seq: int
     t_us: int
@@ -168,6 +176,11 @@ class Feedback:
     omega_rad_s: Pair
     delta_m: Pair
     nut_vel_m_s: Pair
+    DBC: ClassVar[str] = ""
+    DBC_FD: ClassVar[str | None] = "FEEDBACK_FD"
+    FIELDS: ClassVar = (("seq", "seq"), ("t_us", "t_us"), ("theta_rad", ("theta1", "theta2")),
+                        ("omega_rad_s", ("omega1", "omega2")), ("delta_m", ("delta1", "delta2")),
+                        ("nut_vel_m_s", ("nut_vel1", "nut_vel2")))
 
     def parts(self) -> tuple[FeedbackAngle, FeedbackJoint1, FeedbackJoint2]:
         n, q, w, d, v = self.node_id, self.seq, self.omega_rad_s, self.delta_m, self.nut_vel_m_s
@@ -181,9 +194,19 @@ class Feedback:
 
 
 Frame = Union[EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
-              FeedbackAngle, FeedbackJoint1, FeedbackJoint2]
+              FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Feedback]
 FRAME_TYPES: tuple[type, ...] = (EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
-                                 FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
+                                 FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Feedback)
+
+
+def profile_messages(fd: bool) -> dict[type, str]:
+    """Frame type -> its DBC message in the classic (`fd` False) or the CAN FD profile."""
+    out = {}
+    for cls in FRAME_TYPES:
+        name = cls.DBC if not fd else cls.DBC if cls.DBC_FD is None else cls.DBC_FD
+        if name:
+            out[cls] = name
+    return out
 FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
 
 

@@ -52,8 +52,8 @@ def frames(draw: st.DrawFn) -> can.Message:
 
 
 def _for_another_driver(msg: can.Message, cmd_ids: frozenset[int]) -> bool:
-    """A classic data frame with a DBC command id of node 2..63: ignored like drive firmware's id filter does."""
-    plain = not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd)
+    """A data frame (classic or FD) with a DBC command id of node 2..63: ignored like drive firmware's id filter."""
+    plain = not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame)
     return plain and 2 <= msg.arbitration_id >> 5 <= 63 and msg.arbitration_id & 0x1F in cmd_ids
 
 

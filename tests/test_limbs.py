@@ -18,7 +18,7 @@ from sea_hil.protocol.can_codec import Feedback, SeaCodec
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic
-from sea_hil.session.limbs import (Limb, buses_of, bus_specs, expand_limbs, limb_bits_per_s, limb_config,
+from sea_hil.session.limbs import (Limb, buses_of, bus_specs, expand_limbs, limb_config, limb_load_pct,
                                    limbs_per_bus, session_limbs)
 from sea_hil.session.run import RunOptions, run_session
 
@@ -33,7 +33,7 @@ def test_one_limb_is_todays_limb() -> None:
 
 def test_classic_can_carries_one_limb_per_bus() -> None:
     cfg = load_config()
-    assert limb_bits_per_s(cfg) == 511_350      # docs/can-protocol.md: 51.1 % of 1 Mbit/s
+    assert limb_load_pct(cfg) == pytest.approx(51.135)      # docs/can-protocol.md: 51.1 % of 1 Mbit/s
     assert limbs_per_bus(cfg) == 1 and limbs_per_bus(cfg, max_load=1.0) == 1
     limbs = expand_limbs(cfg, 4)
     assert [(x.name, x.node_id) for x in limbs] == [("limb1", 1), ("limb2", 2), ("limb3", 3), ("limb4", 4)]
@@ -46,6 +46,12 @@ def test_a_faster_bus_fills_before_the_next() -> None:
     limbs = expand_limbs(cfg, 4, node_id=5, spec="socketcan:vcan0")
     assert {b: [x.node_id for x in ls] for b, ls in buses_of(limbs).items()} == \
         {"socketcan:vcan0": [5, 6, 7], "socketcan:vcan1": [8]}
+
+
+def test_can_fd_carries_four_limbs_per_bus() -> None:
+    cfg = load_config(overrides={"can": {"fd": True}})      # 16.4 % a limb at 1 / 5 Mbit/s
+    assert limbs_per_bus(cfg) == 4
+    assert [x.bus for x in expand_limbs(cfg, 6)] == ["virtual:sea-hil0"] * 4 + ["virtual:sea-hil1"] * 2
 
 
 def test_bus_specs_count_up() -> None:

@@ -155,7 +155,8 @@ def _frames_bad_by_construction() -> st.SearchStrategy[can.Message]:
     own_cmd = st.sampled_from(sorted(DLC_OF_CMD))
     wrong_dlc = st.tuples(own_cmd, byte_data).filter(lambda t: len(t[1]) != DLC_OF_CMD[t[0]]).map(
         lambda t: can.Message(arbitration_id=NODE << 5 | t[0], data=t[1], is_extended_id=False))
-    unknown_cmd = st.tuples(st.integers(0, 63), st.integers(8, 31), byte_data).map(
+    unassigned = st.integers(0, 31).filter(lambda c: c not in DLC_OF_CMD)
+    unknown_cmd = st.tuples(st.integers(0, 63), unassigned, byte_data).map(
         lambda t: can.Message(arbitration_id=t[0] << 5 | t[1], data=t[2], is_extended_id=False))
     nan_hi = struct.pack("<f", float("nan"))[2:]   # 0x7FC0: a float32 NaN's upper half, 32.704 V / 32.7 mm raw
     out_of_range = st.tuples(st.sampled_from([1, 2]), st.integers(0, 255), st.integers(30_001, 32_767),
@@ -184,8 +185,9 @@ def _random_frames() -> st.SearchStrategy[can.Message]:
 
 
 def _addressed_to_another_node(msg: can.Message) -> bool:
-    """The test's own statement of the acceptance filter: a classic data frame with a DBC command id of node 2..63."""
-    plain = not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame or msg.is_fd)
+    """The test's own statement of the acceptance filter: a data frame (classic or FD) with a DBC command id of node
+    2..63."""
+    plain = not (msg.is_extended_id or msg.is_remote_frame or msg.is_error_frame)
     return plain and 2 <= msg.arbitration_id >> 5 <= 63 and msg.arbitration_id & 0x1F in DLC_OF_CMD
 
 

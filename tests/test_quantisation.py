@@ -29,26 +29,33 @@ def _errors(mode: str, quantise: bool) -> tuple[np.ndarray, np.ndarray, int]:
 
 def test_joint_two_signals_share_joint_one_resolution() -> None:
     db = load_database()
-    scale = {s.name: s.scale for m in db.messages for s in m.signals}
-    for a, b in (("theta1", "theta2"), ("omega1", "omega2"), ("delta1", "delta2"), ("nut_vel1", "nut_vel2"),
-                 ("voltage1", "voltage2")):
-        assert scale[a] == scale[b]
-    assert dbc_resolutions() == (scale["theta1"], scale["omega1"], scale["delta1"], scale["nut_vel1"],
-                                 scale["voltage1"])
+    for fd in (False, True):
+        scale = {s.name: s.scale for m in db.messages if m.is_fd == fd for s in m.signals}
+        for a, b in (("theta1", "theta2"), ("omega1", "omega2"), ("delta1", "delta2"), ("nut_vel1", "nut_vel2"),
+                     ("voltage1", "voltage2")):
+            assert scale[a] == scale[b]
+        assert dbc_resolutions(fd) == (scale["theta1"], scale["omega1"], scale["delta1"], scale["nut_vel1"],
+                                       scale["voltage1"])
 
 
 @settings(max_examples=300, deadline=None)
 @given(st.tuples(*(st.floats(-lim, lim) for lim in (1.5, 1.5, 2.0, 2.0, 0.004, 0.004, 0.1, 0.1))),
-       st.tuples(st.floats(-24.0, 24.0), st.floats(-24.0, 24.0)))
-def test_quantised_equals_the_codec_round_trip(meas: tuple[float, ...], volts: tuple[float, float]) -> None:
-    wire = WireQuantiser()
-    th, om, de, nv, vo = dbc_resolutions()
+       st.tuples(st.floats(-24.0, 24.0), st.floats(-24.0, 24.0)), st.booleans())
+def test_quantised_equals_the_codec_round_trip(meas: tuple[float, ...], volts: tuple[float, float],
+                                               fd: bool) -> None:
+    wire = WireQuantiser(fd)   # both profiles: the offline engine quantises like the wire of the configured one
+    th, om, de, nv, vo = dbc_resolutions(fd)
     lsbs = (th, th, om, om, de, de, nv, nv)
     got = wire.measurement(meas)  # type: ignore[arg-type]
     for value, lsb, ref in zip(meas, lsbs, got):
-        assert quantised(value, lsb) == pytest.approx(ref, abs=lsb * 1e-6)
+        assert quantised(value, lsb) == ref   # bit for bit: offline == lockstep rests on it
     for value, ref in zip(volts, wire.voltage(volts)):
-        assert quantised(value, vo) == pytest.approx(ref, abs=vo * 1e-6)
+        assert quantised(value, vo) == ref
+
+
+def test_fd_profile_is_at_least_as_fine_as_classic() -> None:
+    assert all(f <= c for f, c in zip(dbc_resolutions(True), dbc_resolutions(False)))
+    assert dbc_resolutions(True) != dbc_resolutions(False)
 
 
 def test_quantisation_changes_tt_tracking_error_by_less_than_one_percent() -> None:

@@ -11,7 +11,17 @@ from sea_hil.errors import ConfigError
 
 class CanConfig(_Frozen):
     interface: str = "virtual:sea-hil"
-    bitrate_bps: int = Field(1_000_000, gt=0)
+    bitrate_bps: int = Field(1_000_000, gt=0, description="nominal (arbitration-phase) bit rate; classic CAN's only "
+                             "rate")
+    fd: bool = Field(False, description="CAN FD profile: VOLTAGE_CMD_FD and one FEEDBACK_FD frame per sample, data "
+                     "phase at data_bitrate_bps (docs/can-protocol.md); false = classic CAN")
+    data_bitrate_bps: int = Field(5_000_000, gt=0, description="CAN FD data-phase bit rate (bit rate switch when "
+                                  "above bitrate_bps)")
+    emulate_bitrate: bool = Field(False, description="bus-timing model: a frame is delivered when its transmission "
+                                  "on the configured bit rates would end, queued by CAN id priority "
+                                  "(sea_hil.protocol.bus_timing); false = as fast as the bus delivers")
+    bus_load_warn_pct: float = Field(80.0, gt=0, description="a session warns at start when the planned load of a "
+                                     "bus is above this")
     node_ids: tuple[int, ...] = (1,)
     feedback_rate_hz: float = Field(1000.0, gt=0, description="drive feedback rate = the inner (backstepping) loop "
                                     "rate, offline and in sessions")
@@ -28,6 +38,13 @@ class CanConfig(_Frozen):
         except ConfigError as err:
             raise ValueError(str(err)) from err
         return v
+
+    @model_validator(mode="after")
+    def _rates(self) -> CanConfig:
+        if self.fd and self.data_bitrate_bps < self.bitrate_bps:
+            raise ValueError(f"data_bitrate_bps {self.data_bitrate_bps} below bitrate_bps {self.bitrate_bps}: the "
+                             "CAN FD data phase is never slower than the arbitration phase")
+        return self
 
     @field_validator("node_ids")
     @classmethod

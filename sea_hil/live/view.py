@@ -47,7 +47,7 @@ class LiveView:
         self.rtt_last_s: float | None = None
         self.ignored = 0
         self._state_rx: dict[int, int] = {}
-        self._codec = SeaCodec()
+        self._codec = SeaCodec(fd=None)
         self._heartbeat_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
         self._driver = DriverWatch()
         self._now_ns: int | None = None
@@ -111,7 +111,7 @@ class LiveView:
             self.ignored += 1
             return []
         try:
-            self.bus.add_frame(t_ns, can_id, dlc, ext)
+            self.bus.add_frame(t_ns, can_id, dlc, ext, bool(p.get("is_fd", False)))
             self._frame_rate.add(t_ns)
         except MalformedFrame:
             self.ignored += 1
@@ -119,7 +119,8 @@ class LiveView:
         if ext or can_id & CMD_MASK != self._heartbeat_cmd:
             return []
         try:
-            hb = self._codec.decode_raw(can_id, bytes.fromhex(str(p.get("data_hex", ""))), dlc)
+            hb = self._codec.decode_raw(can_id, bytes.fromhex(str(p.get("data_hex", ""))), dlc,
+                                        is_fd=bool(p.get("is_fd", False)))
         except (MalformedFrame, ValueError):
             self.ignored += 1   # a malformed heartbeat: the recording keeps it in /can/raw
             return []

@@ -214,7 +214,7 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     env = _Env(cfg, mode, cycles, p, jit)
     theta0 = tuple(cfg.plant.initial_theta_rad)
     x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
-    lsb = dbc_resolutions()
+    lsb = dbc_resolutions(cfg.can.fd)
     m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
     dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
     tab = dist_tab if env.jit else dist_tab.tolist()

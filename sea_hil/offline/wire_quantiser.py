@@ -1,6 +1,7 @@
 """What the CAN wire does to the inner loop's numbers: DBC scaling, rounding and range limits, nothing else.
 
-`dbc_resolutions()` reads the resolution (scale) of each feedback and voltage signal from protocol/sea.dbc and
+`dbc_resolutions(fd)` reads the resolution (scale) of each feedback and voltage signal of the classic or the CAN FD
+profile (FEEDBACK_FD and VOLTAGE_CMD_FD are finer) from protocol/sea.dbc and
 `quantised` rounds a value to it, which is what a cantools encode/decode round trip does to an in-range value; the
 offline closed loop uses them (`sea-hil simulate --quantise`) to show what quantisation alone costs in tracking error
 (docs/can-protocol.md). `WireQuantiser` is the real round trip through the codec, used to check `quantised`.
@@ -15,16 +16,18 @@ Measurement = tuple[float, float, float, float, float, float, float, float]
 Resolutions = tuple[float, float, float, float, float]
 EXACT: Resolutions = (0.0, 0.0, 0.0, 0.0, 0.0)
 _NODE = 1
-_SIGNALS = (("FEEDBACK_ANGLE", "theta1"), ("FEEDBACK_JOINT1", "omega1"), ("FEEDBACK_JOINT1", "delta1"),
-            ("FEEDBACK_JOINT1", "nut_vel1"), ("VOLTAGE_CMD", "voltage1"))
+_SIGNALS = {False: (("FEEDBACK_ANGLE", "theta1"), ("FEEDBACK_JOINT1", "omega1"), ("FEEDBACK_JOINT1", "delta1"),
+                     ("FEEDBACK_JOINT1", "nut_vel1"), ("VOLTAGE_CMD", "voltage1")),
+            True: (("FEEDBACK_FD", "theta1"), ("FEEDBACK_FD", "omega1"), ("FEEDBACK_FD", "delta1"),
+                   ("FEEDBACK_FD", "nut_vel1"), ("VOLTAGE_CMD_FD", "voltage1"))}
 
 
 @functools.cache
-def dbc_resolutions() -> Resolutions:
-    """(theta rad, omega rad/s, delta m, nut velocity m/s, voltage V) per LSB, from the DBC; joint 2 signals share
-    joint 1's scale (checked by tests/test_quantisation.py)."""
+def dbc_resolutions(fd: bool = False) -> Resolutions:
+    """(theta rad, omega rad/s, delta m, nut velocity m/s, voltage V) per LSB of the classic (`fd` False) or the CAN
+    FD profile, from the DBC; joint 2 signals share joint 1's scale (checked by tests/test_quantisation.py)."""
     db = load_database()
-    res = tuple(float(db.get_message_by_name(msg).get_signal_by_name(sig).scale) for msg, sig in _SIGNALS)
+    res = tuple(float(db.get_message_by_name(msg).get_signal_by_name(sig).scale) for msg, sig in _SIGNALS[bool(fd)])
     return res  # type: ignore[return-value]
 
 
@@ -37,15 +40,17 @@ def quantised(value: float, lsb: float) -> float:
 
 class WireQuantiser:
     """Round trips through the DBC codec (saturate -> strict encode -> decode), as the driver and edge do; the
-    measurement order is (theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2)."""
+    measurement order is (theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2); `fd` picks the
+    profile."""
 
-    def __init__(self) -> None:
-        self.codec = SeaCodec([_NODE])
+    def __init__(self, fd: bool = False) -> None:
+        self.codec = SeaCodec([_NODE], fd=fd)
 
     def measurement(self, meas: Measurement) -> Measurement:
         fb = Feedback(_NODE, 0, 0, (meas[0], meas[1]), (meas[2], meas[3]), (meas[4], meas[5]), (meas[6], meas[7]))
         sent, _ = self.codec.saturate(fb)
-        got = Feedback.from_parts(*(self.codec.decode(m) for m in self.codec.encode_feedback(sent)))
+        frames = [self.codec.decode(m) for m in self.codec.encode_feedback(sent)]
+        got = frames[0] if len(frames) == 1 else Feedback.from_parts(*frames)
         return (*got.theta_rad, *got.omega_rad_s, *got.delta_m, *got.nut_vel_m_s)
 
     def voltage(self, voltage_v: tuple[float, float]) -> tuple[float, float]:

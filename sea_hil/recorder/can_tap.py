@@ -21,11 +21,15 @@ import can
 
 from sea_hil.protocol.can_assembly import seq_gap
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import (CMD_BITS, DriverState, ErrorFlags, FeedbackAngle, FeedbackJoint1,
-                                         FeedbackJoint2, Heartbeat, VoltageCmd)
+from sea_hil.protocol.can_frames import (CMD_BITS, DriverState, ErrorFlags, Feedback, FeedbackAngle,
+                                         FeedbackJoint1, FeedbackJoint2, Heartbeat, VoltageCmd)
 from sea_hil.errors import MalformedFrame
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, log_message
+
+
+_FD_FIELDS = (("theta", "theta_rad", "rad"), ("omega", "omega_rad_s", "rad_s"), ("delta", "delta_m", "m"),
+              ("nut_vel", "nut_vel_m_s", "m_s"))
 
 
 class Record(NamedTuple):
@@ -59,7 +63,8 @@ def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str,
     rejected frames keep their `/can/raw`."""
     out: list[tuple[str, dict[str, Any]]] = [
         ("/can/raw", {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
-                      "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS})]
+                      "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS,
+                      **({"is_fd": True} if f.is_fd else {})})]
     try:
         d = codec.decode_raw(f.can_id, f.data, f.dlc, is_extended=f.is_extended, is_error=f.is_error,
                              is_remote=f.is_remote, is_fd=f.is_fd)
@@ -71,6 +76,10 @@ def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str,
     elif isinstance(d, FeedbackAngle):
         out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, "t_us": d.t_us,
                                       "theta1_rad": d.theta_rad[0], "theta2_rad": d.theta_rad[1]}))
+    elif isinstance(d, Feedback):   # CAN FD: the whole sample in one frame
+        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, "t_us": d.t_us,
+                                      **{f"{k}{j + 1}_{u}": getattr(d, a)[j] for k, a, u in _FD_FIELDS
+                                         for j in (0, 1)}}))
     elif isinstance(d, (FeedbackJoint1, FeedbackJoint2)):
         j = 1 if isinstance(d, FeedbackJoint1) else 2
         out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, f"omega{j}_rad_s": d.omega_rad_s,
@@ -98,7 +107,7 @@ class CanTap:
     log time of each message (`time_base`) and the `/log` messages of faults."""
 
     def __init__(self, codec: SeaCodec | None = None, time_base: TimeBase = "wall") -> None:
-        self.codec = codec or SeaCodec()
+        self.codec = codec or SeaCodec(fd=None)
         self.time_base = check_time_base(time_base)
         self.clock = SampleClock()
         self.gaps = SeqGapCounter()
@@ -110,7 +119,7 @@ class CanTap:
         out, rejected, decoded = can_records(self.codec, f)
         self.frames += 1
         self.rejected += rejected
-        if isinstance(decoded, FeedbackAngle):
+        if isinstance(decoded, (FeedbackAngle, Feedback)):
             self.clock.on_feedback(decoded.node_id, decoded.t_us)
         t_ns = f.t_ns if self.time_base == "wall" else self.clock.node_ns(f.can_id >> CMD_BITS)
         seq = getattr(decoded, "seq", 0)

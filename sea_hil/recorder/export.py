@@ -33,6 +33,7 @@ def can_messages(data: SessionData, channel: str | int | None = None) -> Iterato
             payload = bytes.fromhex(p["data_hex"])
             yield can.Message(timestamp=m.log_time_ns * 1e-9, arbitration_id=int(p["can_id"]),
                               is_extended_id=bool(p.get("is_extended", False)), dlc=int(p["dlc"]), data=payload,
+                              is_fd=bool(p.get("is_fd", False)), bitrate_switch=bool(p.get("is_fd", False)),
                               is_rx=p.get("direction", "rx") == "rx", channel=channel)
         except (KeyError, TypeError, ValueError) as err:
             raise RecordingError(f"/can/raw message at {m.log_time_ns} ns is not a frame: {err}") from err

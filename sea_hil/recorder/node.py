@@ -75,7 +75,7 @@ class RecorderNode(Node):
         self.tap_batch_s = tap_batch_s
         self.tap_timeout_s = tap_timeout_s
         self.payloads = PayloadCounters()
-        self.tap = CanTap(SeaCodec(), time_base)   # with a RecorderProcess, the child's tap (same time base) decodes
+        self.tap = CanTap(SeaCodec(fd=None), time_base)   # with a RecorderProcess, the child's tap (same time base) decodes
         self.ztap = ZenohTap(self.payloads, time_base)
         self.can_forwarded = 0   # frames shipped raw to a RecorderProcess (which counts and decodes them)
         self.can_tap_unfinished = False   # stop() gave up on a CAN backlog (frames not seen, not counted)

@@ -31,7 +31,7 @@ _DEFLECTION_REF = {"delta1_ref_m": _NUM, "delta2_ref_m": _NUM}
 # topic -> (schema title, description, properties, required)
 _CHANNELS: dict[str, tuple[str, str, dict[str, Any], list[str]]] = {
     "/can/raw": ("sea_hil.CanFrame", "Every CAN frame seen on the bus.",
-                 {"t_ns": _INT, "can_id": _INT, "is_extended": {"type": "boolean"}, "dlc": _INT,
+                 {"t_ns": _INT, "can_id": _INT, "is_extended": {"type": "boolean"}, "is_fd": {"type": "boolean"}, "dlc": _INT,
                   "data_hex": _STR, "direction": {"enum": ["rx", "tx"]}, "node_id": _INT},
                  ["can_id", "dlc", "data_hex", "direction"]),
     "/can/feedback": ("sea_hil.CanFeedback", "Decoded driver feedback, one message per node and frame set.",

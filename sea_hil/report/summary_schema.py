@@ -22,6 +22,10 @@ def _object(props: dict[str, Any], required: tuple[str, ...] | None = None) -> d
 TRANSMISSIONS = _object({k: _COUNT for k in ("downlink_msgs", "downlink_bytes", "uplink_msgs", "uplink_bytes",
                                               "total_msgs", "total_bytes")})   # total = uplink + downlink
 TRACKING = _object({"max_abs_error_rad": _PAIR, "rms_error_rad": _PAIR})
+_US3 = _object({k: _NUMBER for k in ("p50", "p99", "max")})
+CAN_BUS = _object({"bitrate_bps": _COUNT, "data_bitrate_bps": _COUNT, "frames": _COUNT, "load_pct": _NUMBER,
+                   "per_id": {"type": "array", "items": _object({"can_id": _COUNT, "frames": _COUNT,
+                                                                 "queue_us": _US3, "latency_us": _US3})}})
 TIMING = _object({
     "cpu_s": _NUMBER,                                                        # offline
     "wall_s": _NUMBER,                                                       # `run` (not `report`)
@@ -29,6 +33,7 @@ TIMING = _object({
     "latency_samples": _COUNT,
     "edge": {"type": "object", "additionalProperties": _NUMBER},             # wall-time-derived edge counters
     "driver": _object({"ticks": _COUNT, "tick_misses": _COUNT}),             # `run`: summed over the buses' drivers
+    "can_bus": {"type": "object", "additionalProperties": CAN_BUS},          # [can] emulate_bitrate, per bus spec
 }, required=())
 LATENCY = _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")})
 LIMB = _object({"limb": {"type": "string"}, "node_id": _COUNT, "bus": {"type": "string"},

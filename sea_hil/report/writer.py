@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData, read_session
-from sea_hil.stats.can_bits import can_frame_bits
+from sea_hil.stats.can_bits import nominal_bits
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
 from sea_hil.report.session_summary import session_summary, tracking_arrays
@@ -82,14 +82,16 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
             t_axis = t_axis_i
         series[name] = rate
     series_figure(files[-2], t_axis, series, "payload bytes/s", "Zenoh bandwidth")
-    bitrate = float(data.metadata.get("sea-hil.config", {}).get("can.bitrate_bps", 1_000_000))
+    meta = data.metadata.get("sea-hil.config", {})
+    bitrate, data_rate = int(meta.get("can.bitrate_bps", 1_000_000)), int(meta.get("can.data_bitrate_bps", 5_000_000))
     raw, bus_of = data.messages.get("/can/raw", []), _bus_of_node(data)
     loads: dict[str, np.ndarray] = {}
     tb = np.zeros(0)
     for bus in dict.fromkeys(bus_of.values()):   # every bus (frames of unknown node ids: the first bus)
         first = bus == next(iter(bus_of.values()))
         msgs = [m for m in raw if bus_of.get(m.payload.get("node_id"), bus if first else None) == bus]
-        t_i, bits = _bins(msgs, lambda p: can_frame_bits(int(p["dlc"])), t0)
+        t_i, bits = _bins(msgs, lambda p: nominal_bits(int(p["dlc"]), fd=bool(p.get("is_fd")), bitrate_bps=bitrate,
+                                                       data_bitrate_bps=data_rate), t0)
         tb = t_i if len(t_i) > len(tb) else tb
         loads["bus load %" if len(bus_of) == 1 else f"{bus} load %"] = 100.0 * bits / bitrate
     series_figure(files[-1], tb, loads, "load [%]", "CAN bus load (worst-case stuffing)")

@@ -19,7 +19,9 @@ import can
 import zenoh
 
 from sea_hil.config import SeaHilConfig
+from sea_hil.protocol.bus_timing import warn_if_overloaded
 from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.timed_bus import TimedBus, make_timeline
 from sea_hil.protocol.zsession import open_session
 from sea_hil.runtime.clock import clock_for
 from sea_hil.runtime.node import Node
@@ -33,6 +35,8 @@ class SessionBuilder:
         self.lockstep = lockstep
         self.clock = clock_for(lockstep)
         self._stack = ExitStack()
+        self.timelines: dict[str, Any] = {}
+        self._load_checked: set[str] = set()
 
     # ---- resources ------------------------------------------------------------------------------------------------
     def zenoh(self, *, listen: Iterable[str] | None = None, connect: Iterable[str] | None = None,
@@ -49,10 +53,25 @@ class SessionBuilder:
         return session
 
     def bus(self, spec: str | None = None) -> can.BusABC:
-        """A CAN bus handle (`spec`, default `cfg.can.interface`), shut down on close."""
-        bus = open_bus(spec or self.cfg.can.interface)
+        """A CAN bus handle (`spec`, default `cfg.can.interface`; the `[can] fd` profile), shut down on close. The
+        first handle of a bus warns when its planned load is too high; with `[can] emulate_bitrate` every handle of
+        a bus goes through that bus's one timing model (`sea_hil.protocol.timed_bus`)."""
+        spec, cc = spec or self.cfg.can.interface, self.cfg.can
+        if spec not in self.timelines and spec not in self._load_checked:
+            self._load_checked.add(spec)
+            warn_if_overloaded(cc, cc.node_ids, spec)
+        bus: Any = open_bus(spec, fd=cc.fd)
+        if cc.emulate_bitrate:
+            if spec not in self.timelines:
+                self.timelines[spec] = make_timeline(cc, spec, self.lockstep)
+            bus = TimedBus(bus, self.timelines[spec])
         self._stack.callback(bus.shutdown)
         return bus
+
+    def bus_timing(self) -> dict[str, Any]:
+        """Per bus (spec): the timing model's frames, load and per-id queueing delay and latency (`BusArbiter.stats`);
+        empty without `[can] emulate_bitrate`."""
+        return {spec: t.arbiter.stats() for spec, t in self.timelines.items()}
 
     def callback(self, fn: Callable[..., Any], *args: Any) -> None:
         """Run `fn(*args)` on close (after everything added later, before everything added earlier)."""
@@ -80,6 +99,8 @@ class SessionBuilder:
     def recorder(self, rec: Any, session: zenoh.Session | None, bus: can.BusABC | None = None,
                  **kw: Any) -> Any:
         from sea_hil.recorder.node import RecorderNode
+        if isinstance(bus, TimedBus):
+            bus.listen_only = True   # the bus-timing model does not wait for a recorder (it never answers)
         return self.add(RecorderNode(rec, session, self.cfg.zenoh.prefix, bus, **kw))
 
     # ---- lifecycle ------------------------------------------------------------------------------------------------

@@ -4,8 +4,9 @@
 default limb (`[zenoh] limb`, `node_id`, `[can] interface`) -- once, or `n` times with `--limbs N`
 (`expand_limbs`). Expanded limbs get node ids `node_id, node_id + 1, ...`, names `<stem>1..` (`limb1`, `limb2`,
 ...: the first keeps the 1-limb keys) and buses from the bus-load model: a bus carries as many limbs as fit below
-`MAX_BUS_LOAD` of its bit rate (`limbs_per_bus`, worst-case bits of one limb's frames from
-`sea_hil.stats.can_bits`); classic CAN at 1 Mbit/s: 510 kbit/s per limb, one limb per bus (1.96 would fit at 100 %).
+`MAX_BUS_LOAD` of its capacity (`limbs_per_bus`, the planned worst-case load of one limb's frames for the [can]
+profile, `sea_hil.protocol.bus_timing.planned_load_pct`); classic CAN at 1 Mbit/s: 51.1 % a limb, one limb per
+bus (1.96 would fit at 100 %); CAN FD at 1 / 5 Mbit/s: 16.4 % a limb, four limbs per bus.
 Bus channels count up from the configured one (`bus_specs`): `virtual:NAME` -> `virtual:NAME0, NAME1, ...`,
 `socketcan:vcan0` -> `vcan0, vcan1, ...`, `udp_multicast:239.74.163.2` -> `.2, .3, ...`; one bus keeps its spec.
 """
@@ -31,24 +32,16 @@ class Limb:
     bus: str
 
 
-def limb_bits_per_s(cfg: SeaHilConfig) -> float:
-    """Worst-case CAN bits per second of one limb: per feedback sample its feedback frames and one VOLTAGE_CMD,
-    plus its heartbeats (`can_frame_bits`, worst-case stuffing)."""
-    from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
-    from sea_hil.protocol.can_frames import Heartbeat, DriverState, ErrorFlags
-    from sea_hil.stats.can_bits import can_frame_bits
-    codec, zero = SeaCodec([1]), (0.0, 0.0)
-    per_sample = codec.encode_feedback(Feedback(1, 0, 0, zero, zero, zero, zero)) + [codec.encode(VoltageCmd(1, zero, 0))]
-    heartbeat = codec.encode(Heartbeat(1, DriverState(0), ErrorFlags(0), 0, 0, 0))
-
-    def bits(m: object) -> int:
-        return can_frame_bits(m.dlc, m.is_extended_id)  # type: ignore[attr-defined]
-    return cfg.can.feedback_rate_hz * sum(map(bits, per_sample)) + cfg.can.heartbeat_rate_hz * bits(heartbeat)
+def limb_load_pct(cfg: SeaHilConfig) -> float:
+    """Planned worst-case load (%) of one limb on its bus, for the configured profile (classic or FD):
+    `sea_hil.protocol.bus_timing.planned_load_pct` (its feedback and voltage frames per sample, its heartbeats)."""
+    from sea_hil.protocol.bus_timing import planned_load_pct
+    return planned_load_pct(cfg.can, (1,))
 
 
 def limbs_per_bus(cfg: SeaHilConfig, max_load: float = MAX_BUS_LOAD) -> int:
-    """How many limbs one bus carries below `max_load` of `[can] bitrate_bps` (at least one)."""
-    return max(1, math.floor(max_load * cfg.can.bitrate_bps / limb_bits_per_s(cfg)))
+    """How many limbs one bus carries below `max_load` of its capacity (at least one)."""
+    return max(1, math.floor(1e-9 + 100.0 * max_load / limb_load_pct(cfg)))
 
 
 def bus_specs(spec: str, count: int) -> list[str]:

@@ -112,6 +112,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     data = read_session(opts.out / "session.mcap")
     summary = session_summary(data, opts.controller)   # every limb (`limbs`, `limbs_total`)
     summary["timing"]["wall_s"] = wall_s
+    if b.timelines:   # [can] emulate_bitrate: queueing delay and latency per CAN id (simulated time in lockstep)
+        summary["timing"]["can_bus"] = b.bus_timing()
     summary["lockstep"] = opts.lockstep
     summary["inner"] = opts.inner
     write_summary(opts.out / "summary.json", summary)

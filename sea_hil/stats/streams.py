@@ -3,9 +3,10 @@
 the live view (`sea_hil.live.view`)."""
 from __future__ import annotations
 
+import math
 from typing import Any
 
-from sea_hil.stats.can_bits import can_frame_bits
+from sea_hil.stats.can_bits import can_frame_bits, nominal_bits
 
 NS_PER_S = 1_000_000_000
 
@@ -85,10 +86,11 @@ class BusLoad:
 
     Session load = bits / (bitrate * (now - start)), where start is `start_ns` or the first frame's time."""
 
-    def __init__(self, bitrate_bps: int, window_s: float = 1.0, start_ns: int | None = None) -> None:
-        if bitrate_bps <= 0:
-            raise ValueError("bitrate_bps must be > 0")
-        self.bitrate_bps = bitrate_bps
+    def __init__(self, bitrate_bps: int, window_s: float = 1.0, start_ns: int | None = None,
+                 data_bitrate_bps: int = 5_000_000) -> None:
+        if bitrate_bps <= 0 or data_bitrate_bps <= 0:
+            raise ValueError("bitrate_bps and data_bitrate_bps must be > 0")
+        self.bitrate_bps, self.data_bitrate_bps = bitrate_bps, data_bitrate_bps
         self.start_ns = start_ns
         self.total_bits = 0
         self.frames = 0
@@ -96,9 +98,10 @@ class BusLoad:
         self._window = SlidingRate(window_s)
         self._last_ns: int | None = None
 
-    def add_frame(self, t_ns: int, can_id: int, dlc: int, extended: bool = False) -> int:
-        """Account one frame; returns its bit count."""
-        bits = can_frame_bits(dlc, extended)
+    def add_frame(self, t_ns: int, can_id: int, dlc: int, extended: bool = False, fd: bool = False) -> int:
+        """Account one frame; returns its bit count (a CAN FD frame's bus time in nominal bits, rounded up)."""
+        bits = can_frame_bits(dlc, extended) if not fd else math.ceil(nominal_bits(
+            dlc, extended=extended, fd=True, bitrate_bps=self.bitrate_bps, data_bitrate_bps=self.data_bitrate_bps))
         if self.start_ns is None:
             self.start_ns = t_ns
         self._last_ns = t_ns if self._last_ns is None else max(self._last_ns, t_ns)
