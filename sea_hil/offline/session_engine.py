@@ -28,11 +28,11 @@ from sea_hil.controller.inner import InnerLoop, inner_step
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.outer import OuterController
+from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
-from sea_hil.offline.predictor import Predictor
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import make_disturbance
@@ -220,9 +220,7 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
     tab = dist_tab if env.jit else dist_tab.tolist()
     if opts.compensation == "predict":
-        env.predictor = Predictor(env.nominal, env.inner.gains, env.inner.period_s, env.period_ns, cfg.sim.substeps,
-                                  env.steps,
-                                  np.zeros_like(dist_tab) if env.jit else np.zeros_like(dist_tab).tolist())
+        env.predictor = Predictor.for_inner(env.inner, env.period_ns, cfg.sim.substeps, jit=env.jit)
     loop = SessionLoop(env, opts)
     saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
     while k < env.n_max:

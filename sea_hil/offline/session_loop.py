@@ -7,7 +7,7 @@ placements and delay compensation of issue 16.
   sample, or every 1 kHz sample with `edge_check="sample"`), the controller answers each state. State seqs are then
   the 1 kHz sample index + 1 (gaps are normal), tracking records are the edge's, one per outer sample.
 - `compensation="predict"`: the controller answers with v_x for the state predicted at the instant its setpoint will
-  act (`sea_hil.offline.predictor`); the trigger (controller placement) sees the predicted state too.
+  act (`sea_hil.controller.predictor`); the trigger (controller placement) sees the predicted state too.
 """
 from __future__ import annotations
 
