@@ -22,6 +22,8 @@ SAMPLES: dict[str, Any] = {
     "SETPOINT": pl.SetpointPayload(12, 7, 99, (2e-3, -1e-3), (0.5, -0.75), pl.TriggerReason.TRACKING_BOUND),
     "VOLTAGE": pl.VoltagePayload(13, 8, 98, (3.25, -4.5)),
     "ACK": pl.AckPayload(14, 9, 97, 12, True),
+    "EVENT_STATE": pl.EventStatePayload(15, 10, 6_000_000, (0.5, -0.5), (1.0, -1.0), (2e-4, -2e-4), (0.03, -0.03),
+                                        41, pl.TriggerReason.ERROR_BOUND, 0xDEADBEEF),
 }
 
 

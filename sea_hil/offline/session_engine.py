@@ -41,7 +41,7 @@ from sea_hil.plant_emulator.integrator import rk4_core
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import SetpointPayload, StatePayload, encode
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, encode
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.errors import SeaHilError
 
@@ -138,12 +138,13 @@ class SessionRecords:
 
     def __init__(self, keys: Keys) -> None:
         self.keys = keys
+        self.state_bytes = STATE_BYTES      # EVENT_STATE's size with the trigger at the edge
         self.messages: dict[str, list[RecordedMessage]] = {"/zenoh/state": [], "/zenoh/setpoint": [], "/tracking": []}
 
     def state(self, seq: int, sample_ns: int, fb: tuple, t_ns: int) -> None:
         (th, om, de, nut) = fb
         self.messages["/zenoh/state"].append(RecordedMessage(t_ns, t_ns, {
-            "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": STATE_BYTES,
+            "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": self.state_bytes,
             "sample_t_ns": sample_ns, "theta1_rad": th[0], "theta2_rad": th[1], "omega1_rad_s": om[0],
             "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1], "nut_vel1_m_s": nut[0],
             "nut_vel2_m_s": nut[1]}, seq))
@@ -221,6 +222,8 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     tab = dist_tab if env.jit else dist_tab.tolist()
     if opts.compensation == "predict":
         env.predictor = Predictor.for_inner(env.inner, env.period_ns, cfg.sim.substeps, jit=env.jit)
+    if opts.placement == "edge":
+        env.state_bytes = env.rec.state_bytes = PAYLOAD_SIZE[MsgType.EVENT_STATE]
     loop = SessionLoop(env, opts)
     saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
     while k < env.n_max:
