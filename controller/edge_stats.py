@@ -82,4 +82,6 @@ def edge_stats(edge: Any) -> dict[str, float]:
                **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
                loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
                uplink_pending=pub.uplink.pending)
+    if edge.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
+        out.update(edge.events.stats())
     return out

@@ -21,16 +21,18 @@ from typing import Any
 
 import zenoh
 
+from sea_hil.controller.edge_events import tracking_record
 from sea_hil.controller.inner import InnerLoop
-from sea_hil.controller.outer import OuterController
-from sea_hil.controller.smc import JointState
-from sea_hil.controller.trajectory import LeadIn, make_trajectory
+from sea_hil.controller.outer import OuterController, Setpoint
+from sea_hil.controller.predictor import Predictor
+from sea_hil.controller.smc import JointState, smc_deflection
+from sea_hil.controller.trajectory import LeadIn, make_trajectory, trajectory_id
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.keys import Keys
 from sea_hil.controller.nominal import nominal_params
-from sea_hil.protocol.payloads import (PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
-                                       VoltagePayload, encode)
+from sea_hil.protocol.payloads import (EventStatePayload, PayloadCounters, SeqVerdict, SequenceTracker,
+                                       SetpointPayload, StatePayload, VoltagePayload, encode)
 from sea_hil.protocol.zsession import publisher
 from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node
@@ -50,6 +52,15 @@ class RemoteController(Node):
         self.traj = make_trajectory(cfg.trajectory)
         self.outer = OuterController(cfg, self.params, mode)
         self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.controller.sample_period_s)
+        # issue 16: the trigger at the edge (answer every EVENT_STATE) and the predictor of the edge's closed loop
+        self.edge_trigger = cfg.trigger.placement == "edge"
+        self.trajectory_id = trajectory_id(cfg.trajectory)
+        self.predictor: Predictor | None = None
+        if cfg.controller.compensation == "predict":
+            period_s = 1.0 / cfg.can.feedback_rate_hz
+            edge_inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), period_s)
+            self.predictor = Predictor.for_inner(edge_inner, int(round(period_s * 1e9)), cfg.sim.substeps)
+        self.trajectory_mismatches = 0
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         self._lead_in: LeadIn | None = None
@@ -93,11 +104,17 @@ class RemoteController(Node):
         p = self.payloads.try_decode(data)
         if p is None:
             return
-        if not isinstance(p, StatePayload):
+        if not isinstance(p, EventStatePayload if self.edge_trigger else StatePayload) or \
+                (not self.edge_trigger and isinstance(p, EventStatePayload)):
             self.unexpected_payloads += 1
             return
+        if self.edge_trigger and p.trajectory_id != self.trajectory_id:   # type: ignore[attr-defined]
+            self.trajectory_mismatches += 1
+            log.error("state %d refused: the edge's trajectory %08x is not the controller's %08x (same [trajectory] "
+                      "and CSV on both ends?)", p.seq, p.trajectory_id, self.trajectory_id)  # type: ignore
+            return
         now_ns = time.monotonic_ns() if now_ns is None else now_ns
-        verdict = self.seq.feed(p.seq)
+        verdict = self.seq.feed(p.event_seq if self.edge_trigger else p.seq)  # type: ignore[attr-defined]
         if self.sync.repeat_state(verdict, p.seq):
             return
         if verdict is not SeqVerdict.NEW and not self._edge_restarted(p, now_ns):
@@ -125,22 +142,41 @@ class RemoteController(Node):
         for pub, msg in answer:
             pub.put(msg)
         self.sync.answered(p.seq, answer)
-        self.event_pub.put(json.dumps({
-            "t_s": t_ns * 1e-9, "state_seq": p.seq,
-            "theta1_rad": p.theta_rad[0], "theta2_rad": p.theta_rad[1],
-            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1],
-            "event": sp is not None, "reason": sp.reason.name if sp is not None else "",
-            "setpoint_seq": self.setpoint_seq if sent else 0}).encode())
+        if not self.edge_trigger:      # with the trigger at the edge, the edge records every outer sample
+            self.event_pub.put(json.dumps(tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
+                                                          self.setpoint_seq if sent else 0)).encode())
+
+    def _desired(self, t_ns: int) -> Any:
+        return self._lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self._lead_in else self.traj.sample(t_ns * 1e-9)
+
+    def _decide(self, p: StatePayload, t_ns: int) -> tuple[Setpoint | None, int]:
+        """The setpoint for state p (None: no event) and the arrival time used; with `predict` for the state
+        predicted at the instant the setpoint will act (controller/predictor.py), as the offline engine does."""
+        js, t_eval, now = JointState(p.theta_rad, p.omega_rad_s), t_ns, 0
+        if self.predictor is not None:
+            now = self.sync.arrival_ns(p)
+            self.predictor.observe_uplink(now - p.sample_t_ns)
+            apply_ns = self.predictor.apply_time_ns(now)
+            js = self.predictor.predict((p.theta_rad, p.omega_rad_s, p.delta_m, p.nut_vel_m_s), p.sample_t_ns,
+                                        apply_ns)
+            t_eval = apply_ns - self.t0_ns  # type: ignore[operator]
+        ds_eval = self._desired(t_eval)
+        if not self.edge_trigger:
+            return self.outer.step(t_eval, p.seq, js, ds_eval), now
+        cc = self.cfg.controller
+        vx, s = smc_deflection(js, ds_eval, self.params, cc.c, cc.rho, cc.boundary_layer)
+        return Setpoint(vx, s, p.reason, p.seq, t_eval), now  # type: ignore[attr-defined]
 
     def _answer(self, p: StatePayload, t_ns: int) -> tuple[list[tuple[zenoh.Publisher, bytes]], Any, Any]:
         """Outer (and, remote placement, inner) control for one new state: the messages to publish."""
-        ds = self._lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self._lead_in else self.traj.sample(t_ns * 1e-9)
-        js = JointState(p.theta_rad, p.omega_rad_s)
-        sp = self.outer.step(t_ns, p.seq, js, ds)
+        ds = self._desired(t_ns)
+        sp, now = self._decide(p, t_ns)
         answer: list[tuple[zenoh.Publisher, bytes]] = []
         if sp is not None:
             self.setpoint_seq += 1
             self.inner.hold(sp.deflection_m, sp.sliding)
+            if self.predictor is not None:
+                self.predictor.sent(self.predictor.apply_time_ns(now), sp.deflection_m, sp.sliding)
             if self.inner_mode == "edge":
                 answer.append((self.sp_pub, encode(SetpointPayload(self.setpoint_seq, time.monotonic_ns(), p.seq,
                                                                    sp.deflection_m, sp.sliding, sp.reason))))
@@ -171,4 +207,5 @@ class RemoteController(Node):
                 **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
+                "trajectory_mismatches": self.trajectory_mismatches,
                 **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}}

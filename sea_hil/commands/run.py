@@ -5,7 +5,7 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_link_args, add_scenario_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_scheme_args, add_link_args, add_scenario_args, config_from_args
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -34,6 +34,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_link_args(p)
     add_live_args(p)
     add_config_args(p)
+    add_scheme_args(p)
     add_scenario_args(p)
     p.set_defaults(func=_main)
 

@@ -26,11 +26,12 @@ import numpy as np
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop, inner_step
 from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.edge_events import make_trigger, tracking_record
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
@@ -196,10 +197,7 @@ class _Env:
         return LeadIn(fb[0], fb[1], self.traj.sample(0.0), self.lead_in_ns * 1e-9)
 
     def make_trigger(self) -> EventTrigger | TimeTrigger:
-        tc, cc = self.cfg.trigger, self.cfg.controller
-        if self.mode == "tt":
-            return TimeTrigger()
-        return EventTrigger(error_threshold(tc.eta, tc.lipschitz_l, cc.c), tc.r, int(round(tc.max_inter_event_s * 1e9)))
+        return make_trigger(self.cfg, self.mode)
 
     @staticmethod
     def downlink_due(queue: DelayQueue[SetpointPayload], now_ns: int) -> list[SetpointPayload]:
@@ -247,12 +245,3 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated, faulted,
                         env.envelope.rejected)
 
-
-def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,
-                    setpoint_seq: int) -> dict[str, Any]:
-    """The controller's per-state tracking record (controller/remote.py publishes the same dict as JSON on `event`);
-    `reason` None: no event at this state."""
-    sent = reason is not None
-    return {"t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta_rad[0], "theta2_rad": theta_rad[1],
-            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1], "event": sent,
-            "reason": reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}

@@ -121,7 +121,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, t0
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
     recorder = b.recorder(rec, session, buses[2], tap_batch_s=0.002, time_base=time_base)
     plant = b.plant(buses[0], (opts.node_id,))
-    edge = b.edge(buses[1], session, opts.node_id, inner=opts.inner)
+    edge = b.edge(buses[1], session, opts.node_id, inner=opts.inner, mode=opts.controller)
     b.callback(_finish, rec, plant, edge, recorder, opts.lockstep)
     b.callback(end_process, proc)
     recorder.start()
