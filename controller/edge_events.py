@@ -46,6 +46,7 @@ class EdgeEvents:
         self.model: Predictor | None = None
         if cfg.trigger.edge_model and cfg.controller.compensation == "predict":
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps)
+            self.model.warm(tuple(cfg.plant.initial_theta_rad))
         self.events = 0
         self.sampled_at: dict[int, int] = {}
 

@@ -68,6 +68,11 @@ class Predictor:
     def __post_init__(self) -> None:
         self.kernel = predict_kernel(self.jit)
 
+    def warm(self, theta_rad: tuple[float, float]) -> None:
+        """Compile (or load from numba's disk cache) the kernel now, with one prediction from rest at `theta_rad`:
+        a node calls this before its loop, so no real-time sample pays for it."""
+        self.predict((theta_rad, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), 0, self.period_ns, count=False)
+
     @classmethod
     def for_inner(cls, inner: Any, period_ns: int, substeps: int, jit: bool = True) -> "Predictor":
         """The predictor of the nominal closed loop with the edge's inner loop `inner` (an `InnerLoop`)."""

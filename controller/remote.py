@@ -60,6 +60,7 @@ class RemoteController(Node):
             period_s = 1.0 / cfg.can.feedback_rate_hz
             edge_inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), period_s)
             self.predictor = Predictor.for_inner(edge_inner, int(round(period_s * 1e9)), cfg.sim.substeps)
+            self.predictor.warm(tuple(cfg.plant.initial_theta_rad))
         self.trajectory_mismatches = 0
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
