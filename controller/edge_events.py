@@ -37,15 +37,20 @@ def make_trigger(cfg: SeaHilConfig, mode: str) -> EventTrigger | TimeTrigger:
 
 
 class EdgeEvents:
-    def __init__(self, cfg: SeaHilConfig, mode: str, inner: Any, period_ns: int, outer_every: int) -> None:
+    def __init__(self, cfg: SeaHilConfig, mode: str, inner: Any, period_ns: int, outer_every: int, *,
+                 every_sample: bool | None = None, model: bool | None = None, jit: bool = True) -> None:
+        """`every_sample` (check every 1 kHz sample) and `model` (model lookahead) default to the config's
+        (`trigger.edge_check`, `trigger.edge_model` with `controller.compensation = "predict"`)."""
         traj = make_trajectory(cfg.trajectory)
         self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)))
         self.trajectory_id = trajectory_id(cfg.trajectory)
         self.inner, self.period_ns, self.outer_every = inner, period_ns, outer_every
-        self.every_sample = cfg.trigger.edge_check == "sample"
+        self.every_sample = cfg.trigger.edge_check == "sample" if every_sample is None else every_sample
+        if model is None:
+            model = cfg.trigger.edge_model and cfg.controller.compensation == "predict"
         self.model: Predictor | None = None
-        if cfg.trigger.edge_model and cfg.controller.compensation == "predict":
-            self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps)
+        if model:
+            self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
             self.model.warm(tuple(cfg.plant.initial_theta_rad))
         self.events = 0
         self.sampled_at: dict[int, int] = {}
