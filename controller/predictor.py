@@ -53,6 +53,9 @@ def predict_kernel(jit: bool = True) -> Callable[..., tuple]:
     return kernel if kernel is not None else make_predict_steps()
 
 
+MAX_HORIZON_NS = 500_000_000   # a delay beyond this is a clock error (unsynchronised clocks), not a link: clamped
+
+
 @dataclass
 class Predictor:
     params: LimbParams            # the controller's nominal model
@@ -64,6 +67,7 @@ class Predictor:
     schedule: list[tuple[int, tuple[float, float], tuple[float, float]]] = field(default_factory=list)
     down_delay_ns: float | None = None
     predictions: int = 0
+    clamped: int = 0              # delays/horizons outside [0, MAX_HORIZON_NS] (clock skew), clamped and counted
 
     def __post_init__(self) -> None:
         self.kernel = predict_kernel(self.jit)
@@ -79,6 +83,9 @@ class Predictor:
         return cls(inner._p, inner.gains, inner.period_s, period_ns, substeps, jit=jit)
 
     def observe_uplink(self, delay_ns: int) -> None:
+        if not 0 <= delay_ns <= MAX_HORIZON_NS:
+            self.clamped += 1
+            delay_ns = min(max(delay_ns, 0), MAX_HORIZON_NS)
         self.down_delay_ns = float(delay_ns) if self.down_delay_ns is None else (
             0.875 * self.down_delay_ns + 0.125 * delay_ns)
 
@@ -106,6 +113,9 @@ class Predictor:
                 count: bool = True) -> JointState:
         """The joint state at `until_ns` from the feedback `fb` (theta, omega, delta, nut velocity) of `sample_ns`."""
         (q1, q2), (w1, w2), (d1, d2), (nv1, nv2) = fb
+        if until_ns - sample_ns > MAX_HORIZON_NS:
+            self.clamped += count
+            until_ns = sample_ns + MAX_HORIZON_NS
         p = self.params
         len1, len2, _, _, _, _ = sea_geometry(q1, q2, p)
         x = (q1, q2, w1, w2, len1 - p.l_ref[0] - d1, len2 - p.l_ref[1] - d2, nv1, nv2)

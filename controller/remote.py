@@ -209,4 +209,5 @@ class RemoteController(Node):
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
                 "trajectory_mismatches": self.trajectory_mismatches,
+                "prediction_clamped": self.predictor.clamped if self.predictor else 0,
                 **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}}
