@@ -29,9 +29,9 @@ from sea_hil.protocol.sequence import SeqVerdict, SequenceTracker
 from sea_hil.protocol.wire_size import estimate_wire_bytes
 
 __all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",
-           "AckPayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected", "RejectReason", "SeqVerdict",
-           "SequenceTracker", "SetpointPayload", "StatePayload", "EventStatePayload", "TriggerReason", "VoltagePayload", "decode",
-           "encode", "estimate_wire_bytes"]
+           "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected",
+           "RejectReason", "SeqVerdict", "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason",
+           "VoltagePayload", "decode", "encode", "estimate_wire_bytes"]
 
 MAGIC = b"SH"
 VERSION = 1

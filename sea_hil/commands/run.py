@@ -5,7 +5,8 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_scheme_args, add_link_args, add_scenario_args, config_from_args
+from sea_hil.commands.common import (add_config_args, add_link_args, add_scenario_args, add_scheme_args,
+                                     config_from_args)
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
