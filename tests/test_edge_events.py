@@ -94,3 +94,15 @@ def test_the_controller_never_imports_the_plant():
     code = ("import sys, sea_hil.controller.remote, sea_hil.controller.edge, sea_hil.controller.predictor; "
             "sys.exit(any(m.startswith('sea_hil.plant_emulator') for m in sys.modules))")
     assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
+
+
+def test_controller_core_is_pure_state_in_messages_out():
+    """The remote controller's core without any Zenoh: the paper's placement answers with a setpoint and a record."""
+    from sea_hil.controller.remote_core import ControllerCore
+    core = ControllerCore(load_config(), "tt")
+    th = tuple(load_config().plant.initial_theta_rad)
+    ans = core.on_state(StatePayload(1, 0, 0, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), lambda p: 0, lambda: 7)
+    assert ans is not None and [c for c, _ in ans.messages] == ["setpoint"] and ans.record is not None
+    assert ans.setpoint is not None and ans.setpoint.reason is TriggerReason.TIME and core.states == 1
+    late = StatePayload(2, 0, 11 * 10**9, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))   # past the 10 s cycle
+    assert core.on_state(late, lambda p: 0, lambda: 8) is None and core.done
