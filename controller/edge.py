@@ -18,6 +18,7 @@ VOLTAGE_CMD sent) is kept in a histogram (`loop_us_*`, `loop_overruns` = longer 
 """
 from __future__ import annotations
 
+import json
 import logging
 import threading
 import time
@@ -29,11 +30,12 @@ from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.edge_command import CommandPath
 from sea_hil.controller.edge_downlink import SetpointIntake
+from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, rx_monotonic_ns
 from sea_hil.controller.edge_uplink import StatePublisher
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
-from sea_hil.errors import MalformedFrame
+from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.can_codec import FEEDBACK_PARTS, Feedback, FeedbackAssembler, Heartbeat, SeaCodec, unwrap_us
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.epoch import new_epoch
@@ -50,9 +52,11 @@ class EdgeNode(Node):
     kind = "edge"
 
     def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, session: zenoh.Session, node_id: int, *,
-                 inner: str = "edge", clock: Clock | None = None) -> None:
+                 inner: str = "edge", clock: Clock | None = None, mode: str = "et") -> None:
         if inner not in ("edge", "remote"):
             raise ValueError("inner must be 'edge' or 'remote'")
+        if cfg.trigger.placement == "edge" and (inner != "edge" or mode not in ("et", "tt")):
+            raise ConfigError("trigger.placement = 'edge' needs the inner loop at the edge and --controller et|tt")
         super().__init__()
         self.cfg, self.bus, self.node_id = cfg, bus, node_id
         self.codec = SeaCodec.for_bus(cfg.can, [node_id])
@@ -70,7 +74,11 @@ class EdgeNode(Node):
         seed = cfg.link.seed
         self.publisher = StatePublisher(
             LinkedPublisher(publisher(session, self.keys.state), LinkEmulator(cfg.link.uplink, f"{seed}/up")),
-            self.counters, new_epoch())
+            self.counters, new_epoch(), self.sync.state_stamp)
+        self.events = EdgeEvents(cfg, mode, self.inner, self.period_ns, self.outer_every) \
+            if cfg.trigger.placement == "edge" else None
+        self.event_pub = publisher(session, self.keys.event, express=False,
+                                   congestion_control=zenoh.CongestionControl.BLOCK) if self.events else None
         self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
                                      int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync,
                                      self.envelope)
@@ -103,6 +111,8 @@ class EdgeNode(Node):
     def _close(self) -> None:
         for sub in self._subs:
             sub.undeclare()
+        if self.event_pub is not None:
+            self.event_pub.undeclare()
 
     def _stats(self) -> dict[str, float]:
         return edge_stats(self)
@@ -140,7 +150,9 @@ class EdgeNode(Node):
         c.feedback += 1
         self.t_us_full = t_us_full
         now = self.sample_t_ns = self.t_us_full * 1000
-        if round(now / self.period_ns) % self.outer_every == 0:
+        if self.events is not None:
+            self._edge_trigger(fb, now)
+        elif round(now / self.period_ns) % self.outer_every == 0:
             seq, data, at = self.publisher.publish(fb, now)
             if at is not None:
                 self.sync.state_sent(at, seq, data)
@@ -153,6 +165,24 @@ class EdgeNode(Node):
         loop_ns = time.monotonic_ns() - rx_ns
         c.loop.record(max(loop_ns, 0) * 1e-9)
         c.loop_overruns += loop_ns > self.period_ns
+
+    def _edge_trigger(self, fb: Feedback, now: int) -> None:
+        """The trigger at the edge: publish this sample only on an event; the tracking record of an outer sample."""
+        d = self.events.on_sample(now, (fb.theta_rad, fb.omega_rad_s, fb.delta_m, fb.nut_vel_m_s))  # type: ignore
+        if d is None:
+            return
+        if d.reason is not None:
+            seq, data, at = self.publisher.publish_event(fb, now, d.seq, d.event_seq, d.reason,
+                                                         self.events.trajectory_id)  # type: ignore[union-attr]
+            if at is not None:
+                self.sync.state_sent(at, seq, data)
+        if d.record is not None:
+            self.event_pub.put(json.dumps(d.record).encode())  # type: ignore[union-attr]
+
+    def _apply(self, p: object) -> None:
+        self.command_path.apply(p)
+        if self.events is not None:
+            self.events.answered(p.state_seq, self.sample_t_ns)  # type: ignore[attr-defined]
 
     def _answer(self, fb: Feedback, now: int) -> bool:
         command, clear = self.sync.gate(self.intake.fresh(now))
@@ -181,4 +211,4 @@ class EdgeNode(Node):
         """Apply the setpoints/voltages the downlink emulator releases by sample time `now`; True if any."""
         self.sync.drain()
         p = self.publisher
-        return self.intake.take(now, p.sent_at, p.sampled_at, self.command_path.apply)
+        return self.intake.take(now, p.sent_at, p.sampled_at, self._apply)

@@ -86,4 +86,6 @@ def edge_stats(edge: Any) -> dict[str, float]:
     timing = getattr(edge.bus, "timing_stats", None)   # [can] emulate_bitrate: queueing delay per CAN id
     if timing is not None:
         out.update(timing())
+    if edge.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
+        out.update(edge.events.stats())
     return out

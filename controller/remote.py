@@ -1,4 +1,5 @@
-"""The remote controller node: subscribes to the sampled state, runs the outer ET/TT SMC and
+"""The remote controller node: subscribes to the sampled state, runs the outer ET/TT SMC (its pure core:
+`controller/remote_core.py`, state in, messages out; this node does the I/O) and
 publishes a setpoint only on events (TT: every sample). With `inner="remote"` it also runs the backstepping law on
 the 10 ms state and publishes voltages every sample (to be tunnelled to CAN by the edge, held for 10 ms).
 
@@ -14,24 +15,18 @@ t = -lead_in_s and the desired motion until t = 0 is the `LeadIn` from that meas
 """
 from __future__ import annotations
 
-import json
 import logging
 import time
-from typing import Any
 
 import zenoh
 
-from sea_hil.controller.inner import InnerLoop
-from sea_hil.controller.outer import OuterController
-from sea_hil.controller.smc import JointState
-from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.config import SeaHilConfig
+from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.errors import MalformedPayload
-from sea_hil.protocol.keys import Keys
-from sea_hil.controller.nominal import nominal_params
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
-from sea_hil.protocol.payloads import (PayloadCounters, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
-                                       VoltagePayload, encode)
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.payloads import (EventStatePayload, PayloadCounters, SeqVerdict, SequenceTracker,
+                                       StatePayload)
 from sea_hil.protocol.zsession import publisher
 from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node
@@ -47,13 +42,11 @@ class RemoteController(Node):
         super().__init__()
         self.cfg, self.mode, self.inner_mode, self.session = cfg, mode, inner, session
         self.keys = Keys.from_config(cfg.zenoh)
-        self.params = nominal_params(cfg)
-        self.traj = make_trajectory(cfg.trajectory)
-        self.outer = OuterController(cfg, self.params, mode)
-        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.controller.sample_period_s)
-        self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
-        self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
-        self._lead_in: LeadIn | None = None
+        self.epoch = new_epoch()                    # this controller's session epoch, in every payload it sends
+        self.edge_epoch = PeerEpoch("edge", log)    # the state stream's epoch, learned on first contact
+        self.core = ControllerCore(cfg, mode, inner, cycles, self.epoch)   # the pure part: state in, messages out
+        self.edge_trigger, self.trajectory_id = self.core.edge_trigger, self.core.trajectory_id
+        self.trajectory_mismatches = 0
         self.sync = (clock or RealTimeClock()).controller(self)
         self.source = self.sync.state_source(session, self.keys.state)
         self.sp_pub = publisher(session, self.keys.setpoint)
@@ -62,17 +55,20 @@ class RemoteController(Node):
                                    congestion_control=zenoh.CongestionControl.BLOCK)
         self.payloads = PayloadCounters()
         self.seq = SequenceTracker()
-        self.epoch = new_epoch()                    # this controller's session epoch, in every payload it sends
-        self.edge_epoch = PeerEpoch("edge", log)    # the state stream's epoch, learned on first contact
-        self.t0_ns: int | None = None
-        self.setpoint_seq = 0
-        self.states = 0
-        self.done = False
         self.stats_pub = publisher(session, self.keys.stats, express=False)
         self.unexpected_payloads = self.ignored_states = self.edge_restarts = self.unusable_states = 0
         self.restart_gap_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
         self._last_state_wall_ns: int | None = None
-        self._last_t_ns = 0
+        self._pubs = {"setpoint": self.sp_pub, "voltage": self.v_pub}
+
+    # ---- the core's state, read (and, by tests, set) through the node ----------------------------------------
+    states = property(lambda self: self.core.states)
+    setpoint_seq = property(lambda self: self.core.setpoint_seq)
+    predictor = property(lambda self: self.core.predictor)
+    _last_t_ns = property(lambda self: self.core.last_t_ns)
+    done = property(lambda self: self.core.done, lambda self, v: setattr(self.core, "done", v))
+    t0_ns = property(lambda self: self.core.t0_ns, lambda self, v: setattr(self.core, "t0_ns", v))
+    lead_in_ns = property(lambda self: self.core.lead_in_ns)
 
     # ---- the node hooks -------------------------------------------------------------------------------------------
     def _step(self) -> bool:
@@ -96,8 +92,14 @@ class RemoteController(Node):
         p = self.payloads.try_decode(data)
         if p is None:
             return
-        if not isinstance(p, StatePayload):
+        if not isinstance(p, EventStatePayload if self.edge_trigger else StatePayload) or \
+                (not self.edge_trigger and isinstance(p, EventStatePayload)):
             self.unexpected_payloads += 1
+            return
+        if self.edge_trigger and p.trajectory_id != self.trajectory_id:   # type: ignore[attr-defined]
+            self.trajectory_mismatches += 1
+            log.error("state %d refused: the edge's trajectory %08x is not the controller's %08x (same [trajectory] "
+                      "and CSV on both ends?)", p.seq, p.trajectory_id, self.trajectory_id)  # type: ignore
             return
         now_ns = time.monotonic_ns() if now_ns is None else now_ns
         epoch = self.edge_epoch.check(p.epoch, lambda: self._restart_allowed(p, now_ns))
@@ -106,73 +108,45 @@ class RemoteController(Node):
         if epoch is EpochVerdict.RESTART:
             self._edge_restarted(p)
         else:
-            verdict = self.seq.feed(p.seq)
+            verdict = self.seq.feed(self._stream_seq(p))
             if self.sync.repeat_state(verdict, p.seq):
                 return
             if verdict is not SeqVerdict.NEW:
                 self.ignored_states += 1
                 return
         self._last_state_wall_ns = now_ns
-        if self.t0_ns is None:
-            self.t0_ns = p.sample_t_ns + self.lead_in_ns
-            if self.lead_in_ns:
-                self._lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9)
-        t_ns = p.sample_t_ns - self.t0_ns
-        self._last_t_ns = t_ns
-        if t_ns > self.duration_ns:
-            self.done = True
-            return
         try:
-            answer, sp, ds = self._answer(p, t_ns)
+            ans = self.core.on_state(p, self.sync.arrival_ns, time.monotonic_ns)
         except (ArithmeticError, ValueError, MalformedPayload) as err:   # e.g. absurd but finite state values
             self.unusable_states += 1
             log.warning("state %d not usable: %s", p.seq, err)
             return
-        self.states += 1
-        sent = bool(answer)
-        answer += self.sync.answer_extra(p.seq, self.setpoint_seq, sent)
+        if ans is None:
+            return
+        answer = [(self._pubs[channel], msg) for channel, msg in ans.messages]
+        answer += self.sync.answer_extra(p.seq, self.core.setpoint_seq, bool(answer))
         for pub, msg in answer:
             pub.put(msg)
         self.sync.answered(p.seq, answer)
-        self.event_pub.put(json.dumps({
-            "t_s": t_ns * 1e-9, "state_seq": p.seq,
-            "theta1_rad": p.theta_rad[0], "theta2_rad": p.theta_rad[1],
-            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1],
-            "event": sp is not None, "reason": sp.reason.name if sp is not None else "",
-            "setpoint_seq": self.setpoint_seq if sent else 0}).encode())
+        if ans.record is not None:
+            self.event_pub.put(ans.record)
 
-    def _answer(self, p: StatePayload, t_ns: int) -> tuple[list[tuple[zenoh.Publisher, bytes]], Any, Any]:
-        """Outer (and, remote placement, inner) control for one new state: the messages to publish."""
-        ds = self._lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self._lead_in else self.traj.sample(t_ns * 1e-9)
-        js = JointState(p.theta_rad, p.omega_rad_s)
-        sp = self.outer.step(t_ns, p.seq, js, ds)
-        answer: list[tuple[zenoh.Publisher, bytes]] = []
-        if sp is not None:
-            self.setpoint_seq += 1
-            self.inner.hold(sp.deflection_m, sp.sliding)
-            if self.inner_mode == "edge":
-                answer.append((self.sp_pub, encode(SetpointPayload(self.setpoint_seq, time.monotonic_ns(), p.seq,
-                                                                   sp.deflection_m, sp.sliding, sp.reason,
-                                                                   epoch=self.epoch))))
-        if self.inner_mode == "remote":
-            m = (*p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
-            u = self.inner.voltage(m)  # type: ignore[arg-type]
-            self.setpoint_seq += 1
-            answer.append((self.v_pub, encode(VoltagePayload(self.setpoint_seq, time.monotonic_ns(), p.seq, u,
-                                                                epoch=self.epoch))))
-        return answer, sp, ds
+    def _stream_seq(self, p: StatePayload) -> int:
+        """The sequence number of the state stream: `event_seq` (consecutive) with the trigger at the edge, else the
+        header seq."""
+        return p.event_seq if self.edge_trigger else p.seq   # type: ignore[attr-defined]
 
     def _restart_allowed(self, p: StatePayload, now_ns: int) -> bool:
         """A new edge epoch starts a new state stream only when no state arrived for the restart gap and it looks
-        like a fresh sender (seq < tracker window)."""
+        like a fresh sender (stream seq < tracker window)."""
         silent = self._last_state_wall_ns is not None and now_ns - self._last_state_wall_ns > self.restart_gap_ns
-        return self.sync.restart_possible(silent) and p.seq < self.seq.window
+        return self.sync.restart_possible(silent) and self._stream_seq(p) < self.seq.window
 
     def _edge_restarted(self, p: StatePayload) -> None:
         """The edge restarted: a new state stream; the trajectory continues where it stopped."""
         self.seq.restart()
-        self.seq.feed(p.seq)
-        self.t0_ns = p.sample_t_ns - self._last_t_ns
+        self.seq.feed(self._stream_seq(p))
+        self.core.restart_at(p)
         self.edge_restarts += 1
         log.warning("state stream restarted at seq %d (edge restart)", p.seq)
 
@@ -183,4 +157,6 @@ class RemoteController(Node):
                 **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
+                "trajectory_mismatches": self.trajectory_mismatches,
+                "prediction_clamped": self.predictor.clamped if self.predictor else 0,
                 **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}, **self.edge_epoch.as_dict()}

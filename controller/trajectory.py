@@ -10,6 +10,7 @@ cycles of a networked session (`trajectory.lead_in_s`, docs/deviations.md).
 from __future__ import annotations
 
 import csv
+import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -145,3 +146,15 @@ def make_trajectory(cfg: TrajectoryConfig) -> GaitTrajectory | CsvTrajectory:
             raise TrajectoryError("trajectory.kind = 'csv' needs trajectory.csv_path")
         return CsvTrajectory(cfg.csv_path)
     return GaitTrajectory(cfg.period_s)
+
+
+def trajectory_id(cfg: TrajectoryConfig) -> int:
+    """The trajectory's identity (u32): sha256 of its parameters and, for a CSV trajectory, the file's bytes. The edge
+    sends it with every event state (EVENT_STATE.trajectory_id); a controller with another trajectory refuses it."""
+    digest = hashlib.sha256(cfg.model_dump_json(exclude={"csv_path"}).encode())
+    if cfg.kind == "csv":
+        try:
+            digest.update(Path(cfg.csv_path).read_bytes())
+        except OSError as err:
+            raise TrajectoryError(f"trajectory CSV {cfg.csv_path!r} not readable: {err}") from err
+    return int.from_bytes(digest.digest()[:4], "little")

@@ -1,6 +1,7 @@
 """Fixed-step RK4 with sub-steps; the control input is held (zero-order hold) over a step.
 
-`rk4_core` takes the disturbance torques at t, t + h/2 and t + h as values, so that it is plain float code which the
+`rk4_core` (in `sea_hil.dynamics`, shared with the controller's nominal model) takes the disturbance torques at t,
+t + h/2 and t + h as values, so that it is plain float code which the
 offline simulation also compiles with numba (sea_hil/offline/closed_loop.py); `rk4_step` and `advance` sample a disturbance
 callable and delegate to it. `advance` (the plant emulator's per-sample integration) runs its sub-steps in a kernel
 compiled from the same source with numba (`sea_hil.jit`) once `prepare_advance` has loaded it (a node calls that
@@ -14,7 +15,7 @@ from typing import Any, Callable
 
 import numpy as np
 
-from sea_hil.plant_emulator.dynamics import State, f
+from sea_hil.dynamics import State, rk4_core
 from sea_hil.jit import compiled, loaded
 from sea_hil.mechanics import LimbParams
 
@@ -23,29 +24,6 @@ Disturbance = Callable[[float], tuple[float, float]]
 
 def _no_disturbance(t: float) -> tuple[float, float]:
     return (0.0, 0.0)
-
-
-def rk4_core(t: float, x: State, u: tuple[float, float], h: float, p: LimbParams, d0: tuple[float, float],
-             dm: tuple[float, float], d1: tuple[float, float]) -> State:
-    """One classical RK4 step of length h (seconds) with disturbance torques d0, dm, d1 at t, t + h/2, t + h."""
-    hh = 0.5 * h
-    x0, x1, x2, x3, x4, x5, x6, x7 = x
-    k1 = f(t, x, u, p, d0)
-    k2 = f(t + hh, (x0 + hh * k1[0], x1 + hh * k1[1], x2 + hh * k1[2], x3 + hh * k1[3],
-                    x4 + hh * k1[4], x5 + hh * k1[5], x6 + hh * k1[6], x7 + hh * k1[7]), u, p, dm)
-    k3 = f(t + hh, (x0 + hh * k2[0], x1 + hh * k2[1], x2 + hh * k2[2], x3 + hh * k2[3],
-                    x4 + hh * k2[4], x5 + hh * k2[5], x6 + hh * k2[6], x7 + hh * k2[7]), u, p, dm)
-    k4 = f(t + h, (x0 + h * k3[0], x1 + h * k3[1], x2 + h * k3[2], x3 + h * k3[3],
-                   x4 + h * k3[4], x5 + h * k3[5], x6 + h * k3[6], x7 + h * k3[7]), u, p, d1)
-    h6 = h / 6.0
-    return (x0 + h6 * (k1[0] + 2.0 * k2[0] + 2.0 * k3[0] + k4[0]),
-            x1 + h6 * (k1[1] + 2.0 * k2[1] + 2.0 * k3[1] + k4[1]),
-            x2 + h6 * (k1[2] + 2.0 * k2[2] + 2.0 * k3[2] + k4[2]),
-            x3 + h6 * (k1[3] + 2.0 * k2[3] + 2.0 * k3[3] + k4[3]),
-            x4 + h6 * (k1[4] + 2.0 * k2[4] + 2.0 * k3[4] + k4[4]),
-            x5 + h6 * (k1[5] + 2.0 * k2[5] + 2.0 * k3[5] + k4[5]),
-            x6 + h6 * (k1[6] + 2.0 * k2[6] + 2.0 * k3[6] + k4[6]),
-            x7 + h6 * (k1[7] + 2.0 * k2[7] + 2.0 * k3[7] + k4[7]))
 
 
 def rk4_step(t: float, x: State, u: tuple[float, float], h: float, p: LimbParams,

@@ -8,6 +8,7 @@ float64 so lockstep runs are bit-reproducible):
 - SETPOINT (2): state_seq u32, deflection_m[2] f64, sliding[2] f64, reason u8           -> 61 bytes total
 - VOLTAGE  (3): state_seq u32, voltage_v[2] f64                                          -> 44 bytes total
 - ACK      (4): state_seq u32, setpoint_seq u32, sent u8 (lockstep: controller handled state_seq) -> 33 bytes
+- EVENT_STATE (5): STATE's body + event_seq u32, reason u8, trajectory_id u32 (trigger at the edge) -> 105 bytes
 
 Versioning: `VERSION` is bumped on any change of an existing layout; a decoder rejects every version it does not
 know. New message types may be added without a bump (old decoders reject them as unknown type). Lengths are exact.
@@ -30,9 +31,9 @@ from sea_hil.protocol.sequence import SeqVerdict, SequenceTracker
 from sea_hil.protocol.wire_size import estimate_wire_bytes
 
 __all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",
-           "AckPayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected", "RejectReason", "SeqVerdict",
-           "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason", "VoltagePayload", "decode",
-           "encode", "estimate_wire_bytes"]
+           "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected",
+           "RejectReason", "SeqVerdict", "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason",
+           "VoltagePayload", "decode", "encode", "estimate_wire_bytes"]
 
 _log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"
@@ -47,6 +48,7 @@ class MsgType(IntEnum):
     SETPOINT = 2
     VOLTAGE = 3
     ACK = 4
+    EVENT_STATE = 5
 
 
 class TriggerReason(IntEnum):
@@ -87,6 +89,25 @@ class StatePayload(_Payload):
     def __post_init__(self) -> None:
         super().__post_init__()
         uint_field("sample_t_ns", self.sample_t_ns, U64_MAX)
+
+
+@dataclass(frozen=True)
+class EventStatePayload(StatePayload):
+    """A state the edge's trigger published (issue 16): why (`reason`), which event it is (`event_seq`: consecutive,
+    so the controller counts lost states although the header seq, the sample index + 1, has gaps) and the identity of
+    the trajectory the edge triggers on (`trajectory_id`)."""
+    event_seq: int = 0
+    reason: TriggerReason = TriggerReason.TIME
+    trajectory_id: int = 0
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        uint_field("event_seq", self.event_seq, U32_MAX)
+        uint_field("trajectory_id", self.trajectory_id, U32_MAX)
+        try:
+            object.__setattr__(self, "reason", TriggerReason(self.reason))
+        except ValueError as err:
+            raise PayloadRejected(RejectReason.ENUM, f"trigger reason {self.reason!r} is unknown") from err
 
 
 @dataclass(frozen=True)
@@ -138,16 +159,17 @@ class AckPayload(_Payload):
         object.__setattr__(self, "sent", bool(self.sent))
 
 
-Payload = Union[StatePayload, SetpointPayload, VoltagePayload, AckPayload]
+Payload = Union[StatePayload, EventStatePayload, SetpointPayload, VoltagePayload, AckPayload]
 
 _BODY = {
     MsgType.STATE: struct.Struct("<Q8d"),
     MsgType.SETPOINT: struct.Struct("<I4dB"),
     MsgType.VOLTAGE: struct.Struct("<I2d"),
     MsgType.ACK: struct.Struct("<IIB"),
+    MsgType.EVENT_STATE: struct.Struct("<Q8dIBI"),
 }
 _TYPE_OF = {StatePayload: MsgType.STATE, SetpointPayload: MsgType.SETPOINT, VoltagePayload: MsgType.VOLTAGE,
-            AckPayload: MsgType.ACK}
+            AckPayload: MsgType.ACK, EventStatePayload: MsgType.EVENT_STATE}
 PAYLOAD_SIZE = {t: HEADER_SIZE + s.size for t, s in _BODY.items()}
 
 
@@ -157,7 +179,10 @@ def encode(p: Payload) -> bytes:
     if mtype is None:
         raise PayloadRejected(RejectReason.TYPE, f"cannot encode {type(p).__name__}")
     head = _HEADER.pack(MAGIC, VERSION, mtype, p.seq, p.t_ns, p.epoch)
-    if isinstance(p, StatePayload):
+    if isinstance(p, EventStatePayload):
+        body = _BODY[mtype].pack(p.sample_t_ns, *p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s,
+                                 p.event_seq, int(p.reason), p.trajectory_id)
+    elif isinstance(p, StatePayload):
         body = _BODY[mtype].pack(p.sample_t_ns, *p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
     elif isinstance(p, SetpointPayload):
         body = _BODY[mtype].pack(p.state_seq, *p.deflection_m, *p.sliding, int(p.reason))
@@ -187,6 +212,9 @@ def decode(b: bytes) -> Payload:
     f = _BODY[mt].unpack_from(b, HEADER_SIZE)
     if mt is MsgType.STATE:
         return StatePayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5:7], f[7:9], epoch=epoch)
+    if mt is MsgType.EVENT_STATE:
+        return EventStatePayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5:7], f[7:9], f[9], f[10], f[11],
+                                 epoch=epoch)
     if mt is MsgType.SETPOINT:
         return SetpointPayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5], epoch=epoch)
     if mt is MsgType.ACK:

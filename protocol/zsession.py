@@ -11,7 +11,7 @@ import re
 import socket
 import threading
 from collections.abc import Mapping
-from typing import Any, Protocol
+from typing import Any, Callable, Protocol
 
 import zenoh
 
@@ -151,11 +151,18 @@ class LinkedPublisher:
         self._queue: DelayQueue[bytes] = DelayQueue()
         self.published = 0
 
-    def put(self, data: bytes, now_ns: int, *, wire_bytes: int | None = None) -> int | None:
-        """Submit `data` at `now_ns`; returns its delivery time, or None if the link dropped it."""
+    def put(self, data: bytes | Callable[[int], bytes], now_ns: int, *, wire_bytes: int | None = None
+            ) -> int | None:
+        """Submit `data` at `now_ns`; returns its delivery time, or None if the link dropped it. `data` may be a
+        function of the delivery time that makes the bytes (`wire_bytes` then required): a sender that stamps
+        messages with the emulated link's delivery time (lockstep's simulated clock)."""
+        if callable(data):
+            assert wire_bytes is not None, "a deferred message needs wire_bytes"
         at = self.link.submit(now_ns, estimate_wire_bytes(len(data)) if wire_bytes is None else wire_bytes)
         if at is None:
             return None
+        if callable(data):
+            data = data(at)
         if at <= now_ns and not self._queue:
             self._publish(data)
         else:

@@ -24,6 +24,8 @@ SAMPLES: dict[str, Any] = {
                                    epoch=2**64 - 2),
     "VOLTAGE": pl.VoltagePayload(13, 8, 98, (3.25, -4.5), epoch=0x0123_4567_89AB_CDEF),
     "ACK": pl.AckPayload(14, 9, 97, 12, True, epoch=5),
+    "EVENT_STATE": pl.EventStatePayload(15, 10, 6_000_000, (0.5, -0.5), (1.0, -1.0), (2e-4, -2e-4), (0.03, -0.03),
+                                        41, pl.TriggerReason.ERROR_BOUND, 0xDEADBEEF, epoch=7),
 }
 
 

@@ -59,11 +59,25 @@ def check_period_ms(period_ms: float, cfg: SeaHilConfig, option: str = "--period
     return period_ms / 1000.0
 
 
+def add_scheme_args(p: argparse.ArgumentParser) -> None:
+    """Issue 16: where the trigger runs and whether the controller compensates the link delay (default: config)."""
+    p.add_argument("--trigger", choices=("edge", "controller"),
+                   help="trigger placement (trigger.placement): 'edge' = the edge publishes a state only on an event "
+                        "(both directions event-triggered), 'controller' = the paper's (every state up)")
+    p.add_argument("--compensation", choices=("predict", "none"),
+                   help="delay compensation (controller.compensation): 'predict' = v_x for the state predicted at "
+                        "the instant the setpoint acts, 'none' = the paper's")
+
+
 def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
     ov: dict[str, Any] = dict(overrides or {})
     if getattr(args, "seed", None) is not None:
         ov.setdefault("link", {})["seed"] = args.seed
         ov.setdefault("disturbance", {})["seed"] = args.seed
+    if getattr(args, "trigger", None):
+        ov.setdefault("trigger", {})["placement"] = args.trigger
+    if getattr(args, "compensation", None):
+        ov.setdefault("controller", {})["compensation"] = args.compensation
     if getattr(args, "trajectory", None):
         ov.setdefault("trajectory", {}).update({"kind": "csv", "csv_path": args.trajectory})
     for direction in ("uplink", "downlink"):

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_scheme_args, add_zenoh_args, config_from_args
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -19,6 +19,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_zenoh_args(p)
     add_live_args(p, node=True)
     add_config_args(p)
+    add_scheme_args(p)
     p.set_defaults(func=_main)
 
 

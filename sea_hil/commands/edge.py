@@ -3,7 +3,8 @@ from __future__ import annotations
 
 import argparse
 
-from sea_hil.commands.common import add_config_args, add_link_args, add_zenoh_args, config_from_args
+from sea_hil.commands.common import (add_config_args, add_link_args, add_scheme_args, add_zenoh_args,
+                                     config_from_args)
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -13,10 +14,13 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--node", type=int, default=1, help="driver node id")
     p.add_argument("--inner", choices=("edge", "remote"), default="edge")
     p.add_argument("--lockstep", action="store_true")
+    p.add_argument("--controller", choices=("tt", "et"), default="et",
+                   help="the trigger the edge runs with --trigger edge (the controller's mode)")
     add_zenoh_args(p)
     add_link_args(p)
     add_live_args(p, node=True)
     add_config_args(p)
+    add_scheme_args(p)
     p.set_defaults(func=_main)
 
 
@@ -27,5 +31,5 @@ def _main(args: argparse.Namespace) -> int:
     with SessionBuilder(cfg, lockstep=args.lockstep) as b:
         session = b.zenoh()
         attach_live_child(b, args, cfg, cfg.can.interface)   # --foxglove: a `sea-hil record` child serves the live view
-        b.serve(b.edge(b.bus(), session, args.node, inner=args.inner))
+        b.serve(b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller))
     return 0

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from sea_hil.commands.common import (add_config_args, add_link_args, add_period_arg, add_scenario_args,
-                                    config_from_args)
+                                     add_scheme_args, config_from_args)
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -45,6 +45,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_live_args(p)
     add_config_args(p)
     add_period_arg(p)
+    add_scheme_args(p)
     add_scenario_args(p)
     p.set_defaults(func=_main)
 

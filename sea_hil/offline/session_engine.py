@@ -26,13 +26,14 @@ import numpy as np
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop, inner_step
 from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.edge_events import make_trigger, tracking_record
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.outer import OuterController
+from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
-from sea_hil.offline.predictor import Predictor
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import make_disturbance
@@ -41,7 +42,7 @@ from sea_hil.plant_emulator.integrator import rk4_core
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, encode
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.errors import SeaHilError
 
@@ -137,12 +138,13 @@ class SessionRecords:
 
     def __init__(self, keys: Keys) -> None:
         self.keys = keys
+        self.state_bytes = STATE_BYTES      # EVENT_STATE's size with the trigger at the edge
         self.messages: dict[str, list[RecordedMessage]] = {"/zenoh/state": [], "/zenoh/setpoint": [], "/tracking": []}
 
     def state(self, seq: int, sample_ns: int, fb: tuple, t_ns: int) -> None:
         (th, om, de, nut) = fb
         self.messages["/zenoh/state"].append(RecordedMessage(t_ns, t_ns, {
-            "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": STATE_BYTES,
+            "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": self.state_bytes,
             "sample_t_ns": sample_ns, "theta1_rad": th[0], "theta2_rad": th[1], "omega1_rad_s": om[0],
             "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1], "nut_vel1_m_s": nut[0],
             "nut_vel2_m_s": nut[1]}, seq))
@@ -194,10 +196,7 @@ class _Env:
         return LeadIn(fb[0], fb[1], self.traj.sample(0.0), self.lead_in_ns * 1e-9)
 
     def make_trigger(self) -> EventTrigger | TimeTrigger:
-        tc, cc = self.cfg.trigger, self.cfg.controller
-        if self.mode == "tt":
-            return TimeTrigger()
-        return EventTrigger(error_threshold(tc.eta, tc.lipschitz_l, cc.c), tc.r, int(round(tc.max_inter_event_s * 1e9)))
+        return make_trigger(self.cfg, self.mode)
 
     @staticmethod
     def downlink_due(queue: DelayQueue[SetpointPayload], now_ns: int) -> list[SetpointPayload]:
@@ -219,9 +218,9 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
     tab = dist_tab if env.jit else dist_tab.tolist()
     if opts.compensation == "predict":
-        env.predictor = Predictor(env.nominal, env.inner.gains, env.inner.period_s, env.period_ns, cfg.sim.substeps,
-                                  env.steps,
-                                  np.zeros_like(dist_tab) if env.jit else np.zeros_like(dist_tab).tolist())
+        env.predictor = Predictor.for_inner(env.inner, env.period_ns, cfg.sim.substeps, jit=env.jit)
+    if opts.placement == "edge":
+        env.state_bytes = env.rec.state_bytes = PAYLOAD_SIZE[MsgType.EVENT_STATE]
     loop = SessionLoop(env, opts)
     saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
     while k < env.n_max:
@@ -245,12 +244,3 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated, faulted,
                         env.envelope.rejected)
 
-
-def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,
-                    setpoint_seq: int) -> dict[str, Any]:
-    """The controller's per-state tracking record (controller/remote.py publishes the same dict as JSON on `event`);
-    `reason` None: no event at this state."""
-    sent = reason is not None
-    return {"t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta_rad[0], "theta2_rad": theta_rad[1],
-            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1], "event": sent,
-            "reason": reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}

@@ -7,14 +7,14 @@ placements and delay compensation of issue 16.
   sample, or every 1 kHz sample with `edge_check="sample"`), the controller answers each state. State seqs are then
   the 1 kHz sample index + 1 (gaps are normal), tracking records are the edge's, one per outer sample.
 - `compensation="predict"`: the controller answers with v_x for the state predicted at the instant its setpoint will
-  act (`sea_hil.offline.predictor`); the trigger (controller placement) sees the predicted state too.
+  act (`sea_hil.controller.predictor`); the trigger (controller placement) sees the predicted state too.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.controller.edge_trigger import EdgeEventGenerator
+from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.outer import Setpoint
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.protocol.link import DelayQueue
@@ -52,10 +52,11 @@ class SessionLoop:
         self.state_seq = self.setpoint_seq = self.newest = 0
         self.t0_ns: int | None = None
         self.lead: Any = None
-        self.sampled_at: dict[int, int] = {}
-        self.edge: EdgeEventGenerator | None = None
+        self.edge: EdgeEvents | None = None     # the live edge's core (controller/edge_events.py)
         if opts.placement == "edge":
-            self.edge = EdgeEventGenerator(env.make_trigger(), env.traj, env.lead_in_ns)
+            self.edge = EdgeEvents(env.cfg, env.mode, env.inner, env.period_ns, env.outer_every,
+                                   every_sample=opts.edge_check == "sample",
+                                   model=opts.edge_model and opts.compensation == "predict", jit=env.jit)
 
     # ---- edge ---------------------------------------------------------------------------------------------------
     def edge_sample(self, k: int, fb: tuple) -> None:
@@ -66,24 +67,15 @@ class SessionLoop:
                 self.state_seq += 1
                 self._publish(self.state_seq, now, fb, None)
             return
-        checked = self.o.edge_check == "sample" or k % e.outer_every == 0
-        if not checked:
+        d = self.edge.on_sample(now, fb)
+        if d is None:
             return
-        ahead = None
-        if self.o.edge_model and self.e.predictor is not None:
-            pred, held = self.e.predictor, self.e.inner
-            hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
-            ahead = lambda h_ns: pred.predict_held(fb, now, now + h_ns, hold)  # noqa: E731
-        t_ns, ds, reason = self.edge.on_sample(now, JointState(fb[0], fb[1]), ahead)
-        seq = k + 1
-        if reason is not None:
-            self.edge.sent(seq, now)
-            self._publish(seq, now, fb, reason)
-        if k % e.outer_every == 0:
-            e.rec.tracking(e.tracking_record(t_ns, seq, fb[0], ds, reason, 0), now)
+        if d.reason is not None:
+            self._publish(d.seq, now, fb, d.reason)
+        if d.record is not None:
+            e.rec.tracking(d.record, now)
 
     def _publish(self, seq: int, now: int, fb: tuple, reason: Any) -> None:
-        self.sampled_at[seq] = now
         at = self.e.uplink.submit(now, self.e.state_bytes)
         if at is not None:
             self.in_flight.push(at, (seq, now, fb, reason))
@@ -92,7 +84,7 @@ class SessionLoop:
         for payload in self.e.downlink_due(self.pending_down, now):
             self.e.inner.hold(payload.deflection_m, payload.sliding)
             if self.edge is not None:
-                self.edge.answered(payload.state_seq, now, self.sampled_at.get(payload.state_seq, now))
+                self.edge.answered(payload.state_seq, now)
 
     # ---- controller ---------------------------------------------------------------------------------------------
     def controller(self, now: int) -> bool:

@@ -126,6 +126,11 @@ class RealTimeEdgeSync:
     def state_sent(self, at_ns: int, seq: int, data: bytes) -> None:
         pass
 
+    def state_stamp(self, at_ns: int) -> int:
+        """A state's header t_ns: the sender's monotonic clock at sending (the controller, on a synchronised clock,
+        measures the uplink delay from it)."""
+        return time.monotonic_ns()
+
     def sync(self, now_ns: int) -> None:
         pass
 
@@ -168,6 +173,12 @@ class RealTimeControllerSync:
 
     def answered(self, seq: int, answer: list[tuple[Any, bytes]]) -> None:
         pass
+
+    def arrival_ns(self, p: Any) -> int:
+        """The state's arrival on the edge's sample clock: its sample time + its uplink delay, measured as now minus
+        its header t_ns on synchronised monotonic clocks (one host: the same CLOCK_MONOTONIC; across hosts PTP or
+        chrony), never negative."""
+        return p.sample_t_ns + max(0, time.monotonic_ns() - p.t_ns)
 
     def restart_possible(self, silent: bool) -> bool:
         return silent

@@ -145,6 +145,12 @@ class LockstepEdgeSync:
     def state_sent(self, at_ns: int, seq: int, data: bytes) -> None:
         self.in_flight.push(at_ns, (seq, data))
 
+    def state_stamp(self, at_ns: int) -> int:
+        """A state's header t_ns on the simulated clock: the sample at which the uplink emulator releases it (the
+        first sample at or after its delivery time), i.e. when the controller receives it."""
+        period = self.edge.period_ns
+        return -(-at_ns // period) * period
+
     def gate(self, fresh: bool) -> tuple[bool, bool]:
         return True, False
 
@@ -218,6 +224,10 @@ class LockstepControllerSync:
 
     def answered(self, seq: int, answer: list[tuple[Any, bytes]]) -> None:
         self._last_answer = (seq, answer)
+
+    def arrival_ns(self, p: Any) -> int:
+        """The state's arrival on the simulated clock: the edge stamps it with its release (`state_stamp`)."""
+        return int(p.t_ns)
 
     def restart_possible(self, silent: bool) -> bool:
         return False

@@ -88,9 +88,10 @@ class SessionBuilder:
         return self.add(PlantNode(cfg or self.cfg, bus, node_ids, clock=self.clock))
 
     def edge(self, bus: can.BusABC, session: zenoh.Session, node_id: int, *, inner: str = "edge",
-             cfg: SeaHilConfig | None = None) -> Any:
+             cfg: SeaHilConfig | None = None, mode: str = "et") -> Any:
+        """`mode` (et | tt) is the trigger the edge runs when `trigger.placement = "edge"`."""
         from sea_hil.controller.edge import EdgeNode
-        return self.add(EdgeNode(cfg or self.cfg, bus, session, node_id, inner=inner, clock=self.clock))
+        return self.add(EdgeNode(cfg or self.cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
 
     def controller(self, session: zenoh.Session, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
         from sea_hil.controller.remote import RemoteController

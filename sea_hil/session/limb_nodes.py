@@ -42,7 +42,8 @@ class LimbNodes:
         return {limb.name: f"{limb.node_id} {limb.bus}" for limb in self.limbs}
 
 
-def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], inner: str) -> LimbNodes:
+def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], inner: str,
+                     mode: str = "et") -> LimbNodes:
     """Open every bus's handles and build its plant and edge (owned by `b`); nothing is started."""
     from sea_hil.controller.edge_mux import EdgeMux
     nodes = LimbNodes(limbs)
@@ -52,7 +53,7 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
         plant_bus, edge_bus, tap = handles[spec]
         nodes.taps.append(tap)
         nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
-        edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb))
+        edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
                  for limb in group]
         nodes.edges += edges
         nodes.runners += edges if len(edges) == 1 else [b.add(EdgeMux(edge_bus, edges, workers=b.lockstep))]

@@ -133,7 +133,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     closed, then buses go."""
     cfg = b.cfg
     spec = opts.can or cfg.can.interface
-    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner)   # every bus: plant, edge(s), tap
+    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller)   # every bus: plant, edge(s), tap
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,

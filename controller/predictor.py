@@ -1,4 +1,4 @@
-"""Delay compensation by prediction (issue 16), offline prototype: the controller computes v_x for the state at the
+"""Delay compensation by prediction (issue 16): the controller computes v_x for the state at the
 instant its setpoint will act, by integrating its nominal model (plant + the edge's inner loop at 1 kHz) forward from
 the received state over the delay, with the setpoints it has already sent applied at their estimated arrival times.
 
@@ -8,23 +8,52 @@ is not observable by the controller alone and is estimated as the smoothed uplin
 delay varies, each prediction uses the state's own measured uplink delay for the past and the smoothed estimate for
 the future; an error in the estimate shifts when the predicted setpoint acts, by at most the jitter.
 
-Prototype: it runs the plant model of `sea_hil.plant_emulator` as the nominal model, which a remote controller must
-not import; the node version needs that model in the shared mechanics (docs/deviations.md, section on issue 16).
+The nominal model is the shared SEA dynamics (`sea_hil.dynamics`, Eq. 1-9, with the controller's nominal parameters)
+closed by the edge's inner step (`inner_step`, observer off: it has no model of the disturbance), exact feedback, no
+drive limits, no disturbance; it runs in a numba kernel compiled from those functions (`sea_hil.jit`) when numba is
+installed, the same body in plain Python otherwise. The live remote controller (controller/remote.py), the edge's
+model lookahead (controller/edge_trigger.py) and the offline session engine all use this one class.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field
 from typing import Any, Callable
 
-import numpy as np
-
+from sea_hil.controller.inner import inner_step
 from sea_hil.controller.observer import OBSERVER_UNSTARTED
 from sea_hil.controller.smc import JointState
+from sea_hil.dynamics import deflections, rk4_core, saturate
+from sea_hil.jit import compiled
 from sea_hil.mechanics import LimbParams, sea_geometry
-from sea_hil.offline.wire_quantiser import EXACT
 
-INF = float("inf")
-NO_LIMITS = (-INF, -INF, INF, INF, INF, INF, INF, INF)   # the prediction never faults
+
+def make_predict_steps(fingerprint: str = "") -> Callable[..., tuple]:
+    """The nominal closed loop, `n_steps` samples from the state x of sample k0, the setpoint (vx, s) held (or the
+    measured deflection when `hold_measured`); `fingerprint` (sea_hil/jit.py) only keys numba's disk cache."""
+
+    def predict_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, gains, obs, dt_s):  # noqa
+        fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
+        for k in range(k0, k0 + n_steps):
+            dl1, dl2, _, _ = deflections(x, p)
+            m = (x[0], x[1], x[2], x[3], dl1, dl2, x[6], x[7])
+            u1, u2, _, obs = inner_step(m, vx, s, hold_measured, obs, p, gains, p.voltage_limit, dt_s)
+            u1 = saturate(u1, p.voltage_limit)
+            u2 = saturate(u2, p.voltage_limit)
+            t = k * period_ns * 1e-9
+            h = (period_ns * 1e-9) / substeps
+            for i in range(substeps):
+                x = rk4_core(t + i * h, x, (u1, u2), h, p, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+        return x
+
+    return predict_steps
+
+
+def predict_kernel(jit: bool = True) -> Callable[..., tuple]:
+    kernel = compiled(make_predict_steps) if jit else None
+    return kernel if kernel is not None else make_predict_steps()
+
+
+MAX_HORIZON_NS = 500_000_000   # a delay beyond this is a clock error (unsynchronised clocks), not a link: clamped
 
 
 @dataclass
@@ -34,13 +63,29 @@ class Predictor:
     dt_s: float                   # the inner loop's period
     period_ns: int
     substeps: int
-    kernel: Callable[..., tuple]  # session_engine.make_session_steps (compiled)
-    zeros: np.ndarray             # a zero disturbance table long enough for the session
+    jit: bool = True
     schedule: list[tuple[int, tuple[float, float], tuple[float, float]]] = field(default_factory=list)
     down_delay_ns: float | None = None
     predictions: int = 0
+    clamped: int = 0              # delays/horizons outside [0, MAX_HORIZON_NS] (clock skew), clamped and counted
+
+    def __post_init__(self) -> None:
+        self.kernel = predict_kernel(self.jit)
+
+    def warm(self, theta_rad: tuple[float, float]) -> None:
+        """Compile (or load from numba's disk cache) the kernel now, with one prediction from rest at `theta_rad`:
+        a node calls this before its loop, so no real-time sample pays for it."""
+        self.predict((theta_rad, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), 0, self.period_ns, count=False)
+
+    @classmethod
+    def for_inner(cls, inner: Any, period_ns: int, substeps: int, jit: bool = True) -> "Predictor":
+        """The predictor of the nominal closed loop with the edge's inner loop `inner` (an `InnerLoop`)."""
+        return cls(inner._p, inner.gains, inner.period_s, period_ns, substeps, jit=jit)
 
     def observe_uplink(self, delay_ns: int) -> None:
+        if not 0 <= delay_ns <= MAX_HORIZON_NS:
+            self.clamped += 1
+            delay_ns = min(max(delay_ns, 0), MAX_HORIZON_NS)
         self.down_delay_ns = float(delay_ns) if self.down_delay_ns is None else (
             0.875 * self.down_delay_ns + 0.125 * delay_ns)
 
@@ -68,6 +113,9 @@ class Predictor:
                 count: bool = True) -> JointState:
         """The joint state at `until_ns` from the feedback `fb` (theta, omega, delta, nut velocity) of `sample_ns`."""
         (q1, q2), (w1, w2), (d1, d2), (nv1, nv2) = fb
+        if until_ns - sample_ns > MAX_HORIZON_NS:
+            self.clamped += count
+            until_ns = sample_ns + MAX_HORIZON_NS
         p = self.params
         len1, len2, _, _, _, _ = sea_geometry(q1, q2, p)
         x = (q1, q2, w1, w2, len1 - p.l_ref[0] - d1, len2 - p.l_ref[1] - d2, nv1, nv2)
@@ -84,9 +132,8 @@ class Predictor:
             if k_next > k:
                 hv, hs = held if held is not None else ((0.0, 0.0), (0.0, 0.0))
                 # the nominal closed loop without the edge's observer (it has no model of the disturbance)
-                x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p, p,
-                                self.gains._replace(compensation=0), OBSERVER_UNSTARTED, self.dt_s, p.voltage_limit,
-                                self.zeros, EXACT, NO_LIMITS, False)[0]
+                x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p,
+                                self.gains._replace(compensation=0), OBSERVER_UNSTARTED, self.dt_s)
                 k = k_next
             if vx is not None:
                 held = (vx, s)

@@ -1,0 +1,93 @@
+"""The trigger at the edge in the live edge node (issue 16, `trigger.placement = "edge"`): a pure core around the
+sensor-side event generator (`EdgeEventGenerator`). Per feedback sample it says whether to publish an EVENT_STATE
+(and with which body fields) and gives the tracking record of each outer sample (the edge sees every sample, the
+controller only the events); `answered` tells it about an applied setpoint. No I/O: the edge node publishes.
+
+The same decisions, sample for sample, as the offline session engine's edge (`sea_hil.offline.session_loop`):
+checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"`), state seq = sample index + 1,
+the lookahead on the nominal model (`trigger.edge_model`, with `controller.compensation = "predict"`: the engine
+builds that model only then) with the setpoint the edge holds kept.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sea_hil.config import SeaHilConfig
+from sea_hil.controller.edge_trigger import EdgeEventGenerator
+from sea_hil.controller.predictor import Predictor
+from sea_hil.controller.smc import JointState
+from sea_hil.controller.trajectory import make_trajectory, trajectory_id
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, error_threshold
+
+
+@dataclass(frozen=True)
+class EdgeDecision:
+    seq: int                              # the state seq of this sample (sample index + 1)
+    reason: TriggerReason | None          # publish this sample (None: not an event)
+    event_seq: int                        # EVENT_STATE.event_seq if published
+    record: dict[str, Any] | None         # the tracking record of an outer sample, else None
+
+
+def make_trigger(cfg: SeaHilConfig, mode: str) -> EventTrigger | TimeTrigger:
+    tc, cc = cfg.trigger, cfg.controller
+    if mode == "tt":
+        return TimeTrigger()
+    return EventTrigger(error_threshold(tc.eta, tc.lipschitz_l, cc.c), tc.r, int(round(tc.max_inter_event_s * 1e9)))
+
+
+class EdgeEvents:
+    def __init__(self, cfg: SeaHilConfig, mode: str, inner: Any, period_ns: int, outer_every: int, *,
+                 every_sample: bool | None = None, model: bool | None = None, jit: bool = True) -> None:
+        """`every_sample` (check every 1 kHz sample) and `model` (model lookahead) default to the config's
+        (`trigger.edge_check`, `trigger.edge_model` with `controller.compensation = "predict"`)."""
+        traj = make_trajectory(cfg.trajectory)
+        self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)))
+        self.trajectory_id = trajectory_id(cfg.trajectory)
+        self.inner, self.period_ns, self.outer_every = inner, period_ns, outer_every
+        self.every_sample = cfg.trigger.edge_check == "sample" if every_sample is None else every_sample
+        if model is None:
+            model = cfg.trigger.edge_model and cfg.controller.compensation == "predict"
+        self.model: Predictor | None = None
+        if model:
+            self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
+            self.model.warm(tuple(cfg.plant.initial_theta_rad))
+        self.events = 0
+        self.sampled_at: dict[int, int] = {}
+
+    def on_sample(self, sample_ns: int, fb: tuple) -> EdgeDecision | None:
+        """fb = (theta, omega, delta, nut velocity) pairs of the sample at `sample_ns`; None: not checked."""
+        k = round(sample_ns / self.period_ns)
+        outer = k % self.outer_every == 0
+        if not (outer or self.every_sample):
+            return None
+        ahead = None
+        if self.model is not None:
+            model, held = self.model, self.inner
+            hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
+            ahead = lambda h_ns: model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)  # noqa: E731
+        t_ns, ds, reason = self.generator.on_sample(sample_ns, JointState(fb[0], fb[1]), ahead)
+        seq = k + 1
+        if reason is not None:
+            self.generator.sent(seq, sample_ns)
+            self.events += 1
+            self.sampled_at[seq] = sample_ns
+            self.sampled_at.pop(seq - 100_000, None)
+        record = tracking_record(t_ns, seq, fb[0], ds, reason, 0) if outer else None
+        return EdgeDecision(seq, reason, self.events, record)
+
+    def answered(self, state_seq: int, now_ns: int) -> None:
+        self.generator.answered(state_seq, now_ns, self.sampled_at.get(state_seq, now_ns))
+
+    def stats(self) -> dict[str, int]:
+        return {"edge_events": self.events, "edge_retriggers": self.generator.retriggers}
+
+
+def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,
+                    setpoint_seq: int) -> dict[str, Any]:
+    """The per-state tracking record (published as JSON on the `event` key; the offline engine builds the same);
+    `reason` None: no event at this state."""
+    sent = reason is not None
+    return {"t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta_rad[0], "theta2_rad": theta_rad[1],
+            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1], "event": sent,
+            "reason": reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}

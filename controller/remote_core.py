@@ -1,0 +1,123 @@
+"""The remote controller's pure core (issue 12): one accepted state in, the messages to send out. No clock read of
+its own, no I/O: the node (controller/remote.py) decodes, checks sequence and trajectory, passes the state with
+its arrival time (`arrival(p)`, on the edge's sample clock, see `sea_hil.runtime`) and the wall clock to stamp
+messages with, and publishes what `on_state` returns.
+
+Per state: the controller's time t (t = 0: start of the measured cycles; the `LeadIn` before it), the outer SMC and
+trigger (`OuterController`; with the trigger at the edge every event state is answered), with `compensation =
+"predict"` for the state predicted at the instant the setpoint will act (controller/predictor.py), and with
+`inner = "remote"` the backstepping voltage every state.
+"""
+from __future__ import annotations
+
+import json
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from sea_hil.config import SeaHilConfig
+from sea_hil.controller.edge_events import tracking_record
+from sea_hil.controller.inner import InnerLoop
+from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.outer import OuterController, Setpoint
+from sea_hil.controller.predictor import Predictor
+from sea_hil.controller.smc import JointState, smc_deflection
+from sea_hil.controller.trajectory import LeadIn, make_trajectory, trajectory_id
+from sea_hil.protocol.payloads import SetpointPayload, StatePayload, VoltagePayload, encode
+
+
+@dataclass(frozen=True)
+class Answer:
+    messages: list[tuple[str, bytes]]     # ("setpoint" | "voltage", encoded payload), in order
+    setpoint: Setpoint | None
+    record: bytes | None                  # the tracking record (JSON), None with the trigger at the edge
+
+
+class ControllerCore:
+    def __init__(self, cfg: SeaHilConfig, mode: str, inner: str = "edge", cycles: int = 1, epoch: int = 0) -> None:
+        self.cfg, self.inner_mode = cfg, inner
+        self.epoch = epoch                  # the controller's session epoch, in every payload it makes
+        self.params = nominal_params(cfg)
+        self.traj = make_trajectory(cfg.trajectory)
+        self.outer = OuterController(cfg, self.params, mode)
+        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.controller.sample_period_s)
+        self.edge_trigger = cfg.trigger.placement == "edge"      # answer every EVENT_STATE
+        self.trajectory_id = trajectory_id(cfg.trajectory)
+        self.predictor: Predictor | None = None
+        if cfg.controller.compensation == "predict":            # the edge's closed loop at its own rate
+            period_s = 1.0 / cfg.can.feedback_rate_hz
+            edge_inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), period_s)
+            self.predictor = Predictor.for_inner(edge_inner, int(round(period_s * 1e9)), cfg.sim.substeps)
+            self.predictor.warm(tuple(cfg.plant.initial_theta_rad))
+        self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
+        self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
+        self.lead_in: LeadIn | None = None
+        self.t0_ns: int | None = None
+        self.last_t_ns = 0
+        self.setpoint_seq = 0
+        self.states = 0
+        self.done = False
+
+    def restart_at(self, p: StatePayload) -> None:
+        """A new state stream (edge restart): the trajectory continues where it stopped."""
+        self.t0_ns = p.sample_t_ns - self.last_t_ns
+
+    def on_state(self, p: StatePayload, arrival: Callable[[StatePayload], int], wall_ns: Callable[[], int]
+                 ) -> Answer | None:
+        """The answer to one new state; None once past the cycles (`done`). Raises ArithmeticError / ValueError /
+        MalformedPayload for a state it cannot use (the node counts it)."""
+        if self.t0_ns is None:
+            self.t0_ns = p.sample_t_ns + self.lead_in_ns
+            if self.lead_in_ns:
+                self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9)
+        t_ns = p.sample_t_ns - self.t0_ns
+        self.last_t_ns = t_ns
+        if t_ns > self.duration_ns:
+            self.done = True
+            return None
+        ds = self.desired(t_ns)
+        sp, now = self._decide(p, t_ns, arrival)
+        messages: list[tuple[str, bytes]] = []
+        if sp is not None:
+            self.setpoint_seq += 1
+            self.inner.hold(sp.deflection_m, sp.sliding)
+            if self.predictor is not None:
+                self.predictor.sent(self.predictor.apply_time_ns(now), sp.deflection_m, sp.sliding)
+            if self.inner_mode == "edge":
+                messages.append(("setpoint", encode(SetpointPayload(self.setpoint_seq, wall_ns(), p.seq,
+                                                                    sp.deflection_m, sp.sliding, sp.reason,
+                                                                    epoch=self.epoch))))
+        if self.inner_mode == "remote":
+            m = (*p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
+            u = self.inner.voltage(m)  # type: ignore[arg-type]
+            self.setpoint_seq += 1
+            messages.append(("voltage", encode(VoltagePayload(self.setpoint_seq, wall_ns(), p.seq, u,
+                                                              epoch=self.epoch))))
+        self.states += 1
+        record = None
+        if not self.edge_trigger:      # with the trigger at the edge, the edge records every outer sample
+            record = json.dumps(tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
+                                                self.setpoint_seq if messages else 0)).encode()
+        return Answer(messages, sp, record)
+
+    def desired(self, t_ns: int) -> Any:
+        return self.lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self.lead_in else self.traj.sample(t_ns * 1e-9)
+
+    def _decide(self, p: StatePayload, t_ns: int, arrival: Callable[[StatePayload], int]
+                ) -> tuple[Setpoint | None, int]:
+        """The setpoint for state p (None: no event) and the arrival time used; with `predict` for the state
+        predicted at the instant the setpoint will act, as the offline engine does."""
+        js, t_eval, now = JointState(p.theta_rad, p.omega_rad_s), t_ns, 0
+        if self.predictor is not None:
+            now = arrival(p)
+            self.predictor.observe_uplink(now - p.sample_t_ns)
+            apply_ns = self.predictor.apply_time_ns(now)
+            js = self.predictor.predict((p.theta_rad, p.omega_rad_s, p.delta_m, p.nut_vel_m_s), p.sample_t_ns,
+                                        apply_ns)
+            t_eval = apply_ns - self.t0_ns  # type: ignore[operator]
+        ds_eval = self.desired(t_eval)
+        if not self.edge_trigger:
+            return self.outer.step(t_eval, p.seq, js, ds_eval), now
+        cc = self.cfg.controller
+        vx, s = smc_deflection(js, ds_eval, self.params, cc.c, cc.rho, cc.boundary_layer)
+        return Setpoint(vx, s, p.reason, p.seq, t_eval), now  # type: ignore[attr-defined]

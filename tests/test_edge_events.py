@@ -1,0 +1,108 @@
+"""The live trigger at the edge (issue 16) without Zenoh: the edge's pure core (`EdgeEvents`: which samples cross
+the uplink, the tracking record of each outer sample, no duplicate while an answer is in flight, re-trigger after
+the answer timeout), the trajectory identity, the remote controller answering event states (and refusing another
+trajectory), and the controller's import boundary (never the plant)."""
+from __future__ import annotations
+
+import subprocess
+import sys
+import uuid
+
+from sea_hil.config import load_config
+from sea_hil.controller.edge_events import EdgeEvents
+from sea_hil.controller.inner import InnerLoop
+from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.trajectory import trajectory_id
+from sea_hil.protocol.payloads import EventStatePayload, StatePayload, TriggerReason, encode
+from sea_hil.session.builder import SessionBuilder
+
+MS = 1_000_000
+EDGE = {"trigger": {"placement": "edge", "edge_model": True}, "controller": {"compensation": "predict"}}
+
+
+def _core(mode: str = "et") -> EdgeEvents:
+    cfg = load_config(overrides=EDGE)
+    inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad), 1e-3)
+    return EdgeEvents(cfg, mode, inner, MS, 10, jit=False)   # plain Python: no compile in a unit test
+
+
+def _rest(cfg_theta: tuple[float, float]) -> tuple:
+    return (cfg_theta, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
+
+
+def test_edge_core_checks_outer_samples_publishes_events_and_records_every_outer_sample():
+    core = _core()
+    fb = _rest(tuple(load_config().plant.initial_theta_rad))
+    first = core.on_sample(0, fb)
+    assert first is not None and first.reason is TriggerReason.INITIAL and (first.seq, first.event_seq) == (1, 1)
+    assert first.record is not None and first.record["event"] and first.record["state_seq"] == 1
+    assert all(core.on_sample(k * MS, fb) is None for k in range(1, 10))       # between outer samples: not checked
+    second = core.on_sample(10 * MS, fb)
+    assert second is not None and second.seq == 11 and second.record is not None
+    assert second.reason is None                 # the answer to state 1 is in flight: no duplicate event
+    core.answered(1, 6 * MS)
+    assert core.generator.awaiting_seq is None and core.generator.rtt_ns == 6 * MS
+    assert core.stats() == {"edge_events": 1, "edge_retriggers": 0}
+
+
+def test_edge_core_retriggers_when_the_answer_is_lost():
+    core = _core("tt")            # every outer sample would be an event, but not while an answer is in flight
+    fb = _rest(tuple(load_config().plant.initial_theta_rad))
+    reasons = [core.on_sample(k * 10 * MS, fb).reason for k in range(5)]  # type: ignore[union-attr]
+    assert reasons[0] is TriggerReason.TIME and reasons[1:] == [None, TriggerReason.TIME, None, TriggerReason.TIME]
+    assert core.stats()["edge_retriggers"] == 2          # lost after the 20 ms minimum timeout: re-triggered
+
+
+def test_trajectory_identity(tmp_path):
+    cfg = load_config()
+    assert trajectory_id(cfg.trajectory) == trajectory_id(load_config().trajectory)
+    assert trajectory_id(cfg.trajectory) != trajectory_id(load_config(overrides={"trajectory": {"period_s": 5.0}})
+                                                          .trajectory)
+    csv = tmp_path / "t.csv"
+    csv.write_text("t_s,theta1_rad,theta2_rad\n0,0,0\n1,0.1,0.2\n", encoding="utf-8")
+    a = trajectory_id(load_config(overrides={"trajectory": {"kind": "csv", "csv_path": str(csv)}}).trajectory)
+    csv.write_text("t_s,theta1_rad,theta2_rad\n0,0,0\n1,0.1,0.3\n", encoding="utf-8")
+    b = trajectory_id(load_config(overrides={"trajectory": {"kind": "csv", "csv_path": str(csv)}}).trajectory)
+    assert a != b                                        # same parameters, other CSV bytes
+
+
+def _event_state(seq: int, event_seq: int, traj: int, sample_ns: int) -> bytes:
+    th = tuple(load_config().plant.initial_theta_rad)
+    return encode(EventStatePayload(seq, sample_ns, sample_ns, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), event_seq,
+                                    TriggerReason.ERROR_BOUND, traj))
+
+
+def test_remote_controller_answers_every_event_state_and_refuses_another_trajectory():
+    cfg = load_config(overrides={**EDGE, "can": {"interface": f"virtual:ee-{uuid.uuid4().hex[:8]}"}})
+    mine = trajectory_id(cfg.trajectory)
+    with SessionBuilder(cfg) as b:
+        ctrl = b.controller(b.zenoh(listen=(), connect=()), "et")
+        ctrl.handle(_event_state(1, 1, mine ^ 1, 0), now_ns=0)
+        assert ctrl.trajectory_mismatches == 1 and ctrl.setpoint_seq == 0
+        ctrl.handle(encode(StatePayload(2, 0, 10 * MS, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))), now_ns=0)
+        assert ctrl.unexpected_payloads == 1            # a paper-path STATE to an edge-trigger controller
+        for i, k in enumerate((20, 50, 51, 90)):        # gaps in the header seq are normal
+            ctrl.handle(_event_state(k + 1, i + 1, mine, k * MS), now_ns=0)
+        assert ctrl.setpoint_seq == 4 and ctrl.seq.lost == 0
+        ctrl.handle(_event_state(131, 6, mine, 130 * MS), now_ns=0)    # event 5 lost on the link
+        assert ctrl.setpoint_seq == 5 and ctrl.seq.lost == 1
+        assert ctrl.predictor is not None and ctrl.predictor.predictions > 0
+        assert ctrl.predictor.clamped > 0     # these stamps are not on the test's monotonic clock: clamped, counted
+
+
+def test_the_controller_never_imports_the_plant():
+    code = ("import sys, sea_hil.controller.remote, sea_hil.controller.edge, sea_hil.controller.predictor; "
+            "sys.exit(any(m.startswith('sea_hil.plant_emulator') for m in sys.modules))")
+    assert subprocess.run([sys.executable, "-c", code], timeout=120).returncode == 0
+
+
+def test_controller_core_is_pure_state_in_messages_out():
+    """The remote controller's core without any Zenoh: the paper's placement answers with a setpoint and a record."""
+    from sea_hil.controller.remote_core import ControllerCore
+    core = ControllerCore(load_config(), "tt")
+    th = tuple(load_config().plant.initial_theta_rad)
+    ans = core.on_state(StatePayload(1, 0, 0, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), lambda p: 0, lambda: 7)
+    assert ans is not None and [c for c, _ in ans.messages] == ["setpoint"] and ans.record is not None
+    assert ans.setpoint is not None and ans.setpoint.reason is TriggerReason.TIME and core.states == 1
+    late = StatePayload(2, 0, 11 * 10**9, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))   # past the 10 s cycle
+    assert core.on_state(late, lambda p: 0, lambda: 8) is None and core.done
