@@ -31,5 +31,5 @@ def test_wrapped_errors_keep_their_cause(tmp_path: Path) -> None:
     assert isinstance(_cause(load_config, None, {"plant": {"m1_kg": -1.0}}), pydantic.ValidationError)
     assert isinstance(_cause(parse_link_spec, "delay=abcms"), ValueError)
     assert isinstance(_cause(parse_axis, "eta", "x"), ValueError)
-    assert isinstance(_cause(decode, struct.pack("<2sBBIQ", MAGIC, VERSION, 99, 1, 1)), ValueError)
+    assert isinstance(_cause(decode, struct.pack("<2sBBIQQ", MAGIC, VERSION, 99, 1, 1, 7)), ValueError)
     assert isinstance(_cause(read_session, tmp_path), OSError)      # a directory
