@@ -29,7 +29,7 @@ from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
-from sea_hil.session.processes import end_process
+from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
 
 
 @dataclass(frozen=True)
@@ -75,7 +75,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     cfg_path.write_text(config_to_toml(quiet), encoding="utf-8")
     listen = listen_endpoints(cfg, opts)
     t0 = time.monotonic()
-    with SessionBuilder(cfg, lockstep=opts.lockstep) as b:
+    # SIGTERM/SIGHUP raise `Terminated` here: the builder's close path ends the controller and closes the recording
+    with stop_on_signals(), SessionBuilder(cfg, lockstep=opts.lockstep) as b:
         # this process is what the controller connects to: a peer even when the nodes' config says client (a
         # client needs a router; `sea-hil run` has none), with the config's TLS and ACL
         session = b.zenoh(listen=listen, connect=(), mode="peer")
@@ -86,7 +87,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
         else:   # the controller's start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
             child_path = opts.out / "controller.toml"
             child_path.write_text(config_to_toml(controller_config(quiet, listen[0])), encoding="utf-8")
-            proc = subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL)
+            proc = spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL)   # ends if we die
         b.callback(end_process, proc)
         _host_nodes(b, opts, session, proc, t0, log)
     wall_s = time.monotonic() - t0
