@@ -24,6 +24,9 @@ from pathlib import Path
 
 import psutil
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+from sea_hil.session.processes import end_process  # noqa: E402
+
 PROGRESS = re.compile(r"sim\s+([\d.]+)/[\d.]+ s .*setpoints (\d+)\s+states (\d+)")
 
 
@@ -119,13 +122,7 @@ def end_tree(proc: subprocess.Popen, grace_s: float = 20.0) -> None:
         kids = psutil.Process(proc.pid).children(recursive=True)
     except psutil.Error:
         kids = []
-    if proc.poll() is None:
-        proc.terminate()
-        try:
-            proc.wait(timeout=grace_s)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+    end_process(proc, grace_s)
     for k in kids:
         try:
             k.wait(timeout=5.0)
