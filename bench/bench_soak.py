@@ -9,10 +9,11 @@ minutes), watched for stalls (bench/sessionwatch.py). While the controller runs,
 (`sea_hil.recorder.reader.read_session(path, on_message=...)`). Reported:
 - RSS growth per process after the first minute: median RSS of the last 10 samples before the controller ended
   minus the median of the samples in [60 s, 70 s) (and the least-squares slope over t >= 60 s, MB/min);
-- lost CAN frames: the recorder's sequence-gap count (`can_frames_missed`), rejected frames, and recorded
-  `/can/feedback` frames against 3 x (driver ticks + 1) (3 frames per sample, one limb);
-- dropped Zenoh messages: states the controller saw missing in its sequence (`state_seq_lost`), setpoints sent by
-  the controller that the edge never took in (`setpoints_sent - downlink_submitted`, plus its `seq_lost`);
+- lost CAN frames: recorded `/can/feedback` frames against 3 x (driver ticks + 1) (3 frames per sample, one limb),
+  recorded `/can/command` frames against the edge's VOLTAGE_CMD count, frames the DBC rejected (the
+  recorder's sequence-gap count is reported beside: it also counts samples the edge did not answer);
+- dropped Zenoh messages: setpoints the controller sent (its final stats) that the host's session, where the edge
+  and the recorder's tap are, did not receive (recorded count); the states the controller skipped are reported;
 - recording completeness: file complete and closed in order, writer/recorder drops 0, per-topic counts read back
   equal to the writer's counters, recorded `/zenoh/state` equal to the edge's published states and recorded
   `/zenoh/setpoint` equal to the controller's sent setpoints, both with contiguous sequence numbers.
@@ -117,6 +118,7 @@ def recording_check(mcap: Path) -> dict[str, Any]:
 
     data = read_session(mcap, on_message=on_message)
     final, edge, ctl = data.metadata.get("sea-hil.final", {}), finals.get("edge", {}), finals.get("controller", {})
+    commands_sent = sum(int(edge.get(k, 0)) for k in ("commands_sent", "arrival_commands"))   # VOLTAGE_CMDs
     writer_counts = {k.split(".", 1)[1]: int(v) for k, v in final.items() if k.startswith("messages.")}
 
     def gaps(v: list[int]) -> int:
@@ -127,16 +129,16 @@ def recording_check(mcap: Path) -> dict[str, Any]:
            "writer_dropped": int(final.get("dropped", -1)), "write_errors": int(final.get("write_errors", -1)),
            "recorder_dropped_ops": int(final.get("recorder_dropped_ops", -1)),
            "topic_count_mismatches": sum(counts.get(t, 0) != n for t, n in writer_counts.items()),
-           "can_frames_missed": int(final.get("can_frames_missed", -1)), "can_rejected": int(final.get("can_rejected", -1)),
+           "can_seq_gaps": int(final.get("can_frames_missed", -1)), "can_rejected": int(final.get("can_rejected", -1)),
            "plant_ticks": ticks, "plant_overruns": int(final.get("plant_overruns", 0)),
            "can_feedback_short": 3 * (ticks + 1) - counts.get("/can/feedback", 0),
+           "can_commands_sent": commands_sent, "can_command_short": commands_sent - counts.get("/can/command", 0),
            "states_published": int(edge.get("uplink_msgs", -1)), "states_recorded": counts.get("/zenoh/state", 0),
            "state_seq_gaps_recorded": gaps(seqs["/zenoh/state"]),
            "setpoints_sent": int(ctl.get("setpoints_sent", -1)), "setpoints_recorded": counts.get("/zenoh/setpoint", 0),
            "setpoint_seq_gaps_recorded": gaps(seqs["/zenoh/setpoint"]),
-           "zenoh_up_dropped": int(ctl.get("state_seq_lost", -1)),
-           "zenoh_down_dropped": int(ctl.get("setpoints_sent", 0)) - int(edge.get("downlink_submitted", 0))
-           + int(edge.get("seq_lost", 0))}
+           "zenoh_down_dropped": int(ctl.get("setpoints_sent", 0)) - counts.get("/zenoh/setpoint", 0),
+           "controller_states_skipped": int(ctl.get("state_seq_lost", -1))}
     out["recorder_lost"] = (out["writer_dropped"] + out["recorder_dropped_ops"] + out["write_errors"]
                             + out["topic_count_mismatches"] + abs(out["states_published"] - out["states_recorded"])
                             + abs(out["setpoints_sent"] - out["setpoints_recorded"]) + out["state_seq_gaps_recorded"]
@@ -161,17 +163,24 @@ def soak_records(growth: dict[str, dict[str, float]], rec: dict[str, Any], minut
                  unit="MB", per_run=[worst], p99=float("nan"), goal=f"< {GOAL_RSS_MB:g} MB per process",
                  goal_met=bool(status == "ok" and worst < GOAL_RSS_MB), command=command,
                  details=[{"process": r, **growth[r]} for r in roles], notes=note)
-    lost = rec.get("can_frames_missed", -1) + rec.get("can_rejected", 0) + max(rec.get("can_feedback_short", 0), 0)
+    lost = (rec.get("can_rejected", 0) + abs(rec.get("can_feedback_short", -1))
+            + abs(rec.get("can_command_short", -1)))
     can = record("10b", f"soak {minutes:g} min: lost CAN frames", runs=1,
-                 metric="recorder sequence gaps + rejected + /can/feedback short of 3 x (ticks + 1)", unit="frames",
+                 metric="recorded vs sent: /can/feedback against 3 x (driver ticks + 1), /can/command against the "
+                        "edge's VOLTAGE_CMDs; + frames the DBC rejected", unit="frames",
                  per_run=[lost], p99=float("nan"), goal="0", goal_met=bool(status == "ok" and lost == 0),
                  command=command, details=[rec], notes=f"{rec.get('plant_ticks', 0)} driver ticks, "
-                 f"{rec.get('plant_overruns', 0)} overruns (loaded machine: a late tick is not a lost frame).")
-    zen = rec.get("zenoh_up_dropped", -1) + rec.get("zenoh_down_dropped", -1)
+                 f"{rec.get('plant_overruns', 0)} overruns (a late tick is skipped, not a lost frame). The recorder's "
+                 f"sequence-gap count ({rec.get('can_seq_gaps', 0)}) also counts the feedback samples the edge did "
+                 "not answer (a VOLTAGE_CMD carries the seq of the sample it answers; none is sent while setpoints "
+                 "are stale), so it is not a loss count.")
+    zen = rec.get("zenoh_down_dropped", -1)
     zrec = record("10c", f"soak {minutes:g} min: dropped Zenoh messages", runs=1,
-                  metric="states missing at the controller + setpoints sent but never taken in by the edge",
-                  unit="messages", per_run=[zen], p99=float("nan"), goal="(informative: 0 expected on loopback)",
-                  goal_met=None, command=command)
+                  metric="setpoints the controller sent that did not reach the host's Zenoh session (recorded there, "
+                         "beside the edge)", unit="messages", per_run=[zen], p99=float("nan"), goal="0 (informative)",
+                  goal_met=None, command=command,
+                  notes=f"States the controller skipped: {rec.get('controller_states_skipped')} (its newest-only "
+                        "receive overwrites states it has not read yet; its stats do not separate these from losses).")
     rl = rec.get("recorder_lost", -1)
     comp = record("10d", f"soak {minutes:g} min: lost recorder messages (recording completeness)", runs=1,
                   metric="drops + write errors + per-topic count mismatches + published-vs-recorded Zenoh "
@@ -200,6 +209,7 @@ def main(argv: list[str] | None = None) -> int:
                     on_tick=sampler.tick)
     print(f"session {res.status} in {res.wall_s:.0f} s (exit {res.returncode}); last progress {res.last_progress!r}",
           flush=True)
+    (out / "processes.json").write_text(json.dumps(sampler.samples), encoding="utf-8")   # (t_s, rss_mb, cpu_s)
     rec = recording_check(out / "session.mcap") if (out / "session.mcap").exists() else {}
     growth = sampler.growth()
     for role, g in sorted(growth.items()):

@@ -22,14 +22,15 @@ def test_growth_after_the_first_minute_and_records() -> None:
     assert abs(g["recorder"]["growth_mb"] - (294.5 - 64.5) / 60.0) < 1e-6
     assert abs(g["recorder"]["slope_mb_per_min"] - 1.0) < 1e-6
     assert abs(g["run"]["cpu_pct"] - 50.0) < 1e-6
-    rec = {"can_frames_missed": 0, "can_rejected": 0, "can_feedback_short": 0, "zenoh_up_dropped": 0,
-           "zenoh_down_dropped": 0, "recorder_lost": 0, "plant_ticks": 1, "messages": 1}
+    rec = {"can_seq_gaps": 9, "can_rejected": 0, "can_feedback_short": 0, "can_command_short": 0,
+           "zenoh_down_dropped": 0, "controller_states_skipped": 5, "recorder_lost": 0, "plant_ticks": 1, "messages": 1}
     rss, can, zen, comp = bench_soak.soak_records(g, rec, 5.0, "ok", 300.0, "python bench/bench_soak.py")
     assert rss["goal_met"] is True and rss["median"] == g["recorder"]["growth_mb"]
     assert can["goal_met"] is True and comp["goal_met"] is True and zen["median"] == 0
     grown = bench_soak.soak_records({**g, "run": {**g["run"], "growth_mb": 6.0}}, rec, 5.0, "ok", 0.0, "x")
     assert grown[0]["goal_met"] is False
     assert bench_soak.soak_records(g, rec, 5.0, "stalled", 0.0, "x")[3]["goal_met"] is False
+    assert bench_soak.soak_records(g, {**rec, "can_command_short": 2}, 5.0, "ok", 0.0, "x")[1]["goal_met"] is False
 
 
 def test_too_short_a_session_has_no_growth_figure() -> None:
