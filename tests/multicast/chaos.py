@@ -72,6 +72,7 @@ class Watch:
         self.faults_seen = 0
         self.flags = 0
         self.samples = 0   # feedback samples the drive has sent (one FEEDBACK_ANGLE frame each): its own clock
+        self.samples_at_change = 0   # `samples` when the newest state change was seen (in bus order)
         self.history: list[tuple[float, str, int]] = []   # (monotonic s, state, flags) of every state change
         self.last_seq = 0
         self._payloads = PayloadCounters()
@@ -97,6 +98,7 @@ class Watch:
             self.samples += isinstance(f, FeedbackAngle)
             if isinstance(f, Heartbeat) and f.state is not self.state:
                 self.state, self.state_since_ns, self.flags = f.state, time.monotonic_ns(), int(f.flags)
+                self.samples_at_change = self.samples
                 self.history.append((round(time.monotonic(), 2), f.state.name, int(f.flags)))
                 self.faults_seen += f.state is DriverState.FAULT
 
@@ -182,7 +184,7 @@ class Chaos:
         safe_s = (safe - killed) / 1e9
         # in the drive's time (its feedback periods): the bound the design guarantees; a loaded host stretches the
         # wall time when the drive misses ticks (it skips them) or the nodes are descheduled
-        drive_s = (w.samples - samples0) * self.period_s
+        drive_s = (w.samples_at_change - samples0) * self.period_s
         assert drive_s <= self.safe_bound_s, f"{name} kill -> FAULT after {drive_s:.3f} s of drive time " \
             f"> {self.safe_bound_s:.3f} s (wall {safe_s:.3f} s)"
         self.start(name)
