@@ -17,7 +17,7 @@ import json
 import os
 import re
 import resource
-import subprocess
+import shutil
 import sys
 import tempfile
 import threading
@@ -29,64 +29,57 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from benchlib import REPO, bench_args, command_line, emit, record, sea_hil_run  # noqa: E402
+from sessionwatch import watch_run  # noqa: E402
 from foxglove_ws_client import receive  # noqa: E402
 from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.live.channels import CHANNELS, END_MESSAGE  # noqa: E402
 from sea_hil.recorder.reader import read_session  # noqa: E402
-from sea_hil.session.processes import end_process  # noqa: E402
 
 GOAL_RATIO = 1.10
 LOADED_MISS_PCT = 1.0   # a quiet machine misses < 0.1 % (figure 4); a baseline above 1 % is not a fair baseline
 URL = re.compile(r"Foxglove live view: (ws://\S+)")
 
 
-def _watch(url: str, nice: int, timeout_s: float) -> dict[str, Any]:
+def _client(url: str, nice: int, timeout_s: float, result: dict[str, Any]) -> threading.Thread:
     """The client, in a thread of this process lowered to `nice` (a viewer on this machine is background work)."""
-    result: dict[str, Any] = {}
-
     def run() -> None:
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)   # Linux: per-thread nice
-        res = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=timeout_s))
+        try:
+            res = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=timeout_s))
+        except (OSError, asyncio.TimeoutError, SeaHilError) as err:   # a stalled session's server may vanish
+            result.update(live_messages=0, live_ended=False, live_error=str(err))
+            return
         result.update(live_messages=sum(len(v) for v in res.messages.values()), live_ended=res.ended)
-    t = threading.Thread(target=run, name="foxglove-client")
+    t = threading.Thread(target=run, name="foxglove-client", daemon=True)
     t.start()
-    t.join()
-    return result
+    return t
 
 
-def _session(out: Path, controller: str, live: bool, client_nice: int = 10,
-             timeout_s: float = 300.0) -> dict[str, Any]:
-    """One real-time session (with a subscribed client when `live`); its figures."""
+def _session(out: Path, controller: str, live: bool, client_nice: int = 10, timeout_s: float = 300.0,
+             stall_s: float = 30.0) -> dict[str, Any]:
+    """One real-time session (with a subscribed client when `live`); its figures, or its stall (`status`)."""
     cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--controller", controller, "--cycles", "1", "--out",
-           str(out), "--quiet", *(["--foxglove", "0", "--foxglove-wait"] if live else [])]
-    out.mkdir(parents=True, exist_ok=True)
+           str(out), *(["--foxglove", "0", "--foxglove-wait"] if live else [])]
     got: dict[str, Any] = {}
+    clients: list[threading.Thread] = []
     cpu0 = _children_cpu_s()
-    with open(out / "stdout.json", "wb") as stdout:
-        proc = subprocess.Popen(cmd, cwd=REPO, stdout=stdout, stderr=subprocess.PIPE)
-    try:
-        assert proc.stderr is not None
-        if live:
-            for raw in proc.stderr:
-                if m := URL.search(raw.decode(errors="replace")):
-                    break
-            else:
-                raise SeaHilError(f"{' '.join(cmd)}: no live view address printed")
-            tail: list[bytes] = []
-            drain = threading.Thread(target=lambda: tail.append(proc.stderr.read()), daemon=True)   # pipe not full
-            drain.start()
-            got = _watch(m.group(1), client_nice, timeout_s)
-        if proc.wait(timeout=timeout_s) != 0:
-            err = proc.stderr.read() if not live else (drain.join(10) or b"".join(tail))
-            raise SeaHilError(f"{' '.join(cmd)} failed ({proc.returncode}): {err.decode(errors='replace')[-1500:]}")
-    finally:
-        end_process(proc)
+    res = watch_run(cmd, out, cwd=REPO, stall_s=stall_s, timeout_s=timeout_s, find=URL if live else None,
+                    on_found=lambda url: clients.append(_client(url, client_nice, timeout_s, got)))
+    for t in clients:
+        t.join(30.0)
     cpu_s = _children_cpu_s() - cpu0   # the whole session: run, its recorder and controller processes (reaped)
+    if res.status != "ok":   # reported as such, with the stacks of every process of a stalled session
+        print(f"session {out.name} {res.status} (exit {res.returncode}) after {res.wall_s:.0f} s; last progress: "
+              f"{res.last_progress!r}; dumps: {res.dumps}", flush=True)
+        return {"live": live, "status": res.status, "returncode": res.returncode, "last_progress": res.last_progress,
+                "dumps": str(res.dumps) if res.dumps else "", "stderr_tail": res.stderr_tail[-600:], **got}
+    if live and not got:
+        raise SeaHilError(f"{' '.join(cmd)}: no live view address printed")
     s = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     final = read_session(out / "session.mcap").metadata.get("sea-hil.final", {})
     ticks, overruns = int(final.get("plant_ticks", 0)), int(final.get("plant_overruns", 0))
     t = s["timing"]   # wall-time-derived fields (docs/session.md)
-    return {"live": live, "p99_us": t["latency_us"]["p99"], "p50_us": t["latency_us"]["p50"],
+    return {"live": live, "status": "ok", "p99_us": t["latency_us"]["p99"], "p50_us": t["latency_us"]["p50"],
             "samples": t["latency_samples"], "plant_ticks": ticks, "plant_overruns": overruns,
             "miss_pct": 100.0 * overruns / ticks if ticks else float("nan"),
             "edge_loop_overruns": t["edge"]["loop_overruns"], "wall_s": t["wall_s"], "cpu_s": cpu_s, **got}
@@ -105,17 +98,26 @@ def _median(vals: list[float]) -> float:
 
 
 def live_records(details: list[dict[str, Any]], command: str) -> list[dict[str, Any]]:
-    on = [d for d in details if d["live"]]
-    off = [d for d in details if not d["live"]]
+    """Figures over the sessions that completed; stalled or failed ones are counted in the notes (and listed, with
+    their dumps, in `details`). With no completed session on a side the comparison is not judged."""
+    done = [d for d in details if d.get("status", "ok") == "ok"]
+    on = [d for d in done if d["live"]] or [{"p99_us": float("nan"), "miss_pct": float("nan"), "cpu_s": float("nan")}]
+    off = [d for d in done if not d["live"]] or [{"p99_us": float("nan"), "miss_pct": float("nan"),
+                                                   "cpu_s": float("nan")}]
+    bad = [d for d in details if d.get("status", "ok") != "ok"]
     p99_on, p99_off = [d["p99_us"] for d in on], [d["p99_us"] for d in off]
     miss_on, miss_off = [d["miss_pct"] for d in on], [d["miss_pct"] for d in off]
     # a baseline that already misses ticks means a loaded machine: the comparison is then not judged
-    judged = _median(miss_off) < LOADED_MISS_PCT
+    judged = _median(miss_off) < LOADED_MISS_PCT   # False for NaN (no completed baseline)
     lat_ok = _median(p99_on) <= GOAL_RATIO * _median(p99_off) if judged else None
     miss_ok = _median(miss_on) <= GOAL_RATIO * _median(miss_off) if judged else None
     note = ("Pairs of real-time sessions, alternating order; with = `--foxglove 0 --foxglove-wait` and a client "
             "subscribed to every live channel, in a thread at nice 10 (--client-nice) of the benchmark process; the "
             "server runs in the SCHED_IDLE recorder process.")
+    if bad:
+        note += (f" {len(bad)} of {len(details)} sessions did not complete ("
+                 + ", ".join(f"pair {d.get('pair')} {'with' if d['live'] else 'without'}: {d['status']}" for d in bad)
+                 + "; stacks in their stall-dumps.txt); the figures are over the completed ones.")
     if not judged:
         note += (f" NOT JUDGED (provisional): the sessions without the live view already missed "
                  f"{_median(miss_off):.1f} % of the driver ticks (>= {LOADED_MISS_PCT} %: the machine was loaded), "
@@ -172,23 +174,30 @@ def main(argv: list[str] | None = None) -> int:
     ap = bench_args(__doc__.splitlines()[0], runs=3)
     ap.add_argument("--controller", choices=("et", "tt"), default="et")
     ap.add_argument("--client-nice", type=int, default=10, help="nice of the watching client's thread (default 10)")
-    ap.add_argument("--workdir", type=Path, help="keep the run directories here (default: a temporary directory)")
+    ap.add_argument("--workdir", type=Path, help="keep the run directories here (default: a temporary directory, "
+                                                  "kept when a session stalled)")
+    ap.add_argument("--stall-s", type=float, default=30.0, metavar="S",
+                    help="a session whose simulated time and setpoints do not advance for S s is a stall (default 30)")
     args = ap.parse_args(argv)
     runs = 1 if args.quick else args.runs
-    details = []
-    with tempfile.TemporaryDirectory(prefix="bench-live-") as tmp:
-        base = args.workdir or Path(tmp)
-        for i in range(runs):
-            for live in ((False, True) if i % 2 == 0 else (True, False)):
-                d = _session(base / f"pair{i + 1}-{'live' if live else 'plain'}", args.controller, live,
-                             args.client_nice)
-                details.append({"pair": i + 1, **d})
+    details: list[dict[str, Any]] = []
+    base = args.workdir or Path(tempfile.mkdtemp(prefix="bench-live-"))
+    for i in range(runs):
+        for live in ((False, True) if i % 2 == 0 else (True, False)):
+            d = _session(base / f"pair{i + 1}-{'live' if live else 'plain'}", args.controller, live,
+                         args.client_nice, stall_s=args.stall_s)
+            details.append({"pair": i + 1, **d})
+            if d["status"] == "ok":
                 print(f"pair {i + 1}/{runs} {'with' if live else 'without'} --foxglove: p99 {d['p99_us']:.0f} us  "
                       f"tick misses {d['plant_overruns']}/{d['plant_ticks']}"
-                      f"{'  live messages %d' % d['live_messages'] if live else ''}", flush=True)
-        lock = base / "lockstep"
-        sea_hil_run(lock, controller=args.controller, lockstep=True)
-        cost = replay_cost(lock / "session.mcap")
+                      f"{'  live messages %d' % d.get('live_messages', 0) if live else ''}", flush=True)
+    lock = base / "lockstep"
+    sea_hil_run(lock, controller=args.controller, lockstep=True)
+    cost = replay_cost(lock / "session.mcap")
+    if args.workdir is None and all(d["status"] == "ok" for d in details):
+        shutil.rmtree(base, ignore_errors=True)
+    elif args.workdir is None:
+        print(f"run directories (with the stalled sessions' dumps) kept in {base}", flush=True)
     print(f"live view replay: {cost['view_us_per_record']:.2f} us per recorded message, "
           f"{cost['publish_us_per_message']:.1f} us per live message, {cost['cpu_ms_per_s']:.1f} ms CPU per s", flush=True)
     recs = live_records(details, command_line())

@@ -38,6 +38,10 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
 ]
+# opt-in (`--long`): the endurance figures take many minutes of one real-time session each
+LONG_STEPS: list[tuple[str, str, list[str], list[str], int]] = [
+    ("bench_soak", "10", ["--minutes", "10"], ["--quick"], 900),
+]
 
 
 def _accepts_json(script: Path) -> bool:
@@ -115,13 +119,17 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="smoke run: every script in its quickest mode")
     ap.add_argument("--only", help="comma-separated script names (e.g. bench_mcap,bench_scale)")
+    ap.add_argument("--long", action="store_true",
+                    help="also run the long endurance benchmarks (bench_soak: a 10 min session); their last results "
+                         "stay in the markdown either way")
     ap.add_argument("--render-only", action="store_true", help="only rewrite the markdown from existing JSON")
     ap.add_argument("--results", type=Path, default=BENCH / "results", help="JSON directory (default bench/results)")
     ap.add_argument("--out", type=Path, default=REPO / "BENCHMARKS.md", help="markdown file to write")
     args = ap.parse_args(argv)
     args.results.mkdir(parents=True, exist_ok=True)
     only = set(args.only.split(",")) if args.only else None
-    steps = [s for s in STEPS if only is None or s[0] in only]
+    steps = [s for s in STEPS + LONG_STEPS if (only is None and (s in STEPS or args.long)) or
+             (only is not None and s[0] in only)]
     t0 = time.monotonic()
     for i, (name, fig, full, quick, est_s) in enumerate(steps):
         if args.render_only:
@@ -137,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
             (args.results / f"{name}.json").write_text(json.dumps([fail]) + "\n", encoding="utf-8")
             print(f"=== {name} FAILED: {err}", flush=True)
     records: list[dict[str, Any]] = []
-    for name, *_ in STEPS:
+    for name, *_ in STEPS + LONG_STEPS:
         path = args.results / f"{name}.json"
         if path.exists():
             records += json.loads(path.read_text(encoding="utf-8"))

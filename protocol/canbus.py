@@ -19,6 +19,7 @@ import can
 from can.interfaces.virtual import VirtualBus, channels_lock
 
 from sea_hil.errors import BusError, ConfigError
+from sea_hil.queues import timed_get
 
 INTERFACES = ("socketcan", "virtual", "udp_multicast")
 _IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")  # Linux IFNAMSIZ (16) minus the NUL
@@ -90,7 +91,7 @@ class FastVirtualBus(VirtualBus):
             return super().recv(timeout)
         self._check_if_open()
         try:
-            msg: can.Message = self.queue.get(block=True, timeout=timeout)
+            msg: can.Message = timed_get(self.queue, timeout)   # not `get(timeout=)`: it can hang (sea_hil.queues)
         except queue.Empty:
             return None
         if _CAN_LOG.isEnabledFor(self.RECV_LOGGING_LEVEL):

@@ -11,7 +11,7 @@ import logging
 import sys
 from typing import NoReturn
 
-from sea_hil.errors import SeaHilError
+from sea_hil.errors import SeaHilError, Terminated
 
 COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "export", "sweep", "robustness",
             "certs")
@@ -41,12 +41,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    from sea_hil.session.processes import exit_with_parent
+    exit_with_parent()   # a child of a sea-hil session (`spawn_child`) ends when its parent dies
     parser = build_parser()
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s")
     try:
         return int(args.func(args) or 0)
+    except Terminated as err:   # SIGTERM/SIGHUP: the close path has run; the shell's exit status of that signal
+        print(f"sea-hil {args.command}: {err}", file=sys.stderr)
+        return 128 + err.signum
     except SeaHilError as err:
         print(f"sea-hil {args.command}: error: {err}", file=sys.stderr)
         return 2

@@ -27,3 +27,12 @@ class BusError(SeaHilError):
 
 class RecordingError(SeaHilError):
     """An MCAP recording cannot be written or read."""
+
+
+class Terminated(SeaHilError):
+    """The process was asked to stop by a signal (SIGTERM, SIGHUP); raised so that its close path runs. The CLI
+    exits with 128 + `signum`, the shell's convention for a process ended by that signal."""
+
+    def __init__(self, signum: int, message: str) -> None:
+        super().__init__(message)
+        self.signum = signum

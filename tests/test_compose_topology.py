@@ -11,7 +11,6 @@ network), so it records the Zenoh side only.
 from __future__ import annotations
 
 import json
-import os
 import shlex
 import subprocess
 import sys
@@ -20,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from test_udp_multicast import netns_available
+from test_udp_multicast import require_netns
 
 from sea_hil.config import load_config
 from sea_hil.report.summary import deterministic as summary_deterministic
@@ -54,11 +53,7 @@ def deterministic(summary: dict[str, Any]) -> dict[str, Any]:
 
 @pytest.mark.slow
 def test_compose_topology_through_a_router_equals_peer_to_peer(tmp_path: Path) -> None:
-    why = netns_available()
-    if why is not None:
-        if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run the compose topology test: {why}")
-        pytest.skip(why)
+    require_netns("compose topology")
     config = tmp_path / "compose.toml"
     config.write_text((REPO / "configs" / "session.toml").read_text() + SHORT, encoding="utf-8")
     out = tmp_path / "compose"

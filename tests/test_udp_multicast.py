@@ -29,12 +29,17 @@ def netns_available() -> str | None:
     return None if probe.returncode == 0 else f"no private network namespace: {probe.stderr.strip()}"
 
 
-def test_plant_over_udp_multicast_answers_another_process() -> None:
+def require_netns(what: str) -> None:
+    """Skip the calling test where a private network namespace is not available; fail it under CI=true."""
     why = netns_available()
     if why is not None:
         if os.environ.get("CI") == "true":
-            pytest.fail(f"CI must run the udp_multicast test: {why}")
+            pytest.fail(f"CI must run the {what} test: {why}")
         pytest.skip(why)
+
+
+def test_plant_over_udp_multicast_answers_another_process() -> None:
+    require_netns("udp_multicast")
     script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && "
               f"exec {shlex.quote(sys.executable)} {shlex.quote(str(PROBE))} {GROUP}")
     result = subprocess.run(["unshare", "--net", "sh", "-c", script], capture_output=True, text=True, timeout=90,

@@ -5,7 +5,7 @@ import json
 import os
 import struct
 from dataclasses import dataclass, field
-from typing import Any, BinaryIO, Iterator, NamedTuple
+from typing import Any, BinaryIO, Callable, Iterator, NamedTuple
 
 from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
@@ -78,9 +78,12 @@ class SessionData:
         return sum(len(v) for v in self.messages.values())
 
 
-def read_session(path: str | os.PathLike[str]) -> SessionData:
+def read_session(path: str | os.PathLike[str],
+                 on_message: Callable[[str, RecordedMessage], None] | None = None) -> SessionData:
     """Read all messages (per topic, log_time order), schemas, metadata and attachments. Works on truncated files
-    (no summary/footer after SIGKILL): every complete chunk is read, the incomplete tail is ignored."""
+    (no summary/footer after SIGKILL): every complete chunk is read, the incomplete tail is ignored. With
+    `on_message(topic, message)` the messages are handed to it in file order instead of kept (`messages` then
+    lists the topics with empty lists): a pass over a long recording in constant memory."""
     out = SessionData()
     schemas: dict[int, Schema] = {}
     channels: dict[int, Channel] = {}
@@ -108,7 +111,11 @@ def read_session(path: str | os.PathLike[str]) -> SessionData:
             if ch is None or not isinstance(payload, dict):
                 out.undecodable += 1
                 return
-            out.messages[ch.topic].append(RecordedMessage(rec.log_time, rec.publish_time, payload, rec.sequence))
+            msg = RecordedMessage(rec.log_time, rec.publish_time, payload, rec.sequence)
+            if on_message is not None:
+                on_message(ch.topic, msg)
+            else:
+                out.messages[ch.topic].append(msg)
         elif isinstance(rec, Metadata):
             out.metadata[rec.name] = dict(rec.metadata)
         elif isinstance(rec, Attachment):

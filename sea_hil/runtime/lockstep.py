@@ -27,6 +27,7 @@ from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.link import DelayQueue
 from sea_hil.protocol.payloads import AckPayload, SeqVerdict, encode
 from sea_hil.protocol.zsession import publisher
+from sea_hil.queues import timed_get
 from sea_hil.runtime.clock import Clock, control_payload
 
 
@@ -195,7 +196,7 @@ class LockstepEdgeSync:
                 last_progress = now
             else:
                 try:
-                    if self._dispatch(self.inbox.get(timeout=(self.resend_ns - (now - last_progress)) * 1e-9)):
+                    if self._dispatch(timed_get(self.inbox, (self.resend_ns - (now - last_progress)) * 1e-9)):
                         last_progress = time.monotonic_ns()
                 except queue.Empty:
                     pass
@@ -245,7 +246,7 @@ class FifoStates:
 
     def recv(self, timeout_s: float) -> bytes | None:
         try:
-            return self._q.get(timeout=timeout_s)
+            return timed_get(self._q, timeout_s)
         except queue.Empty:
             return None
 

@@ -32,7 +32,7 @@ from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
 from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
-from sea_hil.session.processes import end_process
+from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
 from sea_hil.session.secure import secure_profile
 
 
@@ -89,7 +89,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     if opts.controller == "external" and len(limbs) > 1:
         raise SeaHilError(f"--controller external serves one limb, not {len(limbs)}")
     t0 = time.monotonic()
-    with SessionBuilder(cfg, lockstep=opts.lockstep) as b:
+    # SIGTERM/SIGHUP raise `Terminated` here: the builder's close path ends the controller and closes the recording
+    with stop_on_signals(), SessionBuilder(cfg, lockstep=opts.lockstep) as b:
         # this process is what the controller connects to: a peer even when the nodes' config says client (a
         # client needs a router; `sea-hil run` has none), with the config's TLS and ACL
         session = b.zenoh(listen=listen, connect=(), mode="peer")
@@ -99,10 +100,12 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
             procs = []
-            for stem, limb_cfg in limb_nodes.controller_configs(controller_config(_without_live(child_cfg), listen[0]), limbs):
+            base = controller_config(_without_live(child_cfg), listen[0])
+            for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
-                procs.append(subprocess.Popen(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
+                # the child ends when this process dies (sea_hil/session/processes.py)
+                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
@@ -133,7 +136,8 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     closed, then buses go."""
     cfg = b.cfg
     spec = opts.can or cfg.can.interface
-    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller)   # every bus: plant, edge(s), tap
+    # every bus: plant, edge(s), recorder tap
+    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller)
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
