@@ -58,7 +58,7 @@ def driver_disturbance_table(cfg: SeaHilConfig, n_samples: int, period_ns: int) 
     the float times `DriverCore.step` -> `advance` samples them (so a stateful noise disturbance gives the same
     values)."""
     dc, substeps = cfg.disturbance, cfg.sim.substeps
-    if dc.kind == "none" or (dc.amplitude_nm[0] == 0.0 and dc.amplitude_nm[1] == 0.0):
+    if dc.is_zero():        # every joint, incl. per-joint tables ([disturbance.hip] / [disturbance.knee])
         return np.zeros((n_samples * substeps, 6))
     dist = make_disturbance(dc)
     h = (period_ns * 1e-9) / substeps
