@@ -31,6 +31,7 @@ from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
+from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
 from sea_hil.offline.predictor import Predictor
 from sea_hil.offline.session_fast import run_compiled, unsupported
@@ -120,6 +121,13 @@ class _Env:
 
 def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
                opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
+    """`run_session` without cyclic garbage collection (sea_hil/offline/gc_pause.py)."""
+    with gc_paused():
+        return run_session(cfg, mode, cycles, jit, opts, whole)
+
+
+def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
+                opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
     """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` selects the trigger
     placement and delay compensation (None: the config's, `EngineOptions.from_config`; the paper's scheme is the
     lockstep session bit for bit). `whole` (with `jit`): the session in one compiled call where it covers the options
