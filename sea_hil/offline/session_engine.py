@@ -7,9 +7,11 @@ the driver boots at rest (`plant.initial_theta_rad`) and integrates each period 
 outer sample through the uplink `LinkEmulator` (same seed stream `<seed>/up`, same payload size), the controller
 answers each released state at once (lead-in, trigger, SMC: the live `OuterController` and `LeadIn`), a setpoint
 enters the downlink emulator (`<seed>/down`) at that sample and is applied when released; the edge's voltage is the
-backstepping law on the DBC-quantised feedback, quantised and saturated as the VOLTAGE_CMD frame does. The per-sample
-part (inner law + RK4) runs in a numba kernel compiled from the live functions (`sea_hil.jit`); the outer part in
-Python. The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built as
+backstepping law on the DBC-quantised feedback, quantised and saturated as the VOLTAGE_CMD frame does. Two
+implementations of that loop, with the same results: the whole session in one numba call for the paper's scheme
+(`sea_hil.offline.session_fast`, `session_kernel`: the outer loop compiled from the live controller's plain-float
+functions), and the Python sample loop for every option (`sea_hil.offline.session_loop`; per-sample part in a numba
+kernel, `drive_kernel`, outer part in Python). The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built as
 the recorder's `zenoh_record` builds them and summarised by `session_summary`, so the summary is the session's.
 
 Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats`, and `max_abs_voltage_v` is taken up to
