@@ -87,7 +87,13 @@ def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any
                     setpoint_seq: int) -> dict[str, Any]:
     """The per-state tracking record (published as JSON on the `event` key; the offline engine builds the same);
     `reason` None: no event at this state."""
-    sent = reason is not None
+    return tracking_fields(t_ns, seq, theta_rad, ds.theta_rad, None if reason is None else reason.name, setpoint_seq)
+
+
+def tracking_fields(t_ns: int, seq: int, theta_rad: tuple[float, float], theta_d_rad: tuple[float, float],
+                    reason_name: str | None, setpoint_seq: int) -> dict[str, Any]:
+    """`tracking_record` of the desired angles theta_d_rad and the event's reason name (None: no event)."""
+    sent = reason_name is not None
     return {"t_s": t_ns * 1e-9, "state_seq": seq, "theta1_rad": theta_rad[0], "theta2_rad": theta_rad[1],
-            "theta1_d_rad": ds.theta_rad[0], "theta2_d_rad": ds.theta_rad[1], "event": sent,
-            "reason": reason.name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}
+            "theta1_d_rad": theta_d_rad[0], "theta2_d_rad": theta_d_rad[1], "event": sent,
+            "reason": reason_name if sent else "", "setpoint_seq": setpoint_seq if sent else 0}

@@ -31,12 +31,24 @@ class SetpointEnvelope(NamedTuple):
         return cls(tuple(cfg.deflection_max_m) if cfg.enabled else (INF, INF))   # type: ignore[arg-type]
 
     def check(self, deflection_m: tuple[float, float]) -> Verdict:
+        if admissible(deflection_m, self.deflection_max_m):
+            return ACCEPTED
         for j, v in enumerate(deflection_m):
             if not math.isfinite(v):
                 return Verdict(False, f"v_x{j + 1} = {v} is not finite")
             if abs(v) > self.deflection_max_m[j]:
                 return Verdict(False, f"|v_x{j + 1}| = {abs(v):.6g} m above {self.deflection_max_m[j]:.6g} m")
         return ACCEPTED
+
+
+def admissible(deflection_m: tuple[float, float], deflection_max_m: tuple[float, float]) -> bool:
+    """The envelope's verdict on plain numbers (`SetpointEnvelope.check` says why not; the offline session kernel
+    compiles this)."""
+    for j in range(2):
+        v = deflection_m[j]
+        if not math.isfinite(v) or abs(v) > deflection_max_m[j]:
+            return False
+    return True
 
 
 class EnvelopeGate:

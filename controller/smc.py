@@ -27,8 +27,15 @@ def switching(s: float, boundary_layer: float) -> float:
 
 def tracking_errors(js: JointState, ds: DesiredSample) -> tuple[float, float, float, float]:
     """(x~1_hip, x~1_knee, x~2_hip, x~2_knee) of Eq. 11."""
-    return (js.theta_rad[0] - ds.theta_rad[0], js.theta_rad[1] - ds.theta_rad[1],
-            js.omega_rad_s[0] - ds.omega_rad_s[0], js.omega_rad_s[1] - ds.omega_rad_s[1])
+    return tracking_error(js.theta_rad, js.omega_rad_s, ds.theta_rad, ds.omega_rad_s)
+
+
+def tracking_error(theta_rad: tuple[float, float], omega_rad_s: tuple[float, float],
+                   theta_d_rad: tuple[float, float], omega_d_rad_s: tuple[float, float]
+                   ) -> tuple[float, float, float, float]:
+    """`tracking_errors` on plain pairs (compiled in the offline session kernel)."""
+    return (theta_rad[0] - theta_d_rad[0], theta_rad[1] - theta_d_rad[1],
+            omega_rad_s[0] - omega_d_rad_s[0], omega_rad_s[1] - omega_d_rad_s[1])
 
 
 def sliding_surface(xt: tuple[float, float, float, float], c: float) -> tuple[float, float]:
@@ -38,16 +45,24 @@ def sliding_surface(xt: tuple[float, float, float, float], c: float) -> tuple[fl
 
 def smc_deflection(js: JointState, ds: DesiredSample, p: LimbParams, c: float, rho: float,
                    boundary_layer: float = 0.0) -> tuple[tuple[float, float], tuple[float, float]]:
-    """Eq. 13: v_x = g_x^-1 [-f_x + xdd_d - c x~2 - rho sign(s)]. Returns (v_x, s).
+    """Eq. 13: v_x = g_x^-1 [-f_x + xdd_d - c x~2 - rho sign(s)]. Returns (v_x, s)."""
+    return smc_law(js.theta_rad, js.omega_rad_s, ds.theta_rad, ds.omega_rad_s, ds.alpha_rad_s2, p, c, rho,
+                   boundary_layer)
+
+
+def smc_law(theta_rad: tuple[float, float], omega_rad_s: tuple[float, float], theta_d_rad: tuple[float, float],
+            omega_d_rad_s: tuple[float, float], alpha_d_rad_s2: tuple[float, float], p: LimbParams, c: float,
+            rho: float, boundary_layer: float) -> tuple[tuple[float, float], tuple[float, float]]:
+    """`smc_deflection` on plain pairs (the live controller runs it; the offline session kernel compiles it).
 
     With f_x = M^-1 N and g_x = M^-1 diag(-k a): v_x = diag(-k a)^-1 (M y - N), y = xdd_d - c x~2 - rho sign(s).
     """
-    q1, q2 = js.theta_rad
-    w1, w2 = js.omega_rad_s
-    xt = tracking_errors(js, ds)
+    q1, q2 = theta_rad
+    w1, w2 = omega_rad_s
+    xt = tracking_error(theta_rad, omega_rad_s, theta_d_rad, omega_d_rad_s)
     s = sliding_surface(xt, c)
-    y1 = ds.alpha_rad_s2[0] - c * xt[2] - rho * switching(s[0], boundary_layer)
-    y2 = ds.alpha_rad_s2[1] - c * xt[3] - rho * switching(s[1], boundary_layer)
+    y1 = alpha_d_rad_s2[0] - c * xt[2] - rho * switching(s[0], boundary_layer)
+    y2 = alpha_d_rad_s2[1] - c * xt[3] - rho * switching(s[1], boundary_layer)
     m11, m12, m22 = mass_matrix(q2, p)
     n1, n2 = n_terms(q1, q2, w1, w2, p)
     _, _, a1, a2, _, _ = sea_geometry(q1, q2, p)

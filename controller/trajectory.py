@@ -32,25 +32,32 @@ class DesiredSample:
     alpha_rad_s2: tuple[float, float]
 
 
+def gait_joint(spec: tuple, w: float, t: float) -> tuple[float, float, float]:
+    """(q, q', q'') of one joint's Fourier spec (`_HIP`, `_KNEE`) at t, base angular rate w (rad/s)."""
+    offset, harmonics = spec
+    q, qd, qdd = offset, 0.0, 0.0
+    for amp, k, phase in harmonics:
+        wk = k * w
+        s, c = math.sin(wk * t + phase), math.cos(wk * t + phase)
+        q += amp * s
+        qd += amp * wk * c
+        qdd -= amp * wk * wk * s
+    return q, qd, qdd
+
+
+def gait_sample(w: float, t_s: float) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
+    """The gait's (theta, omega, alpha) pairs at t_s; plain float code (the offline session kernel compiles it)."""
+    h, k = gait_joint(_HIP, w, t_s), gait_joint(_KNEE, w, t_s)
+    return (h[0], k[0]), (h[1], k[1]), (h[2], k[2])
+
+
 class GaitTrajectory:
     def __init__(self, period_s: float) -> None:
         self.period_s = period_s
-        self._w = 2.0 * math.pi / period_s
-
-    def _joint(self, spec: tuple, t: float) -> tuple[float, float, float]:
-        offset, harmonics = spec
-        q, qd, qdd = offset, 0.0, 0.0
-        for amp, k, phase in harmonics:
-            wk = k * self._w
-            s, c = math.sin(wk * t + phase), math.cos(wk * t + phase)
-            q += amp * s
-            qd += amp * wk * c
-            qdd -= amp * wk * wk * s
-        return q, qd, qdd
+        self.rate_rad_s = 2.0 * math.pi / period_s     # base angular rate of the gait's harmonics
 
     def sample(self, t_s: float) -> DesiredSample:
-        h, k = self._joint(_HIP, t_s), self._joint(_KNEE, t_s)
-        return DesiredSample((h[0], k[0]), (h[1], k[1]), (h[2], k[2]))
+        return DesiredSample(*gait_sample(self.rate_rad_s, t_s))
 
 
 class CsvTrajectory:
@@ -83,9 +90,11 @@ def quintic(q0: float, v0: float, a0: float, q1: float, v1: float, a1: float, du
     h = q1 - q0 - v0 * T - 0.5 * a0 * T * T
     dv = v1 - v0 - a0 * T
     da = a1 - a0
-    c3 = (10.0 * h - 4.0 * dv * T + 0.5 * da * T * T) / T ** 3
-    c4 = (-15.0 * h + 7.0 * dv * T - da * T * T) / T ** 4
-    c5 = (6.0 * h - 3.0 * dv * T + 0.5 * da * T * T) / T ** 5
+    # float exponents: C pow() as Python's float ** int does, also when numba compiles this (an int exponent there
+    # is repeated multiplication, which differs in the last bit)
+    c3 = (10.0 * h - 4.0 * dv * T + 0.5 * da * T * T) / T ** 3.0
+    c4 = (-15.0 * h + 7.0 * dv * T - da * T * T) / T ** 4.0
+    c5 = (6.0 * h - 3.0 * dv * T + 0.5 * da * T * T) / T ** 5.0
     return q0, v0, 0.5 * a0, c3, c4, c5
 
 
@@ -103,14 +112,24 @@ class LeadIn:
 
     def sample(self, t_s: float) -> DesiredSample:
         """The lead-in at time t_s in [-duration_s, 0] (clamped)."""
-        tau = min(max(t_s + self.duration_s, 0.0), self.duration_s)
-        out = []
-        for c in self._c:
-            q = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
-            qd = c[1] + tau * (2 * c[2] + tau * (3 * c[3] + tau * (4 * c[4] + tau * 5 * c[5])))
-            qdd = 2 * c[2] + tau * (6 * c[3] + tau * (12 * c[4] + tau * 20 * c[5]))
-            out.append((q, qd, qdd))
-        return DesiredSample((out[0][0], out[1][0]), (out[0][1], out[1][1]), (out[0][2], out[1][2]))
+        return DesiredSample(*lead_in_sample(self._c[0], self._c[1], self.duration_s, t_s))
+
+
+def lead_in_sample(c_hip: tuple, c_knee: tuple, duration_s: float, t_s: float
+                   ) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
+    """(theta, omega, alpha) pairs of the lead-in quintics (coefficients `quintic`) at t_s in [-duration_s, 0]
+    (clamped); plain float code (the offline session kernel compiles it)."""
+    tau = min(max(t_s + duration_s, 0.0), duration_s)
+    h, k = quintic_at(c_hip, tau), quintic_at(c_knee, tau)
+    return (h[0], k[0]), (h[1], k[1]), (h[2], k[2])
+
+
+def quintic_at(c: tuple, tau: float) -> tuple[float, float, float]:
+    """(q, q', q'') of the quintic with coefficients c at tau."""
+    q = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
+    qd = c[1] + tau * (2 * c[2] + tau * (3 * c[3] + tau * (4 * c[4] + tau * 5 * c[5])))
+    qdd = 2 * c[2] + tau * (6 * c[3] + tau * (12 * c[4] + tau * 20 * c[5]))
+    return q, qd, qdd
 
 
 def _read_csv(path: Path) -> tuple[np.ndarray, np.ndarray]:

@@ -31,6 +31,31 @@ def _distance(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     return math.sqrt(acc)
 
 
+NO_EVENT = -1
+"""`event_reason` when no event fires (else a `TriggerReason` value)."""
+_EPS_UNSET = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+_INITIAL, _ERROR_BOUND = int(TriggerReason.INITIAL), int(TriggerReason.ERROR_BOUND)
+_TRACKING_BOUND, _HEARTBEAT = int(TriggerReason.TRACKING_BOUND), int(TriggerReason.HEARTBEAT)
+
+
+def event_reason(started: bool, eps_i: tuple[float, ...], t_i_ns: int, t_ns: int, eps: tuple[float, ...],
+                 threshold: float, r: float, max_inter_event_ns: int) -> int:
+    """The trigger rule on plain numbers: the `TriggerReason` value of the event at (t_ns, eps) after the last event
+    (t_i_ns, eps_i), or NO_EVENT; `started` False: no event yet (INITIAL). Plain float code: `EventTrigger.update`
+    runs it, and the offline session kernel compiles it (sea_hil/offline/session_kernel.py)."""
+    if not started:
+        return _INITIAL
+    e_norm = _distance(eps_i, eps)
+    x_norm = math.sqrt(eps[0] * eps[0] + eps[1] * eps[1] + eps[2] * eps[2] + eps[3] * eps[3])  # inf, no raise
+    if e_norm >= threshold:
+        return _ERROR_BOUND
+    if x_norm > r:
+        return _TRACKING_BOUND
+    if t_ns - t_i_ns >= max_inter_event_ns:
+        return _HEARTBEAT
+    return NO_EVENT
+
+
 @dataclass
 class EventTrigger:
     """Stateful trigger; `update` is called once per outer sample and says whether to transmit."""
@@ -41,23 +66,14 @@ class EventTrigger:
     _t_i_ns: int = 0
 
     def update(self, t_ns: int, eps: tuple[float, ...]) -> TriggerReason | None:
-        if self._eps_i is None:
-            reason: TriggerReason | None = TriggerReason.INITIAL
-        else:
-            e_norm = _distance(self._eps_i, eps)
-            x_norm = math.sqrt(eps[0] * eps[0] + eps[1] * eps[1] + eps[2] * eps[2] + eps[3] * eps[3])  # inf, no raise
-            if e_norm >= self.threshold:
-                reason = TriggerReason.ERROR_BOUND
-            elif x_norm > self.r:
-                reason = TriggerReason.TRACKING_BOUND
-            elif t_ns - self._t_i_ns >= self.max_inter_event_ns:
-                reason = TriggerReason.HEARTBEAT
-            else:
-                reason = None
-        if reason is not None:
-            self._eps_i = eps
-            self._t_i_ns = t_ns
-        return reason
+        started = self._eps_i is not None
+        code = event_reason(started, self._eps_i if started else _EPS_UNSET, self._t_i_ns, t_ns, eps,
+                            self.threshold, self.r, self.max_inter_event_ns)
+        if code == NO_EVENT:
+            return None
+        self._eps_i = eps
+        self._t_i_ns = t_ns
+        return TriggerReason(code)
 
 
 @dataclass

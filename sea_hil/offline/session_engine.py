@@ -7,9 +7,11 @@ the driver boots at rest (`plant.initial_theta_rad`) and integrates each period 
 outer sample through the uplink `LinkEmulator` (same seed stream `<seed>/up`, same payload size), the controller
 answers each released state at once (lead-in, trigger, SMC: the live `OuterController` and `LeadIn`), a setpoint
 enters the downlink emulator (`<seed>/down`) at that sample and is applied when released; the edge's voltage is the
-backstepping law on the DBC-quantised feedback, quantised and saturated as the VOLTAGE_CMD frame does. The per-sample
-part (inner law + RK4) runs in a numba kernel compiled from the live functions (`sea_hil.jit`); the outer part in
-Python. The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built as
+backstepping law on the DBC-quantised feedback, quantised and saturated as the VOLTAGE_CMD frame does. Two
+implementations of that loop, with the same results: the whole session in one numba call for the paper's scheme
+(`sea_hil.offline.session_fast`, `session_kernel`: the outer loop compiled from the live controller's plain-float
+functions), and the Python sample loop for every option (`sea_hil.offline.session_loop`; per-sample part in a numba
+kernel, `drive_kernel`, outer part in Python). The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built as
 the recorder's `zenoh_record` builds them and summarised by `session_summary`, so the summary is the session's.
 
 Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats`, and `max_abs_voltage_v` is taken up to
@@ -18,13 +20,12 @@ the controller's last sample (a session also records the commands of its shut-do
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
 from sea_hil.config import SeaHilConfig
-from sea_hil.controller.inner import InnerLoop, inner_step
+from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.edge_events import make_trigger, tracking_record
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
@@ -34,73 +35,25 @@ from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
+from sea_hil.offline.gc_pause import gc_paused
+from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
+from sea_hil.offline.session_fast import run_compiled, unsupported
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
-from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised
+from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, SessionRecords
+from sea_hil.offline.wire_quantiser import dbc_resolutions
 from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, is_finite, saturate
-from sea_hil.plant_emulator.integrator import rk4_core
+from sea_hil.plant_emulator.dynamics import State, initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, encode
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.errors import SeaHilError
 
+__all__ = ["EngineOptions", "EngineResult", "SessionRecords", "driver_disturbance_table", "run_engine",
+           "tracking_record"]
+
 _log = logging.getLogger("sea_hil.offline")
-STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
-
-
-def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
-    """The per-sample kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
-
-    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
-                      limit_v, dist_tab, lsb, lim, faulted):
-        """Samples k0 .. k0 + n_steps - 1 from the state x of sample k0: DBC-quantised feedback m -> the edge's
-        inner step on its nominal model pn (`inner_step`: disturbance observer state obs, backstepping voltage) ->
-        quantised, saturated VOLTAGE_CMD -> one driver period of the plant p (`DriverCore.step`'s expressions; 0 V
-        once `faulted`: a drive soft limit `lim` = (theta min x2, theta max x2, |omega| max x2, |spring force| max x2)
-        was left, checked on every integrated sample as `DriverCore` does). Returns (x, m of the new x, saturated
-        steps, max |u1|, max |u2| commanded, first non-finite sample or -1, obs, faulted)."""
-        fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
-        sat_count = 0
-        u1_max = 0.0
-        u2_max = 0.0
-        m = feedback_measurement(x, p, lsb)
-        for k in range(k0, k0 + n_steps):
-            u1, u2, saturated, obs = inner_step(m, vx, s, hold_measured, obs, pn, gains, limit_v, dt_s)
-            if saturated:
-                sat_count += 1
-            u1 = saturate(quantised(u1, lsb[4]), p.voltage_limit)     # the drive's own limit
-            u2 = saturate(quantised(u2, lsb[4]), p.voltage_limit)
-            u1_max = max(u1_max, abs(u1))
-            u2_max = max(u2_max, abs(u2))
-            if faulted:             # the drive ignores commands in FAULT: 0 V
-                u1 = 0.0
-                u2 = 0.0
-            t = k * period_ns * 1e-9
-            h = (period_ns * 1e-9) / substeps
-            for i in range(substeps):
-                d = dist_tab[k * substeps + i]
-                x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
-            if not is_finite(x):
-                return x, m, sat_count, u1_max, u2_max, k, obs, faulted
-            if not faulted:
-                d1, d2, _, _ = deflections(x, p)
-                faulted = not (lim[0] <= x[0] <= lim[2] and lim[1] <= x[1] <= lim[3] and abs(x[2]) <= lim[4]
-                               and abs(x[3]) <= lim[5] and abs(p.k1 * d1) <= lim[6] and abs(p.k2 * d2) <= lim[7])
-            m = feedback_measurement(x, p, lsb)
-        return x, m, sat_count, u1_max, u2_max, -1, obs, faulted
-
-    return session_steps
-
-
-def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float, float]
-                         ) -> tuple[float, float, float, float, float, float, float, float]:
-    """(theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2) of the driver's feedback frames as the
-    edge decodes them (DBC resolution; in range). Plain float code: the kernel compiles it."""
-    dl1, dl2, _, _ = deflections(x, p)
-    return (quantised(x[0], lsb[0]), quantised(x[1], lsb[0]), quantised(x[2], lsb[1]), quantised(x[3], lsb[1]),
-            quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
 
 
 def driver_disturbance_table(cfg: SeaHilConfig, n_samples: int, period_ns: int) -> np.ndarray:
@@ -108,7 +61,7 @@ def driver_disturbance_table(cfg: SeaHilConfig, n_samples: int, period_ns: int) 
     the float times `DriverCore.step` -> `advance` samples them (so a stateful noise disturbance gives the same
     values)."""
     dc, substeps = cfg.disturbance, cfg.sim.substeps
-    if dc.kind == "none" or (dc.amplitude_nm[0] == 0.0 and dc.amplitude_nm[1] == 0.0):
+    if dc.is_zero():        # every joint, incl. per-joint tables ([disturbance.hip] / [disturbance.knee])
         return np.zeros((n_samples * substeps, 6))
     dist = make_disturbance(dc)
     h = (period_ns * 1e-9) / substeps
@@ -120,44 +73,6 @@ def driver_disturbance_table(cfg: SeaHilConfig, n_samples: int, period_ns: int) 
             ti = t + i * h
             out[k * substeps + i] = (*dist(ti), *dist(ti + hh), *dist(ti + h))
     return out
-
-
-@dataclass
-class EngineResult:
-    data: SessionData            # the messages a session's recorder would hold (see module docstring)
-    samples: int                 # driver periods simulated
-    saturated_steps: int
-    drive_faulted: bool = False          # a drive soft limit faulted the drive (0 V from then on)
-    setpoints_out_of_envelope: int = 0   # setpoints the edge's envelope rejected
-
-
-class SessionRecords:
-    """What a session's recorder would record of the Zenoh traffic: the dicts `sea_hil.recorder.node.zenoh_record`
-    makes of the encoded payloads, built directly (no encode / decode / JSON round trip: float64 fields and JSON
-    floats pass unchanged; `tests/test_session_engine.py` checks these dicts equal the recorder's own)."""
-
-    def __init__(self, keys: Keys) -> None:
-        self.keys = keys
-        self.state_bytes = STATE_BYTES      # EVENT_STATE's size with the trigger at the edge
-        self.messages: dict[str, list[RecordedMessage]] = {"/zenoh/state": [], "/zenoh/setpoint": [], "/tracking": []}
-
-    def state(self, seq: int, sample_ns: int, fb: tuple, t_ns: int) -> None:
-        (th, om, de, nut) = fb
-        self.messages["/zenoh/state"].append(RecordedMessage(t_ns, t_ns, {
-            "key": self.keys.state, "seq": seq, "sent_t_ns": sample_ns, "payload_bytes": self.state_bytes,
-            "sample_t_ns": sample_ns, "theta1_rad": th[0], "theta2_rad": th[1], "omega1_rad_s": om[0],
-            "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1], "nut_vel1_m_s": nut[0],
-            "nut_vel2_m_s": nut[1]}, seq))
-
-    def setpoint(self, sp: SetpointPayload, t_ns: int) -> None:
-        self.messages["/zenoh/setpoint"].append(RecordedMessage(t_ns, t_ns, {
-            "key": self.keys.setpoint, "seq": sp.seq, "sent_t_ns": sp.t_ns, "payload_bytes": SETPOINT_BYTES,
-            "state_seq": sp.state_seq, "delta1_ref_m": sp.deflection_m[0], "delta2_ref_m": sp.deflection_m[1],
-            "s1": sp.sliding[0], "s2": sp.sliding[1], "reason": sp.reason.name}, sp.seq))
-
-    def tracking(self, record: dict[str, Any], t_ns: int) -> None:
-        self.messages["/tracking"].append(RecordedMessage(t_ns, t_ns, {**record, "key": self.keys.event},
-                                                          record["state_seq"]))
 
 
 class _Env:
@@ -204,18 +119,30 @@ class _Env:
 
 
 def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
-               opts: EngineOptions | None = None) -> EngineResult:
+               opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
+    """`run_session` without cyclic garbage collection (sea_hil/offline/gc_pause.py)."""
+    with gc_paused():
+        return run_session(cfg, mode, cycles, jit, opts, whole)
+
+
+def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
+                opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
     """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` selects the trigger
     placement and delay compensation (None: the config's, `EngineOptions.from_config`; the paper's scheme is the
-    lockstep session bit for bit)."""
+    lockstep session bit for bit). `whole` (with `jit`): the session in one compiled call where it covers the options
+    (`sea_hil.offline.session_fast`), else (and with whole=False) the Python sample loop; both give the same result."""
     opts = EngineOptions.from_config(cfg) if opts is None else opts
     p = limb_params(cfg.plant)
     env = _Env(cfg, mode, cycles, p, jit)
     theta0 = tuple(cfg.plant.initial_theta_rad)
     x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
     lsb = dbc_resolutions(cfg.can.fd)
-    m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
     dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
+    if whole and jit and not unsupported(cfg, opts, env.traj):
+        res = run_compiled(env, cfg, x, p, lsb, dist_tab)
+        if res is not None:
+            return res
+    m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
     tab = dist_tab if env.jit else dist_tab.tolist()
     if opts.compensation == "predict":
         env.predictor = Predictor.for_inner(env.inner, env.period_ns, cfg.sim.substeps, jit=env.jit)
@@ -243,4 +170,3 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
     return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated, faulted,
                         env.envelope.rejected)
-
