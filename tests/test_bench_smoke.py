@@ -64,7 +64,7 @@ def test_scale_quick(tmp_path):
     (rec,) = _run_script("bench_scale", tmp_path, "--quick")
     assert [d["limbs"] for d in rec["details"]][:1] == [1]
     assert rec["per_run"][0] in (0, 1, 2)
-    assert "CAN bits per sample" in rec["notes"]
+    assert "% of a bus" in rec["notes"]
 
 
 @pytest.mark.slow
