@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from test_pre_refactor_equality import as_payload_v2
+from test_pre_refactor_equality import as_payload_v2, with_totals
 
 from sea_hil.config import load_config
 from sea_hil.offline.session_engine import SessionRecords, run_engine, tracking_record
@@ -41,6 +41,7 @@ def _cfg(path: Path | None, link: str | None, **extra: dict) -> object:
 @pytest.mark.parametrize("link", [None, "delay=5ms"])
 def test_engine_equals_recorded_lockstep_sessions(mode, link):
     fixture = as_payload_v2(json.loads((FIXTURES / f"run_{mode}_{'d5' if link else 'ideal'}.summary.json").read_text()))
+    fixture.update({block: with_totals(fixture[block]) for block in ("transmissions", "lead_in")})   # added since
     cfg = _cfg(PAPER_PATH if PAPER_PATH.exists() else None, link)
     got = session_summary(run_engine(cfg, mode).data, mode)
     assert {k: got[k] for k in COMPARED} == {k: fixture[k] for k in COMPARED}
