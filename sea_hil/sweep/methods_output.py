@@ -44,6 +44,13 @@ def curves_by_link(rows: Sequence[dict[str, Any]]) -> dict[tuple, dict[str, list
     return dict(sorted(out.items()))
 
 
+def compares_methods(rows: Sequence[dict[str, Any]]) -> bool:
+    """True when the rows hold more than one scheme (trigger placement, compensation, edge model, outer period): a
+    method comparison to draw. A plain eta/r/link sweep (one scheme; TT and ET are in pareto.png) has none."""
+    keys = ("trigger", "compensation", "edge_model", "period_ms")
+    return len({tuple(str(r.get(k)) for k in keys) for r in rows}) > 1
+
+
 def methods_figure(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     curves = curves_by_link(rows)
     n = max(len(curves), 1)

@@ -143,11 +143,12 @@ def sweep_markdown(rows: Sequence[dict[str, Any]], command: str, wall_s: float, 
 
 def write_outputs(out: Path, rows: Sequence[dict[str, Any]], command: str, wall_s: float, jobs: int, mode: str,
                   interrupted: bool) -> None:
-    """pareto.png, methods.png and sweep.md (sweep.csv is written by the runner as points finish,
-    `sea_hil.sweep.csvlog`)."""
-    from sea_hil.sweep.methods_output import domination_markdown, methods_figure
+    """pareto.png, methods.png (when the rows compare methods: `compares_methods`) and sweep.md (sweep.csv is written
+    by the runner as points finish, `sea_hil.sweep.csvlog`)."""
+    from sea_hil.sweep.methods_output import compares_methods, domination_markdown, methods_figure
     out.mkdir(parents=True, exist_ok=True)
     pareto_figure(out / "pareto.png", rows)
-    methods_figure(out / "methods.png", rows)
+    if compares_methods(rows):
+        methods_figure(out / "methods.png", rows)
     md = sweep_markdown(rows, command, wall_s, jobs, mode, interrupted)
     (out / "sweep.md").write_text(md + "\n" + "\n".join(domination_markdown(rows)), encoding="utf-8")
