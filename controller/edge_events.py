@@ -6,7 +6,8 @@ controller only the events); `answered` tells it about an applied setpoint. No I
 The same decisions, sample for sample, as the offline session engine's edge (`sea_hil.offline.session_loop`):
 checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"`), state seq = sample index + 1,
 the lookahead on the nominal model (`trigger.edge_model`, with `controller.compensation = "predict"`: the engine
-builds that model only then) with the setpoint the edge holds kept.
+builds that model only then) with the setpoint the edge holds kept; the trajectory anchor (an INITIAL state) is
+re-published until the controller answers it (controller/edge_trigger.py).
 """
 from __future__ import annotations
 
@@ -42,7 +43,10 @@ class EdgeEvents:
         """`every_sample` (check every 1 kHz sample) and `model` (model lookahead) default to the config's
         (`trigger.edge_check`, `trigger.edge_model` with `controller.compensation = "predict"`)."""
         traj = make_trajectory(cfg.trajectory)
-        self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)))
+        heartbeat_ns = int(round(cfg.trigger.max_inter_event_s * 1e9))
+        # re-anchor when the anchor is unanswered for a heartbeat period, or after the setpoint timeout (twice that)
+        self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)),
+                                            anchor_timeout_ns=heartbeat_ns, reanchor_after_ns=2 * heartbeat_ns)
         self.trajectory_id = trajectory_id(cfg.trajectory)
         self.inner, self.period_ns, self.outer_every = inner, period_ns, outer_every
         self.every_sample = cfg.trigger.edge_check == "sample" if every_sample is None else every_sample
@@ -80,7 +84,8 @@ class EdgeEvents:
         self.generator.answered(state_seq, now_ns, self.sampled_at.get(state_seq, now_ns))
 
     def stats(self) -> dict[str, int]:
-        return {"edge_events": self.events, "edge_retriggers": self.generator.retriggers}
+        return {"edge_events": self.events, "edge_retriggers": self.generator.retriggers,
+                "edge_reanchors": self.generator.reanchors}
 
 
 def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,

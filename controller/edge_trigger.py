@@ -8,6 +8,15 @@ and the same lead-in from the first measured state (t = 0 is that sample + `lead
 no answer yet the trigger is not evaluated (no burst of duplicate events while the answer is in flight), until
 `answer_timeout_ns` has passed — a lost state or a lost setpoint then lets the next event through (re-trigger). The
 timeout follows the measured round trip: max(`min_timeout_ns`, 3 x the smoothed round trip).
+
+The trajectory anchor: the edge's t (and the lead-in) count from an anchor, a state published with reason INITIAL;
+the controller counts its t from the same state (controller/remote_core.py), so both ends evaluate x_d(t) at the
+same t. Until the controller has answered the anchor nothing else is published; when no answer to it comes within
+`anchor_timeout_ns` (a controller that was not listening yet, a lost state or answer) the edge re-anchors on its
+current sample, and also when no answer at all came for `reanchor_after_ns` (a restarted controller: the edge has
+stopped commanding by then). Before this, the edge anchored on its own first sample whether or not the controller
+received it, so a controller that started listening later ran the trajectory shifted by that time (issue 16's
+real-time failure, docs/et-over-links.md).
 """
 from __future__ import annotations
 
@@ -32,6 +41,14 @@ class EdgeEventGenerator:
     rtt_ns: float | None = None
     retriggers: int = 0
     lookahead: bool = True            # evaluate the trigger on the state extrapolated one round trip ahead
+    anchor_timeout_ns: int = 250_000_000   # the anchor unanswered this long: re-anchor
+    reanchor_after_ns: int = 500_000_000   # no answer at all this long after the anchor was answered: re-anchor
+    anchor_seq: int | None = None     # the state seq of the anchor (None: not yet published)
+    anchored: bool = False            # the controller has answered the anchor
+    anchor_ns: int = 0                # sample time of the anchor
+    last_answer_ns: int = 0
+    reanchors: int = 0
+    _anchoring: bool = False          # the sample just checked is a new anchor (its seq comes with `sent`)
     _prev: tuple[int, tuple[float, float]] | None = None
     _alpha: tuple[float, float] = (0.0, 0.0)
 
@@ -53,15 +70,18 @@ class EdgeEventGenerator:
                   ) -> tuple[int, DesiredSample, TriggerReason | None]:
         """(controller time t, x_d(t), the reason to publish this sample or None). `ahead(horizon_ns)`, if given,
         is the edge's model of the state `horizon_ns` ahead (used for the lookahead instead of extrapolation)."""
-        if self.t0_ns is None:
-            self.t0_ns = sample_ns + self.lead_in_ns
-            if self.lead_in_ns:
-                self.lead_in = LeadIn(js.theta_rad, js.omega_rad_s, self.trajectory.sample(0.0),
-                                      self.lead_in_ns * 1e-9)
-        t_ns = sample_ns - self.t0_ns
+        anchor = self._needs_anchor(sample_ns)
+        if anchor:
+            self._anchor(sample_ns, js)
+        t_ns = sample_ns - self.t0_ns  # type: ignore[operator]
         ds = self.desired(t_ns)
         js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds, ahead)
         eps = epsilon(tracking_errors(js_eval, ds_eval), ds_eval.theta_rad, ds_eval.omega_rad_s)
+        if anchor:
+            self.trigger.update(t_eval, eps)
+            return t_ns, ds, TriggerReason.INITIAL
+        if not self.anchored:
+            return t_ns, ds, None               # the anchor's answer is awaited: nothing else is published
         if self.awaiting_seq is not None:
             if sample_ns - self.awaiting_since_ns >= self.answer_timeout_ns:
                 self.retriggers += 1            # the state or its answer was lost: let the next event through
@@ -70,6 +90,24 @@ class EdgeEventGenerator:
                 return t_ns, ds, None           # only the error moving again may fire while an answer is in flight
         reason = self.trigger.update(t_eval, eps)
         return t_ns, ds, reason
+
+    def _needs_anchor(self, sample_ns: int) -> bool:
+        if self.t0_ns is None:
+            return True
+        if self.anchored:
+            silent = sample_ns - self.last_answer_ns >= self.reanchor_after_ns
+        else:
+            silent = sample_ns - self.anchor_ns >= self.anchor_timeout_ns
+        self.reanchors += silent
+        return silent
+
+    def _anchor(self, sample_ns: int, js: JointState) -> None:
+        """A new anchor at this sample: t = -lead_in here, the lead-in from this state, the trigger starts over."""
+        self.t0_ns, self.anchor_ns = sample_ns + self.lead_in_ns, sample_ns
+        self.lead_in = LeadIn(js.theta_rad, js.omega_rad_s, self.trajectory.sample(0.0),
+                              self.lead_in_ns * 1e-9) if self.lead_in_ns else None
+        self.anchored, self._anchoring, self.awaiting_seq = False, True, None
+        self.trigger.reset()
 
     def trigger_moved(self, eps: tuple[float, ...]) -> bool:
         """Would the event error rule (Eq. 19) fire for eps? (the r rule and the heartbeat would fire on every sample
@@ -100,10 +138,15 @@ class EdgeEventGenerator:
 
     def sent(self, seq: int, sample_ns: int) -> None:
         self.awaiting_seq, self.awaiting_since_ns = seq, sample_ns
+        if self._anchoring:
+            self.anchor_seq, self._anchoring = seq, False
 
     def answered(self, state_seq: int, now_ns: int, sampled_ns: int) -> None:
         """A setpoint answering state `state_seq` (sampled at `sampled_ns`) was applied at `now_ns`."""
         rtt = float(now_ns - sampled_ns)
         self.rtt_ns = rtt if self.rtt_ns is None else 0.875 * self.rtt_ns + 0.125 * rtt
+        self.last_answer_ns = now_ns
+        if not self.anchored and state_seq == self.anchor_seq:
+            self.anchored = True
         if self.awaiting_seq is not None and state_seq >= self.awaiting_seq:
             self.awaiting_seq = None

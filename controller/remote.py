@@ -157,6 +157,6 @@ class RemoteController(Node):
                 **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
-                "trajectory_mismatches": self.trajectory_mismatches,
+                "trajectory_mismatches": self.trajectory_mismatches, "unanchored_states": self.core.unanchored,
                 "prediction_clamped": self.predictor.clamped if self.predictor else 0,
                 **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}, **self.edge_epoch.as_dict()}

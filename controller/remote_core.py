@@ -3,7 +3,8 @@ its own, no I/O: the node (controller/remote.py) decodes, checks sequence and tr
 its arrival time (`arrival(p)`, on the edge's sample clock, see `sea_hil.runtime`) and the wall clock to stamp
 messages with, and publishes what `on_state` returns.
 
-Per state: the controller's time t (t = 0: start of the measured cycles; the `LeadIn` before it), the outer SMC and
+Per state: the controller's time t (t = 0: start of the measured cycles; the `LeadIn` before it; with the trigger at
+the edge counted from the edge's anchor, its latest INITIAL state, controller/edge_trigger.py), the outer SMC and
 trigger (`OuterController`; with the trigger at the edge every event state is answered), with `compensation =
 "predict"` for the state predicted at the instant the setpoint will act (controller/predictor.py), and with
 `inner = "remote"` the backstepping voltage every state.
@@ -23,7 +24,7 @@ from sea_hil.controller.outer import OuterController, Setpoint
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import LeadIn, make_trajectory, trajectory_id
-from sea_hil.protocol.payloads import SetpointPayload, StatePayload, VoltagePayload, encode
+from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
 
 
 @dataclass(frozen=True)
@@ -56,6 +57,7 @@ class ControllerCore:
         self.last_t_ns = 0
         self.setpoint_seq = 0
         self.states = 0
+        self.unanchored = 0                 # edge trigger: states before any anchor (its INITIAL state was lost)
         self.done = False
 
     def restart_at(self, p: StatePayload) -> None:
@@ -66,11 +68,15 @@ class ControllerCore:
                  ) -> Answer | None:
         """The answer to one new state; None once past the cycles (`done`). Raises ArithmeticError / ValueError /
         MalformedPayload for a state it cannot use (the node counts it)."""
-        if self.t0_ns is None:
-            self.t0_ns = p.sample_t_ns + self.lead_in_ns
-            if self.lead_in_ns:
-                self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9)
-        t_ns = p.sample_t_ns - self.t0_ns
+        if self.edge_trigger:       # the edge's anchor (an INITIAL state) sets t; nothing to answer before one
+            if p.reason is TriggerReason.INITIAL:   # type: ignore[attr-defined]
+                self._anchor(p)
+            elif self.t0_ns is None:
+                self.unanchored += 1
+                return Answer([], None, None)
+        elif self.t0_ns is None:    # the paper's placement: t counts from the first state handled
+            self._anchor(p)
+        t_ns = p.sample_t_ns - self.t0_ns  # type: ignore[operator]
         self.last_t_ns = t_ns
         if t_ns > self.duration_ns:
             self.done = True
@@ -99,6 +105,12 @@ class ControllerCore:
             record = json.dumps(tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
                                                 self.setpoint_seq if messages else 0)).encode()
         return Answer(messages, sp, record)
+
+    def _anchor(self, p: StatePayload) -> None:
+        """t = -lead_in at state p, the lead-in from its measured state."""
+        self.t0_ns = p.sample_t_ns + self.lead_in_ns
+        self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9) \
+            if self.lead_in_ns else None
 
     def desired(self, t_ns: int) -> Any:
         return self.lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self.lead_in else self.traj.sample(t_ns * 1e-9)

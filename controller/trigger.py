@@ -75,6 +75,10 @@ class EventTrigger:
         self._t_i_ns = t_ns
         return TriggerReason(code)
 
+    def reset(self) -> None:
+        """Forget the last event: the next `update` is INITIAL (a new trajectory anchor at the edge)."""
+        self._eps_i, self._t_i_ns = None, 0
+
 
 @dataclass
 class TimeTrigger:
@@ -82,3 +86,6 @@ class TimeTrigger:
 
     def update(self, t_ns: int, eps: tuple[float, ...]) -> TriggerReason:
         return TriggerReason.TIME
+
+    def reset(self) -> None:
+        """Nothing to forget."""

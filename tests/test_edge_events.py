@@ -42,14 +42,16 @@ def test_edge_core_checks_outer_samples_publishes_events_and_records_every_outer
     assert second.reason is None                 # the answer to state 1 is in flight: no duplicate event
     core.answered(1, 6 * MS)
     assert core.generator.awaiting_seq is None and core.generator.rtt_ns == 6 * MS
-    assert core.stats() == {"edge_events": 1, "edge_retriggers": 0}
+    assert core.stats() == {"edge_events": 1, "edge_retriggers": 0, "edge_reanchors": 0}
 
 
 def test_edge_core_retriggers_when_the_answer_is_lost():
     core = _core("tt")            # every outer sample would be an event, but not while an answer is in flight
     fb = _rest(tuple(load_config().plant.initial_theta_rad))
-    reasons = [core.on_sample(k * 10 * MS, fb).reason for k in range(5)]  # type: ignore[union-attr]
-    assert reasons[0] is TriggerReason.TIME and reasons[1:] == [None, TriggerReason.TIME, None, TriggerReason.TIME]
+    assert core.on_sample(0, fb).reason is TriggerReason.INITIAL    # type: ignore[union-attr]  (the anchor)
+    core.answered(1, 0)
+    reasons = [core.on_sample(k * 10 * MS, fb).reason for k in range(1, 6)]  # type: ignore[union-attr]
+    assert reasons == [TriggerReason.TIME, None, TriggerReason.TIME, None, TriggerReason.TIME]
     assert core.stats()["edge_retriggers"] == 2          # lost after the 20 ms minimum timeout: re-triggered
 
 
@@ -66,10 +68,11 @@ def test_trajectory_identity(tmp_path):
     assert a != b                                        # same parameters, other CSV bytes
 
 
-def _event_state(seq: int, event_seq: int, traj: int, sample_ns: int) -> bytes:
+def _event_state(seq: int, event_seq: int, traj: int, sample_ns: int,
+                 reason: TriggerReason = TriggerReason.ERROR_BOUND) -> bytes:
     th = tuple(load_config().plant.initial_theta_rad)
     return encode(EventStatePayload(seq, sample_ns, sample_ns, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), event_seq,
-                                    TriggerReason.ERROR_BOUND, traj))
+                                    reason, traj))
 
 
 def test_remote_controller_answers_every_event_state_and_refuses_another_trajectory():
@@ -81,10 +84,14 @@ def test_remote_controller_answers_every_event_state_and_refuses_another_traject
         assert ctrl.trajectory_mismatches == 1 and ctrl.setpoint_seq == 0
         ctrl.handle(encode(StatePayload(2, 0, 10 * MS, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))), now_ns=0)
         assert ctrl.unexpected_payloads == 1            # a paper-path STATE to an edge-trigger controller
+        ctrl.handle(_event_state(11, 1, mine, 10 * MS), now_ns=0)      # before any anchor: nothing to answer
+        assert ctrl.setpoint_seq == 0 and ctrl.stats_dict()["unanchored_states"] == 1
         for i, k in enumerate((20, 50, 51, 90)):        # gaps in the header seq are normal
-            ctrl.handle(_event_state(k + 1, i + 1, mine, k * MS), now_ns=0)
+            reason = TriggerReason.INITIAL if i == 0 else TriggerReason.ERROR_BOUND    # the edge's anchor first
+            ctrl.handle(_event_state(k + 1, i + 2, mine, k * MS, reason), now_ns=0)
         assert ctrl.setpoint_seq == 4 and ctrl.seq.lost == 0
-        ctrl.handle(_event_state(131, 6, mine, 130 * MS), now_ns=0)    # event 5 lost on the link
+        assert ctrl.t0_ns == 20 * MS + ctrl.lead_in_ns          # t counts from the anchor
+        ctrl.handle(_event_state(131, 7, mine, 130 * MS), now_ns=0)    # event 6 lost on the link
         assert ctrl.setpoint_seq == 5 and ctrl.seq.lost == 1
         assert ctrl.predictor is not None and ctrl.predictor.predictions > 0
         assert ctrl.predictor.clamped > 0     # these stamps are not on the test's monotonic clock: clamped, counted
@@ -106,3 +113,29 @@ def test_controller_core_is_pure_state_in_messages_out():
     assert ans.setpoint is not None and ans.setpoint.reason is TriggerReason.TIME and core.states == 1
     late = StatePayload(2, 0, 11 * 10**9, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))   # past the 10 s cycle
     assert core.on_state(late, lambda p: 0, lambda: 8) is None and core.done
+
+
+def test_a_controller_that_starts_listening_late_runs_the_edges_trajectory_time():
+    """Issue 16's real-time failure, on the two pure cores: in `sea-hil run` the controller process subscribes some
+    100 ms to seconds after the edge's first sample. The edge used to count t from that first sample and the
+    controller from the first state it received, so the controller ran the trajectory shifted by its start-up time
+    (0.13-0.28 rad max error in real time). Now both count from the anchor the controller answered."""
+    from sea_hil.controller.remote_core import ControllerCore
+    cfg = load_config(overrides={"trigger": {"placement": "edge"}})
+    inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad), 1e-3)
+    edge, ctrl = EdgeEvents(cfg, "et", inner, MS, 10, jit=False), ControllerCore(cfg, "et")
+    tid, fb = trajectory_id(cfg.trajectory), _rest(tuple(cfg.plant.initial_theta_rad))
+    base_ns = 123_450 * MS                      # the edge's sample clock has its own origin
+    answered = 0
+    for k in range(0, 1200, 10):
+        now = base_ns + k * MS
+        d = edge.on_sample(now, fb)
+        if d is None or d.reason is None or k < 300:     # the controller listens from 300 ms on
+            continue
+        p = EventStatePayload(d.seq, now, now, *fb, d.event_seq, d.reason, tid)
+        ans = ctrl.on_state(p, lambda p: p.sample_t_ns, lambda: 0)
+        if ans is not None and ans.setpoint is not None:
+            edge.answered(d.seq, now)
+            answered += 1
+            assert p.sample_t_ns - ctrl.t0_ns == edge.generator.time_of(now)   # the same t at both ends
+    assert answered > 0 and edge.generator.anchored and edge.stats()["edge_reanchors"] >= 1

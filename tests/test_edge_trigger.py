@@ -24,34 +24,79 @@ def _on_track(gen: EdgeEventGenerator, t_ns: int, offset: float = 0.0) -> Trigge
     return gen.on_sample(t_ns, JointState((ds.theta_rad[0] + offset, ds.theta_rad[1]), ds.omega_rad_s))[2]
 
 
+def _anchored(gen: EdgeEventGenerator) -> None:
+    """The first sample is the anchor (INITIAL); the controller answers it at once."""
+    assert _on_track(gen, 0) is TriggerReason.INITIAL
+    gen.sent(1, 0)
+    gen.answered(1, 0, 0)
+    assert gen.anchored and gen.anchor_seq == 1
+
+
 def test_first_sample_is_an_event_and_on_track_needs_only_heartbeats():
     gen = _gen()
-    reasons = [_on_track(gen, k * 10 * MS) for k in range(60)]       # 0.6 s exactly on the trajectory
-    assert reasons[0] is TriggerReason.INITIAL
-    fired = [(k, r) for k, r in enumerate(reasons) if r is not None][1:]
-    assert all(r in (TriggerReason.ERROR_BOUND, TriggerReason.HEARTBEAT) for _, r in fired)
+    _anchored(gen)
+    fired = []
+    for k in range(1, 60):                      # 0.6 s exactly on the trajectory, each event answered at once
+        reason = _on_track(gen, k * 10 * MS)
+        if reason is not None:
+            fired.append(reason)
+            gen.sent(10 * k + 1, k * 10 * MS)
+            gen.answered(10 * k + 1, k * 10 * MS, k * 10 * MS)
+    assert fired and all(r in (TriggerReason.ERROR_BOUND, TriggerReason.HEARTBEAT) for r in fired)
 
 
 def test_no_duplicate_events_while_an_answer_is_in_flight_then_retrigger_after_timeout():
     gen = _gen(threshold=1e9, r=0.01)           # only the r rule can fire: it would fire at every sample
-    assert _on_track(gen, 0) is TriggerReason.INITIAL
-    gen.sent(1, 0)
-    assert _on_track(gen, 1 * MS, offset=0.1) is None            # X~ > r, but the answer is in flight
-    assert _on_track(gen, 19 * MS, offset=0.1) is None
-    assert _on_track(gen, 20 * MS, offset=0.1) is TriggerReason.TRACKING_BOUND   # timeout (20 ms): re-trigger
+    _anchored(gen)
+    assert _on_track(gen, 10 * MS, offset=0.1) is TriggerReason.TRACKING_BOUND
+    gen.sent(11, 10 * MS)
+    assert _on_track(gen, 11 * MS, offset=0.1) is None            # X~ > r, but the answer is in flight
+    assert _on_track(gen, 29 * MS, offset=0.1) is None
+    assert _on_track(gen, 30 * MS, offset=0.1) is TriggerReason.TRACKING_BOUND   # timeout (20 ms): re-trigger
     assert gen.retriggers == 1
-    gen.sent(21, 20 * MS)
-    gen.answered(21, 30 * MS, 20 * MS)           # answered: RTT 10 ms measured, next event may fire at once
-    assert gen.awaiting_seq is None and gen.rtt_ns == 10 * MS
-    assert _on_track(gen, 31 * MS, offset=0.1) is TriggerReason.TRACKING_BOUND
+    gen.sent(31, 30 * MS)
+    gen.answered(31, 40 * MS, 30 * MS)           # answered (RTT 10 ms), the next event may fire at once
+    assert gen.awaiting_seq is None and gen.rtt_ns == 0.125 * 10 * MS
+    assert _on_track(gen, 41 * MS, offset=0.1) is TriggerReason.TRACKING_BOUND
 
 
 def test_error_moving_fires_even_while_an_answer_is_in_flight():
     gen = _gen(threshold=0.05)
-    _on_track(gen, 0)
-    gen.sent(1, 0)
-    assert _on_track(gen, 1 * MS, offset=0.01) is None          # moved less than the threshold
-    assert _on_track(gen, 2 * MS, offset=0.2) is TriggerReason.ERROR_BOUND
+    _anchored(gen)
+    assert _on_track(gen, 1 * MS, offset=0.2) is TriggerReason.ERROR_BOUND
+    gen.sent(2, 1 * MS)
+    assert _on_track(gen, 2 * MS, offset=0.21) is None          # moved less than the threshold
+    assert _on_track(gen, 3 * MS, offset=0.4) is TriggerReason.ERROR_BOUND
+
+
+def test_the_anchor_is_republished_until_the_controller_answers_it():
+    """Issue 16's real-time failure: the edge counted t from its first sample whether or not the controller (still
+    starting) received it. Now nothing but the anchor goes out until it is answered, and an unanswered anchor is
+    replaced after one heartbeat period; only the answer to the current anchor confirms it."""
+    traj = make_trajectory(load_config().trajectory)
+    gen = EdgeEventGenerator(EventTrigger(0.05, 10.0, 250 * MS), traj, lead_in_ns=500 * MS, lookahead=False)
+    t, _, reason = gen.on_sample(7 * MS, JointState((0.05, 0.3), (0.0, 0.0)))     # any clock origin
+    assert (t, reason) == (-500 * MS, TriggerReason.INITIAL)
+    gen.sent(8, 7 * MS)
+    for k in range(1, 25):                      # nobody answers: no event, however far the error moves
+        assert gen.on_sample(7 * MS + k * 10 * MS, JointState((0.05 + 0.01 * k, 0.3), (0.0, 0.0)))[2] is None
+    t, _, reason = gen.on_sample(257 * MS, JointState((0.4, 0.3), (0.0, 0.0)))
+    assert (t, reason) == (-500 * MS, TriggerReason.INITIAL) and gen.reanchors == 1   # t starts over here
+    assert gen.lead_in is not None and gen.lead_in.sample(-0.5).theta_rad[0] == 0.4   # the lead-in from here
+    gen.sent(258, 257 * MS)
+    gen.answered(8, 260 * MS, 7 * MS)           # a late answer to the old anchor: applied, but no confirmation
+    assert not gen.anchored and gen.on_sample(267 * MS, JointState((0.4, 0.3), (0.0, 0.0)))[2] is None
+    gen.answered(258, 268 * MS, 257 * MS)
+    assert gen.anchored and gen.on_sample(277 * MS, JointState((0.9, 0.3), (0.0, 0.0)))[2] is not None
+
+
+def test_no_answer_for_the_setpoint_timeout_reanchors():
+    gen = _gen()
+    _anchored(gen)
+    gen.reanchor_after_ns = 500 * MS
+    assert _on_track(gen, 490 * MS) is not None        # heartbeat (unanswered from here on)
+    gen.sent(491, 490 * MS)
+    assert _on_track(gen, 500 * MS) is TriggerReason.INITIAL and gen.reanchors == 1 and not gen.anchored
 
 
 def _summary(link: str, opts: EngineOptions) -> dict:

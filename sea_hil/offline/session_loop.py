@@ -18,7 +18,7 @@ from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.outer import Setpoint
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.protocol.link import DelayQueue
-from sea_hil.protocol.payloads import SetpointPayload
+from sea_hil.protocol.payloads import SetpointPayload, TriggerReason
 
 
 @dataclass(frozen=True)
@@ -95,9 +95,12 @@ class SessionLoop:
                 continue
             self.newest = seq
             e.rec.state(seq, sample_ns, fb, now)
-            if self.t0_ns is None:
+            # t counts from the first state (the paper's placement) or the edge's anchor, its latest INITIAL state
+            if edge_reason is TriggerReason.INITIAL or (self.t0_ns is None and self.edge is None):
                 self.t0_ns = sample_ns + e.lead_in_ns
                 self.lead = e.lead_in(fb) if e.lead_in_ns else None
+            elif self.t0_ns is None:       # no anchor yet (its state was lost): as the live controller, no answer
+                continue
             t_ns = sample_ns - self.t0_ns
             if t_ns > e.duration_ns:
                 return False
