@@ -39,10 +39,14 @@ def make_trigger(cfg: SeaHilConfig, mode: str) -> EventTrigger | TimeTrigger:
 
 class EdgeEvents:
     def __init__(self, cfg: SeaHilConfig, mode: str, inner: Any, period_ns: int, outer_every: int, *,
-                 every_sample: bool | None = None, model: bool | None = None, jit: bool = True) -> None:
+                 every_sample: bool | None = None, model: bool | None = None, jit: bool = True,
+                 duration_ns: int | None = None) -> None:
         """`every_sample` (check every 1 kHz sample) and `model` (model lookahead) default to the config's
-        (`trigger.edge_check`, `trigger.edge_model` with `controller.compensation = "predict"`)."""
+        (`trigger.edge_check`, `trigger.edge_model` with `controller.compensation = "predict"`); `duration_ns`, the
+        measured cycles (default `sim.cycles` trajectory periods): no tracking record after them (the controller
+        has stopped answering; in real time the session's shut-down would otherwise be counted as tracking)."""
         traj = make_trajectory(cfg.trajectory)
+        self.duration_ns = int(round(traj.period_s * cfg.sim.cycles * 1e9)) if duration_ns is None else duration_ns
         heartbeat_ns = int(round(cfg.trigger.max_inter_event_s * 1e9))
         # re-anchor when the anchor is unanswered for a heartbeat period, or after the setpoint timeout (twice that)
         self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)),
@@ -77,7 +81,7 @@ class EdgeEvents:
             self.events += 1
             self.sampled_at[seq] = sample_ns
             self.sampled_at.pop(seq - 100_000, None)
-        record = tracking_record(t_ns, seq, fb[0], ds, reason, 0) if outer else None
+        record = tracking_record(t_ns, seq, fb[0], ds, reason, 0) if outer and t_ns <= self.duration_ns else None
         return EdgeDecision(seq, reason, self.events, record)
 
     def answered(self, state_seq: int, now_ns: int) -> None:

@@ -56,7 +56,8 @@ class SessionLoop:
         if opts.placement == "edge":
             self.edge = EdgeEvents(env.cfg, env.mode, env.inner, env.period_ns, env.outer_every,
                                    every_sample=opts.edge_check == "sample",
-                                   model=opts.edge_model and opts.compensation == "predict", jit=env.jit)
+                                   model=opts.edge_model and opts.compensation == "predict", jit=env.jit,
+                                   duration_ns=env.duration_ns)
 
     # ---- edge ---------------------------------------------------------------------------------------------------
     def edge_sample(self, k: int, fb: tuple) -> None:

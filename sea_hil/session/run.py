@@ -76,6 +76,8 @@ def controller_config(cfg: SeaHilConfig, endpoint: str) -> SeaHilConfig:
 
 def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = print) -> dict[str, Any]:
     opts.out.mkdir(parents=True, exist_ok=True)
+    # the measured cycles: the edge's trigger records no tracking after them (controller/edge_events.py)
+    cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"cycles": opts.cycles})})
     child_cfg = cfg
     if opts.secure:
         profile = secure_profile(cfg, opts.out, opts.certs, opts.listen)
