@@ -8,6 +8,7 @@ VOLTAGE_CMD_FD.
 """
 from __future__ import annotations
 
+import dataclasses
 import numbers
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
@@ -208,6 +209,44 @@ def profile_messages(fd: bool) -> dict[type, str]:
             out[cls] = name
     return out
 FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
+
+
+class SignalBinding:
+    """A frame type's fields bound to positions in a signal tuple (a frame plan's `names` order), so the hot paths
+    go object -> values -> object without the `to_signals` / `from_signals` dicts; the same mapping (`FIELDS`)."""
+
+    def __init__(self, cls: type, names: tuple[str, ...]) -> None:
+        index = {n: i for i, n in enumerate(names)}
+        flat = [sig for _, g in cls.FIELDS for sig in (g if isinstance(g, tuple) else (g,))]   # FIELDS order
+        if sorted(flat) != sorted(names):
+            raise ValueError(f"{cls.__name__}: FIELDS do not cover the signals {names}")
+        self.fields = tuple((f, isinstance(g, tuple)) for f, g in cls.FIELDS)
+        self.perm = tuple(flat.index(n) for n in names)                                  # signal i = flat[perm[i]]
+        self.identity = self.perm == tuple(range(len(names)))
+        specs = dict((f, tuple(index[x] for x in g) if isinstance(g, tuple) else index[g]) for f, g in cls.FIELDS)
+        self.args = tuple(specs[f.name] for f in dataclasses.fields(cls)[1:])            # dataclass order
+        self.cls = cls
+
+    def values(self, obj: Any) -> list[Any]:
+        """The signal values of `obj` in the plan's order (a pair field must be a pair: ValueError otherwise)."""
+        flat: list[Any] = []
+        for f, pair in self.fields:
+            v = getattr(obj, f)
+            if pair:
+                a, b = v
+                flat += (a, b)
+            else:
+                flat.append(v)
+        return flat if self.identity else [flat[i] for i in self.perm]
+
+    def build(self, node_id: int, vals: Any) -> Any:
+        return self.cls(node_id, *[(vals[a[0]], vals[a[1]]) if type(a) is tuple else vals[a] for a in self.args])
+
+
+def binding_of(cls: type, names: tuple[str, ...]) -> SignalBinding | None:
+    """The `SignalBinding` of a frame type with the plain `FIELDS` mapping; None when it maps its own way
+    (`Heartbeat`: the flag bits) and goes through `to_signals` / `from_signals`."""
+    return None if "to_signals" in cls.__dict__ or "from_signals" in cls.__dict__ else SignalBinding(cls, names)
 
 
 def can_id_of(node_id: int, cmd_id: int) -> int:
