@@ -12,7 +12,7 @@ import dataclasses
 import numbers
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
-from typing import Any, ClassVar, Union
+from typing import Any, Callable, ClassVar, Union
 
 from sea_hil.errors import MalformedFrame
 
@@ -212,35 +212,31 @@ FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackJoint1, FeedbackJoint
 
 
 class SignalBinding:
-    """A frame type's fields bound to positions in a signal tuple (a frame plan's `names` order), so the hot paths
-    go object -> values -> object without the `to_signals` / `from_signals` dicts; the same mapping (`FIELDS`)."""
+    """A frame type's fields bound to positions in a signal tuple (a frame plan's `names` order), written out once as
+    straight-line code, so the hot paths go object -> values -> object without the `to_signals` / `from_signals`
+    dicts; the same mapping (`FIELDS`). `values(obj)` raises ValueError/TypeError unless each pair field is a pair."""
 
     def __init__(self, cls: type, names: tuple[str, ...]) -> None:
         index = {n: i for i, n in enumerate(names)}
         flat = [sig for _, g in cls.FIELDS for sig in (g if isinstance(g, tuple) else (g,))]   # FIELDS order
         if sorted(flat) != sorted(names):
             raise ValueError(f"{cls.__name__}: FIELDS do not cover the signals {names}")
-        self.fields = tuple((f, isinstance(g, tuple)) for f, g in cls.FIELDS)
-        self.perm = tuple(flat.index(n) for n in names)                                  # signal i = flat[perm[i]]
-        self.identity = self.perm == tuple(range(len(names)))
-        specs = dict((f, tuple(index[x] for x in g) if isinstance(g, tuple) else index[g]) for f, g in cls.FIELDS)
-        self.args = tuple(specs[f.name] for f in dataclasses.fields(cls)[1:])            # dataclass order
-        self.cls = cls
-
-    def values(self, obj: Any) -> list[Any]:
-        """The signal values of `obj` in the plan's order (a pair field must be a pair: ValueError otherwise)."""
-        flat: list[Any] = []
-        for f, pair in self.fields:
-            v = getattr(obj, f)
-            if pair:
-                a, b = v
-                flat += (a, b)
+        lines, exprs = ["def values(o):"], []
+        for i, (f, g) in enumerate(cls.FIELDS):
+            if isinstance(g, tuple):
+                lines.append(f"    p{i}a, p{i}b = o.{f}")
+                exprs += [f"p{i}a", f"p{i}b"]
             else:
-                flat.append(v)
-        return flat if self.identity else [flat[i] for i in self.perm]
-
-    def build(self, node_id: int, vals: Any) -> Any:
-        return self.cls(node_id, *[(vals[a[0]], vals[a[1]]) if type(a) is tuple else vals[a] for a in self.args])
+                exprs.append(f"o.{f}")
+        lines.append(f"    return [{', '.join(exprs[flat.index(n)] for n in names)}]")
+        specs = {f: (f"(v[{index[g[0]]}], v[{index[g[1]]}])" if isinstance(g, tuple) else f"v[{index[g]}]")
+                 for f, g in cls.FIELDS}
+        args = "".join(f", {specs[fl.name]}" for fl in dataclasses.fields(cls)[1:])   # dataclass order
+        lines += ["def build(n, v):", f"    return cls(n{args})"]
+        namespace: dict[str, Any] = {"cls": cls}
+        exec(compile("\n".join(lines), f"<signal binding {cls.__name__}>", "exec"), namespace)  # noqa: S102
+        self.values: Callable[[Any], list[Any]] = namespace["values"]
+        self.build: Callable[[int, Any], Any] = namespace["build"]
 
 
 def binding_of(cls: type, names: tuple[str, ...]) -> SignalBinding | None:

@@ -15,11 +15,17 @@ Only little-endian integer signals without multiplexing are planned (what sea.db
 """
 from __future__ import annotations
 
+import dataclasses
 import math
-from dataclasses import dataclass
-from typing import Any, Sequence
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
 
 from sea_hil.errors import ConfigError, MalformedFrame
+from sea_hil.protocol.frame_codegen import generate
+
+
+def _unset(*_: Any) -> Any:
+    raise RuntimeError("frame plan built without FramePlan.of")
 
 
 @dataclass(frozen=True)
@@ -49,6 +55,10 @@ class FramePlan:
     names: tuple[str, ...]
     signals: tuple[SignalPlan, ...]
     used_mask: int                           # bits any signal occupies (the others are reserved, zero)
+    # generated straight-line code (sea_hil.protocol.frame_codegen): the hot paths
+    pack_plain: Callable[[Sequence[Any]], bytes | None] = field(default=_unset, compare=False, repr=False)
+    unpack: Callable[[bytes], tuple[Any, ...]] = field(default=_unset, compare=False, repr=False)
+    unpack_plain: Callable[[bytes], tuple[Any, ...] | None] = field(default=_unset, compare=False, repr=False)
 
     @classmethod
     def of(cls, message: Any) -> FramePlan:
@@ -75,7 +85,9 @@ class FramePlan:
                     raise ConfigError(f"frame plan: {message.name}.{s.name}: range does not fit {s.length} bits")
             sigs.append(sp)
             used |= sp.mask << sp.start
-        return cls(message.name, message.length, tuple(s.name for s in sigs), tuple(sigs), used)
+        plan = cls(message.name, message.length, tuple(s.name for s in sigs), tuple(sigs), used)
+        pack_plain, unpack, unpack_plain = generate(plan)
+        return dataclasses.replace(plan, pack_plain=pack_plain, unpack=unpack, unpack_plain=unpack_plain)
 
     # ---- encode ------------------------------------------------------------------------------------------------
     def encode(self, values: Sequence[Any]) -> bytes:
@@ -92,34 +104,17 @@ class FramePlan:
             word |= (raw & s.mask) << s.start
         return word.to_bytes(self.length, "little")
 
-    def pack_plain(self, values: Sequence[Any]) -> bytes | None:
-        """`encode` for the common case only: every value an `int` (a `float` allowed on scaled signals) inside the
-        DBC range; None as soon as one is not (the caller then saturates / checks it the slow way)."""
-        word = 0
-        for s, v in zip(self.signals, values):
-            t = type(v)
-            if not (t is int or t is float and not s.identity) or not s.minimum <= v <= s.maximum:
-                return None
-            raw = v if s.identity else round((v - s.offset) / s.scale)
-            word |= (raw & s.mask) << s.start
-        return word.to_bytes(self.length, "little")
-
     # ---- decode ------------------------------------------------------------------------------------------------
     def decode(self, data: bytes) -> tuple[Any, ...]:
         """Physical values (signal order) of `data`, as cantools `decode(decode_choices=False)` gives them;
-        `MalformedFrame` for a wrong length or reserved bits set. Range and enum checks are the caller's."""
+        `MalformedFrame` for a wrong length or reserved bits set. Range and enum checks are the caller's
+        (`unpack_plain` does them for the common case)."""
         if len(data) != self.length:
             raise MalformedFrame(f"{self.name}: {len(data)} data bytes, expected {self.length}")
         word = int.from_bytes(data, "little")
         if word & ~self.used_mask:
             raise MalformedFrame(f"{self.name}: reserved bits set in {bytes(data).hex()}")
-        out = []
-        for s in self.signals:
-            raw = (word >> s.start) & s.mask
-            if s.signed and raw >> (s.length - 1):
-                raw -= 1 << s.length
-            out.append(raw if s.identity else raw * s.scale + s.offset)
-        return tuple(out)
+        return self.unpack(data)
 
 
 def _in_table(s: SignalPlan, v: float) -> bool:

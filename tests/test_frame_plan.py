@@ -105,3 +105,32 @@ def test_wrong_length_is_malformed() -> None:
     plan = FramePlan.of(DB.get_message_by_name("VOLTAGE_CMD"))
     with pytest.raises(MalformedFrame, match="expected 5"):
         plan.decode(b"\x00" * 4)
+
+
+@pytest.mark.parametrize("msg", MESSAGES, ids=lambda m: m.name)
+def test_generated_fast_paths_equal_cantools(msg) -> None:
+    """The generated `pack_plain` / `unpack_plain` (the hot paths): the cantools bytes and values where every value is
+    plain and in range, None exactly where one is not (the codec's checking path takes over)."""
+    plan, rng = FramePlan.of(msg), random.Random(20)
+    packed = 0
+    for row in _rows(msg, rng):
+        values = tuple(row[n] for n in plan.names)
+        inside = all(s.minimum <= row[s.name] <= s.maximum for s in msg.signals)
+        got = plan.pack_plain(values)
+        assert (got is not None) == inside, row
+        if got is not None:
+            assert got == msg.encode(row, strict=True)
+            packed += 1
+    assert packed >= N_RANDOM
+    payloads = [(rng.getrandbits(8 * msg.length) & plan.used_mask).to_bytes(msg.length, "little")
+                for _ in range(N_RANDOM)]
+    payloads += [msg.encode({s.name: _random_value(s, rng) for s in msg.signals}, strict=True) for _ in range(50)]
+    for data in payloads:
+        want = msg.decode(data, decode_choices=False, allow_excess=False)
+        fast = plan.unpack_plain(data)
+        inside = all(s.minimum <= want[s.name] <= s.maximum and (not s.choices or want[s.name] in s.choices)
+                     for s in msg.signals)
+        assert (fast is not None) == inside
+        assert plan.unpack(data) == tuple(want[n] for n in plan.names)
+        if fast is not None:
+            assert fast == plan.unpack(data)
