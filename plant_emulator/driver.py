@@ -127,15 +127,27 @@ class DriverCore:
 
     def step(self) -> Feedback:
         """Integrate one period (voltage held between the changes that arrived in it) and return the feedback of the
-        new sample. Without changes inside the period this is one `advance` over the whole period."""
+        new sample. Without changes inside the period this is one `advance` over the whole period. A driver node
+        with several limbs runs `segments` of them all in one compiled call instead (`plant_emulator.batch`)."""
+        x = self.x
+        for t_s, dt_s, n, u in self.segments():
+            x = advance(t_s, x, u, dt_s, n, self.params, self.disturbance)
+        return self.finish_period(x)
+
+    def segments(self) -> list[tuple[float, float, int, tuple[float, float]]]:
+        """The period's pieces of constant voltage, in order: (start time s, length s, RK4 sub-steps, voltage)."""
         t_s = self.seq * self.period_ns * 1e-9
-        x, start, u = self.x, 0, self._u_start
+        out, start, u = [], 0, self._u_start
         for offset, new_u in (*self._changes, (self.period_ns, self.voltage_v)):
             if offset > start:
                 n = max(1, -(-self.substeps * (offset - start) // self.period_ns))   # ceil: sub-steps no longer
-                x = advance(t_s + start * 1e-9, x, u, (offset - start) * 1e-9, n, self.params, self.disturbance)
+                out.append((t_s + start * 1e-9, (offset - start) * 1e-9, n, u))
                 start = offset
             u = new_u
+        return out
+
+    def finish_period(self, x: State) -> Feedback:
+        """The period is integrated to `x`: the new sample, its feedback (and the soft-limit check)."""
         self.x = x
         self._u_start, self._changes = self.voltage_v, []
         self.seq += 1
