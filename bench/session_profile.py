@@ -2,8 +2,8 @@
 
 Run: python bench/session_profile.py [--limbs 4] [--cycles 1] [--out DIR] [--json OUT] [-- EXTRA sea-hil run ARGS]
 Runs the session as a child and samples its process tree with psutil every 0.2 s (the last CPU times seen of every
-process and of every thread of the session process); one `py-spy dump` in the middle of the run names the session
-process's Python threads (driver node `plant*`, edge mux / edges `edge*`, recorder tap, main thread). Threads
+process and of every thread of the session process); a `py-spy dump` every 3 s names the session process's Python
+threads (driver node `plant*`, edge mux / edges `edge*`, recorder tap, main thread). Threads
 py-spy does not name (Zenoh's Rust runtime, numba, the C side of python-can) are grouped by their OS thread name.
 Printed: CPU seconds and CPU us per limb-sample for the driver, the edges, the rest of the session process (Zenoh,
 recorder taps, main loop), the controller children (one per limb) and the recorder child, plus the summary's
@@ -55,6 +55,7 @@ class TreeSampler:
         self.root = root
         self.procs: dict[int, tuple[str, float]] = {}
         self.threads: dict[int, float] = {}
+        self.names: dict[int, str] = {}
         self.stop = threading.Event()
 
     def sample(self) -> None:
@@ -71,8 +72,12 @@ class TreeSampler:
                 continue
 
     def run(self) -> None:
+        k = 0
         while not self.stop.wait(0.2):
             self.sample()
+            k += 1
+            if k % 15 == 0:   # every 3 s: name the threads alive now (py-spy), so short-lived ones are named too
+                self.names.update(thread_names(self.root.pid))
 
 
 def thread_names(pid: int) -> dict[int, str]:
@@ -84,7 +89,8 @@ def thread_names(pid: int) -> dict[int, str]:
         except OSError:
             continue
     try:
-        out = subprocess.run(["py-spy", "dump", "--pid", str(pid)], capture_output=True, text=True, timeout=30)
+        out = subprocess.run([str(Path(sys.executable).with_name("py-spy")), "dump", "--pid", str(pid)],
+                             capture_output=True, text=True, timeout=30)
         names.update({int(tid): name for tid, name in PYSPY_THREAD.findall(out.stdout)})
     except (OSError, subprocess.TimeoutExpired):
         pass
@@ -101,12 +107,8 @@ def profile(limbs: int, cycles: int, out: Path, extra: list[str]) -> dict[str, A
     sampler = TreeSampler(root)
     th = threading.Thread(target=sampler.run, daemon=True)
     th.start()
-    names: dict[int, str] = {}
     try:
-        time.sleep(6.0)   # mid-run (the session takes ~13 s): name the threads once
-        if proc.poll() is None:
-            names = thread_names(proc.pid)
-        rc = proc.wait(timeout=600)
+        rc = proc.wait(timeout=900)
     finally:
         sampler.stop.set()
         th.join()
@@ -117,11 +119,12 @@ def profile(limbs: int, cycles: int, out: Path, extra: list[str]) -> dict[str, A
     summary = json.loads((out / "summary.json").read_text())
     groups: dict[str, float] = defaultdict(float)
     for tid, cpu in sampler.threads.items():
-        groups[_thread_group(names.get(tid, "(unnamed, exited)"))] += cpu
+        groups[_thread_group(sampler.names.get(tid, "(unnamed, exited)"))] += cpu
     for role, cpu in sampler.procs.values():
         groups[role] += cpu
     ticks = summary["timing"]["driver"]["ticks"]
-    samples = max(1, ticks * limbs if len(summary.get("limbs", [])) <= 1 else ticks)
+    buses = summary.get("limbs_total", {}).get("buses", 1)
+    samples = max(1, ticks * limbs // buses)   # `ticks` sums the buses' drivers; each serves limbs / buses limbs
     return {"limbs": limbs, "rc": rc, "wall_s": wall, "load_avg_start": load, "limb_samples": samples,
             "cpu_s": dict(groups), "summary": summary}
 
@@ -132,8 +135,11 @@ def report(r: dict[str, Any]) -> None:
     total = sum(r["cpu_s"].values())
     print(f"sea-hil run --limbs {r['limbs']}: rc {r['rc']}, wall {r['wall_s']:.1f} s, load average at start "
           f"{r['load_avg_start']:.1f} (real-time figures loaded unless ~0), {r['limb_samples']} limb-samples")
-    print(f"  driver tick misses {drv.get('tick_misses')} of {drv.get('ticks')}; closed loop p50/p99 "
-          f"{s.get('latency_us', {}).get('p50')}/{s.get('latency_us', {}).get('p99')} us")
+    edge, lat = s["timing"].get("edge", {}), s["timing"].get("latency_us", {})
+    limb_p99 = [round(e.get("timing", {}).get("latency_us", {}).get("p99", -1)) for e in s.get("limbs", [])]
+    print(f"  driver tick misses {drv.get('tick_misses')} of {drv.get('ticks')}; edge loop p50/p99 "
+          f"{edge.get('loop_us_p50', -1):.0f}/{edge.get('loop_us_p99', -1):.0f} us (first limb); closed loop p50/p99 "
+          f"{lat.get('p50', -1):.0f}/{lat.get('p99', -1):.0f} us; per limb p99 {limb_p99} us")
     for name, cpu in sorted(r["cpu_s"].items(), key=lambda kv: -kv[1]):
         print(f"  {name:48s} {cpu:7.2f} s CPU  {1e6 * cpu / r['limb_samples']:7.1f} us/limb-sample")
     print(f"  {'total':48s} {total:7.2f} s CPU  {1e6 * total / r['limb_samples']:7.1f} us/limb-sample "
