@@ -146,12 +146,13 @@ class DriverCore:
             u = new_u
         return out
 
-    def finish_period(self, x: State) -> Feedback:
-        """The period is integrated to `x`: the new sample, its feedback (and the soft-limit check)."""
+    def finish_period(self, x: State, delta_m: tuple[float, float] | None = None) -> Feedback:
+        """The period is integrated to `x` (spring deflections `delta_m` of x when the caller has them): the new
+        sample, its feedback (and the soft-limit check)."""
         self.x = x
         self._u_start, self._changes = self.voltage_v, []
         self.seq += 1
-        fb = self.feedback()
+        fb = self.feedback(delta_m)
         if self.state is DriverState.RUNNING:
             self._check_limits(fb)
         return fb
@@ -165,9 +166,9 @@ class DriverCore:
             self.voltage_v = self._u_start = (0.0, 0.0)
             self.counters.limit_trips += 1
 
-    def feedback(self) -> Feedback:
+    def feedback(self, delta_m: tuple[float, float] | None = None) -> Feedback:
         x = self.x
-        d1, d2, _, _ = deflections(x, self.params)
+        d1, d2 = deflections(x, self.params)[:2] if delta_m is None else delta_m
         t_us = (self.sample_t_ns // 1000) & U16
         return Feedback(self.node_id, self.seq & 0xFF, t_us, (x[0], x[1]), (x[2], x[3]), (d1, d2), (x[6], x[7]))
 
