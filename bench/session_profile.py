@@ -27,7 +27,7 @@ from typing import Any
 
 import psutil
 
-PYSPY_THREAD = re.compile(r'^Thread (\d+) \([a-z]+\): "([^"]*)"', re.M)
+PYSPY_THREAD = re.compile(r'^Thread (\d+) \([^)]*\): "([^"]*)"', re.M)
 
 
 def _role(cmdline: list[str]) -> str:
