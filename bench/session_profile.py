@@ -32,11 +32,11 @@ PYSPY_THREAD = re.compile(r'^Thread (\d+) \([^)]*\): "([^"]*)"', re.M)
 
 def _role(cmdline: list[str]) -> str:
     text = " ".join(cmdline)
+    if "sea_hil.recorder" in text:
+        return "recorder child"
     if " controller" in text or "controller_" in text:
         return "controllers"
-    if "recorder" in text:
-        return "recorder child"
-    return "other child"
+    return "other child: " + " ".join(cmdline[:3])[:60]
 
 
 def _thread_group(name: str) -> str:
