@@ -6,6 +6,8 @@ CAN FD (VOLTAGE_CMD_FD and one FEEDBACK_FD frame per sample, sent with the bit r
 DEFLECTION_SETPOINT and HEARTBEAT stay classic frames on the FD bus); `fd=None` decodes both (recorders, monitors)
 and encodes classic. A frame's FD flag must match its DBC message. Encoding is strict (out-of-range, NaN, wrong type -> `MalformedFrame`; callers
 saturate first, see `SeaCodec.saturate`); decoding checks id, DLC, reserved bits, ranges and enum values.
+Packing and unpacking run on precompiled frame plans built from the DBC's cantools messages
+(`sea_hil.protocol.frame_plan`: byte for byte cantools strict, tests/test_frame_plan.py), not on cantools per frame.
 The frame types (`sea_hil.protocol.can_frames`) and feedback assembly (`sea_hil.protocol.can_assembly`) are re-exported here.
 """
 from __future__ import annotations
