@@ -9,9 +9,13 @@ echo process answering every state. Printed per count: driver tick misses (skipp
 CPU per limb-sample. A count passes when the driver's miss rate and the edges' miss rate (response later than one
 period or missing) are below 0.1 % and the closed-loop p99 is <= 3 ms. Every count is run (no early stop).
 Real-time figures: measure on a quiet machine; the load average at the start is in the record.
+`--session`: instead of the rig, a whole `sea-hil run --limbs N --cycles 1` per count (controllers and recorder
+included; bench/session_profile.py), printing the same columns from its summary.json plus the CPU per limb-sample of
+every process and thread group (add `--fd` for the CAN FD profile: four limbs per bus, one driver for all four).
 """
 from __future__ import annotations
 
+import json
 import os
 import sys
 from pathlib import Path
@@ -58,13 +62,40 @@ def sweep(limbs: list[int], layout: str, duration_s: float, warmup_s: float) -> 
     return results, best
 
 
+def session_sweep(limbs: list[int], fd: bool) -> list[dict[str, Any]]:
+    """Each count as a whole real-time session (bench/session_profile.py); one line per count plus its CPU table."""
+    import tempfile
+
+    from session_profile import profile, report
+    out = []
+    with tempfile.TemporaryDirectory(prefix="sea-hil-scale-") as tmp:
+        extra = []
+        if fd:
+            cfg = Path(tmp) / "fd.toml"
+            cfg.write_text("[can]\nfd = true\n")
+            extra = ["--config", str(cfg)]
+        for n in limbs:
+            r = profile(n, 1, Path(tmp) / f"l{n}", extra)
+            report(r)
+            out.append({k: v for k, v in r.items() if k != "summary"})
+    return out
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = bench_args(__doc__.splitlines()[0], runs=1)
     ap.add_argument("--limbs", default="1,2,4,6,8", help="comma-separated limb counts")
     ap.add_argument("--layout", default="threads,mux", help="comma-separated edge layouts: threads, mux")
     ap.add_argument("--duration", type=float, default=10.0, help="wall seconds per count (default 10)")
+    ap.add_argument("--session", action="store_true", help="whole `sea-hil run --limbs N` sessions, not the rig")
+    ap.add_argument("--fd", action="store_true", help="with --session: the CAN FD profile (four limbs per bus)")
     args = ap.parse_args(argv)
     limbs = [1, 2] if args.quick else [int(x) for x in args.limbs.split(",")]
+    if args.session:
+        print(f"load average at start: {os.getloadavg()[0]:.2f} (real-time figures on a loaded machine are not final)")
+        rows = session_sweep(limbs, args.fd)
+        if args.json:
+            Path(args.json).write_text(json.dumps(rows, indent=1))
+        return 0 if all(r["rc"] == 0 for r in rows) else 1
     layouts = args.layout.split(",")
     duration = 1.0 if args.quick else args.duration
     runs = 1 if args.quick else args.runs

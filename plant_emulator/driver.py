@@ -127,19 +127,32 @@ class DriverCore:
 
     def step(self) -> Feedback:
         """Integrate one period (voltage held between the changes that arrived in it) and return the feedback of the
-        new sample. Without changes inside the period this is one `advance` over the whole period."""
+        new sample. Without changes inside the period this is one `advance` over the whole period. A driver node
+        with several limbs runs `segments` of them all in one compiled call instead (`plant_emulator.batch`)."""
+        x = self.x
+        for t_s, dt_s, n, u in self.segments():
+            x = advance(t_s, x, u, dt_s, n, self.params, self.disturbance)
+        return self.finish_period(x)
+
+    def segments(self) -> list[tuple[float, float, int, tuple[float, float]]]:
+        """The period's pieces of constant voltage, in order: (start time s, length s, RK4 sub-steps, voltage)."""
         t_s = self.seq * self.period_ns * 1e-9
-        x, start, u = self.x, 0, self._u_start
+        out, start, u = [], 0, self._u_start
         for offset, new_u in (*self._changes, (self.period_ns, self.voltage_v)):
             if offset > start:
                 n = max(1, -(-self.substeps * (offset - start) // self.period_ns))   # ceil: sub-steps no longer
-                x = advance(t_s + start * 1e-9, x, u, (offset - start) * 1e-9, n, self.params, self.disturbance)
+                out.append((t_s + start * 1e-9, (offset - start) * 1e-9, n, u))
                 start = offset
             u = new_u
+        return out
+
+    def finish_period(self, x: State, delta_m: tuple[float, float] | None = None) -> Feedback:
+        """The period is integrated to `x` (spring deflections `delta_m` of x when the caller has them): the new
+        sample, its feedback (and the soft-limit check)."""
         self.x = x
         self._u_start, self._changes = self.voltage_v, []
         self.seq += 1
-        fb = self.feedback()
+        fb = self.feedback(delta_m)
         if self.state is DriverState.RUNNING:
             self._check_limits(fb)
         return fb
@@ -153,9 +166,9 @@ class DriverCore:
             self.voltage_v = self._u_start = (0.0, 0.0)
             self.counters.limit_trips += 1
 
-    def feedback(self) -> Feedback:
+    def feedback(self, delta_m: tuple[float, float] | None = None) -> Feedback:
         x = self.x
-        d1, d2, _, _ = deflections(x, self.params)
+        d1, d2 = deflections(x, self.params)[:2] if delta_m is None else delta_m
         t_us = (self.sample_t_ns // 1000) & U16
         return Feedback(self.node_id, self.seq & 0xFF, t_us, (x[0], x[1]), (x[2], x[3]), (d1, d2), (x[6], x[7]))
 

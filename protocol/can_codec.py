@@ -6,6 +6,8 @@ CAN FD (VOLTAGE_CMD_FD and one FEEDBACK_FD frame per sample, sent with the bit r
 DEFLECTION_SETPOINT and HEARTBEAT stay classic frames on the FD bus); `fd=None` decodes both (recorders, monitors)
 and encodes classic. A frame's FD flag must match its DBC message. Encoding is strict (out-of-range, NaN, wrong type -> `MalformedFrame`; callers
 saturate first, see `SeaCodec.saturate`); decoding checks id, DLC, reserved bits, ranges and enum values.
+Packing and unpacking run on precompiled frame plans built from the DBC's cantools messages
+(`sea_hil.protocol.frame_plan`: byte for byte cantools strict, tests/test_frame_plan.py), not on cantools per frame.
 The frame types (`sea_hil.protocol.can_frames`) and feedback assembly (`sea_hil.protocol.can_assembly`) are re-exported here.
 """
 from __future__ import annotations
@@ -18,14 +20,16 @@ from typing import Any, Iterable
 
 import can
 import cantools
-from cantools.database import DecodeError, EncodeError
+from cantools.database import EncodeError
 
 from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
 from sea_hil.protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
                                  SEQ_MODULUS, T_US_MODULUS, ClearErrors, DeflectionSetpoint, DriverState, ErrorFlags,
                                  EStop, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Frame,
-                                 Heartbeat, Pair, VoltageCmd, can_id_of, check_node_id, profile_messages)
+                                 Heartbeat, Pair, SignalBinding, VoltageCmd, binding_of, can_id_of, check_node_id,
+                                 profile_messages)
 from sea_hil.errors import ConfigError, MalformedFrame
+from sea_hil.protocol.frame_plan import FramePlan
 
 __all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",
            "T_US_MODULUS", "ClearErrors", "DeflectionSetpoint", "DriverState", "ErrorFlags", "EStop", "Feedback",
@@ -66,6 +70,8 @@ class _Layout:
     # per signal (sig, name, min, max, is_int, clampable, min - tol, max + tol, plain): the hot paths' precomputed
     # view of `sigs`; `plain` = no enum, so a finite in-range value needs no further check
     plan: tuple[tuple[Any, ...], ...] = ()
+    frame: FramePlan | None = None   # the precompiled pack/unpack of `message` (sea_hil.protocol.frame_plan)
+    binding: SignalBinding | None = None   # fields <-> the plan's value tuple (None: through the signal dicts)
 
 
 def _layout(db: Any, cls: type, name: str) -> _Layout:
@@ -78,9 +84,13 @@ def _layout(db: Any, cls: type, name: str) -> _Layout:
         is_int = s.scale == 1 and s.offset == 0 and not s.is_float
         choices = frozenset(int(k) for k in s.choices) if s.choices else None
         sigs.append(_Sig(s.name, s.minimum, s.maximum, abs(s.scale) * 1e-6, is_int, choices))
+    frame = FramePlan.of(msg)
+    by_name = {sig.name: sig for sig in sigs}
+    sigs = [by_name[n] for n in frame.names]   # the plan's order (the DBC's)
     plan = tuple((s, s.name, s.minimum, s.maximum, s.is_int, s.clampable, s.minimum - s.tol, s.maximum + s.tol,
                   s.choices is None) for s in sigs)
-    return _Layout(cls, msg, msg.frame_id & CMD_MASK, msg.length, used, tuple(sigs), bool(msg.is_fd), plan)
+    return _Layout(cls, msg, msg.frame_id & CMD_MASK, msg.length, used, tuple(sigs), bool(msg.is_fd), plan,
+                   frame, binding_of(cls, frame.names))
 
 
 class SeaCodec:
@@ -111,23 +121,34 @@ class SeaCodec:
         node_id = obj.node_id
         if type(node_id) is not int or not NODE_ID_MIN <= node_id <= NODE_ID_MAX:  # fast path for plain ints
             node_id = check_node_id(node_id)
+        data = None
+        if lay.binding is not None:   # the common case: plain numbers in range, packed by the precompiled plan
+            try:
+                data = lay.frame.pack_plain(lay.binding.values(obj))
+            except (TypeError, ValueError):
+                data = None           # e.g. not a pair: the general path below says what is wrong
+        if data is None:
+            data = self._encode_general(lay, obj, node_id, saturate)
+        msg = can.Message(arbitration_id=node_id << CMD_BITS | lay.cmd_id, data=data, is_extended_id=False,
+                          is_fd=lay.is_fd, bitrate_switch=lay.is_fd and self.bitrate_switch)
+        msg.data = data  # type: ignore[assignment]  # immutable bytes: python-can's virtual bus deep-copies the
+        return msg       # message once per receiver, and a deepcopy of bytes is free (of a bytearray it is not)
+
+    def _encode_general(self, lay: _Layout, obj: Frame, node_id: int, saturate: bool) -> bytes:
+        """Check (and with `saturate` clamp) every signal, then pack: strict like cantools (tests/test_frame_plan)."""
         try:
             values = obj.to_signals()
             for s, name, lo, hi, is_int, clampable, _, _, _ in lay.plan:
                 v = values[name]
                 t = type(v)
                 if (t is int or t is float and not is_int) and lo <= v <= hi:
-                    continue    # the common case: a finite number of the right kind in range, nothing to do
+                    continue    # a finite number of the right kind in range, nothing to do
                 if saturate and clampable:
                     v = _clamped(s, v, values)
                 _check_encodable(s, v)
-            data = lay.message.encode(values, strict=True)  # cantools range checks (strict), no name lookup
-        except (EncodeError, TypeError, ValueError, OverflowError, KeyError) as err:
+            return lay.frame.encode([values[n] for n in lay.frame.names])
+        except (EncodeError, TypeError, ValueError, OverflowError, KeyError, MalformedFrame) as err:
             raise MalformedFrame(f"cannot encode {lay.message.name} for node {node_id}: {err}") from err
-        msg = can.Message(arbitration_id=node_id << CMD_BITS | lay.cmd_id, data=data, is_extended_id=False,
-                          is_fd=lay.is_fd, bitrate_switch=lay.is_fd and self.bitrate_switch)
-        msg.data = data  # type: ignore[assignment]  # immutable bytes: python-can's virtual bus deep-copies the
-        return msg       # message once per receiver, and a deepcopy of bytes is free (of a bytearray it is not)
 
     def encode_feedback(self, fb: Feedback, *, saturate: bool = False) -> list[can.Message]:
         """The frames of one sample: one FEEDBACK_FD (CAN FD profile) or the three classic parts."""
@@ -164,18 +185,15 @@ class SeaCodec:
                                  f"expected {lay.dlc}")
         if int.from_bytes(data, "little") & ~lay.used_mask:
             raise MalformedFrame(f"{lay.message.name} node {node_id}: reserved bits set in {data.hex()}")
-        try:
-            raw = lay.message.decode(data, decode_choices=False, allow_excess=False)
-        except (DecodeError, ValueError) as err:
-            raise MalformedFrame(f"{lay.message.name} node {node_id}: {err}") from err
-        values = {}
-        for s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain in lay.plan:
-            v = raw[name]
-            if plain and lo_tol <= v <= hi_tol:   # finite (NaN and inf fail the comparison) and in range
-                values[name] = int(v) if is_int else min(max(float(v), lo), hi)
-            else:
-                values[name] = _checked(lay.message.name, s, v)
-        return lay.cls.from_signals(node_id, values)
+        vals = lay.frame.unpack_plain(data)   # = cantools decode (tests/test_frame_plan), all values in range
+        if vals is None:                      # some value outside its DBC range: clamp within tolerance, or reject
+            vals = [(int(v) if is_int else min(max(float(v), lo), hi))
+                    if plain and lo_tol <= v <= hi_tol   # finite (NaN and inf fail the comparison) and in range
+                    else _checked(lay.message.name, s, v)
+                    for (s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain), v in zip(lay.plan, lay.frame.unpack(data))]
+        if lay.binding is not None:
+            return lay.binding.build(node_id, vals)
+        return lay.cls.from_signals(node_id, dict(zip(lay.frame.names, vals)))
 
     def saturate(self, obj: Any) -> tuple[Any, bool]:
         """Copy of `obj` with every physical value and counter clamped to its DBC range (not seq/t_us, enums, NaN);

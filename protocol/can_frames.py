@@ -8,10 +8,11 @@ VOLTAGE_CMD_FD.
 """
 from __future__ import annotations
 
+import dataclasses
 import numbers
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
-from typing import Any, ClassVar, Union
+from typing import Any, Callable, ClassVar, Union
 
 from sea_hil.errors import MalformedFrame
 
@@ -208,6 +209,40 @@ def profile_messages(fd: bool) -> dict[type, str]:
             out[cls] = name
     return out
 FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
+
+
+class SignalBinding:
+    """A frame type's fields bound to positions in a signal tuple (a frame plan's `names` order), written out once as
+    straight-line code, so the hot paths go object -> values -> object without the `to_signals` / `from_signals`
+    dicts; the same mapping (`FIELDS`). `values(obj)` raises ValueError/TypeError unless each pair field is a pair."""
+
+    def __init__(self, cls: type, names: tuple[str, ...]) -> None:
+        index = {n: i for i, n in enumerate(names)}
+        flat = [sig for _, g in cls.FIELDS for sig in (g if isinstance(g, tuple) else (g,))]   # FIELDS order
+        if sorted(flat) != sorted(names):
+            raise ValueError(f"{cls.__name__}: FIELDS do not cover the signals {names}")
+        lines, exprs = ["def values(o):"], []
+        for i, (f, g) in enumerate(cls.FIELDS):
+            if isinstance(g, tuple):
+                lines.append(f"    p{i}a, p{i}b = o.{f}")
+                exprs += [f"p{i}a", f"p{i}b"]
+            else:
+                exprs.append(f"o.{f}")
+        lines.append(f"    return [{', '.join(exprs[flat.index(n)] for n in names)}]")
+        specs = {f: (f"(v[{index[g[0]]}], v[{index[g[1]]}])" if isinstance(g, tuple) else f"v[{index[g]}]")
+                 for f, g in cls.FIELDS}
+        args = "".join(f", {specs[fl.name]}" for fl in dataclasses.fields(cls)[1:])   # dataclass order
+        lines += ["def build(n, v):", f"    return cls(n{args})"]
+        namespace: dict[str, Any] = {"cls": cls}
+        exec(compile("\n".join(lines), f"<signal binding {cls.__name__}>", "exec"), namespace)  # noqa: S102
+        self.values: Callable[[Any], list[Any]] = namespace["values"]
+        self.build: Callable[[int, Any], Any] = namespace["build"]
+
+
+def binding_of(cls: type, names: tuple[str, ...]) -> SignalBinding | None:
+    """The `SignalBinding` of a frame type with the plain `FIELDS` mapping; None when it maps its own way
+    (`Heartbeat`: the flag bits) and goes through `to_signals` / `from_signals`."""
+    return None if "to_signals" in cls.__dict__ or "from_signals" in cls.__dict__ else SignalBinding(cls, names)
 
 
 def can_id_of(node_id: int, cmd_id: int) -> int:

@@ -89,7 +89,8 @@ class RealTimePacer:
             if missed:
                 drv.note_overruns(missed)
             drv.check_watchdog(now)
-            n.publish_sample(drv, drv.step())
+        for drv, feedback in n.step_drivers():   # all limbs of the bus in one compiled step
+            n.publish_sample(drv, feedback)
         if self.k >= self.next_heartbeat_k:  # skipped ticks must not skip the heartbeat
             n.heartbeats()
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every

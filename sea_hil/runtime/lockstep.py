@@ -79,7 +79,7 @@ class LockstepPacer:
             return
         for drv in n.drivers.values():
             drv.last_cmd_ns = drv.sample_t_ns
-            drv.step()
+        n.step_drivers()
         n.stats.ticks += 1
         if n.stats.ticks % n.heartbeat_every == 0:
             n.heartbeats()
