@@ -1,0 +1,153 @@
+"""The `[timing]` levers of the real-time driver loop (sea_hil/runtime/realtime.py, docs/timing.md) as pure units:
+the slack-time garbage collector, the thread policy's fallbacks, the pacer's busy-wait tail on a stub node; and
+the payload validation fast paths taken for the Zenoh hop (same verdicts as the general path)."""
+from __future__ import annotations
+
+import gc
+import logging
+import math
+import os
+import threading
+from types import SimpleNamespace
+
+import pytest
+
+from sea_hil.config import load_config
+from sea_hil.config.timing import TimingConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason, pair_field, uint_field
+from sea_hil.protocol.payloads import MsgType, PayloadCounters, SetpointPayload, TriggerReason, decode, encode
+from sea_hil.runtime.clock import RealTimePacer
+from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_cpus
+
+
+@pytest.fixture
+def gc_restored():
+    enabled = gc.isenabled()
+    yield
+    gc.unfreeze()
+    gc.enable() if enabled else gc.disable()
+
+
+def test_slack_collector_collects_only_in_slack_and_restores(gc_restored) -> None:
+    col = SlackCollector(slack_ns=300_000)
+    col.start()
+    assert not gc.isenabled() and gc.get_freeze_count() > 0
+    keep = [[] for _ in range(3 * gc.get_threshold()[0])]   # gen-0 count above its threshold
+    col.tick(remaining_ns=100_000)                            # no slack: postponed
+    assert (col.collections, col.postponed) == (0, 1)
+    col.tick(remaining_ns=500_000)
+    assert col.collections == 1 and gc.get_count()[0] < gc.get_threshold()[0]
+    more = [[] for _ in range(9 * gc.get_threshold()[0])]   # postponed too long: collected without slack
+    col.tick(remaining_ns=0)
+    assert col.collections == 2
+    col.stop()
+    assert gc.isenabled() and len(keep) + len(more) > 0
+
+
+def test_thread_policy_falls_back_with_one_log_line(monkeypatch, caplog) -> None:
+    def refuse(*_a: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    out: dict[str, object] = {}
+    policy = ThreadPolicy(TimingConfig(realtime_priority=50, realtime_scope="process", driver_cpu=4096))
+    t = threading.Thread(target=lambda: out.update(policy.apply()))
+    with caplog.at_level(logging.INFO, logger="sea_hil.runtime"):
+        t.start()
+        t.join()
+    assert out == {}   # nothing took effect, nothing raised
+    policy.undo()
+    assert sum("SCHED_FIFO" in r.message for r in caplog.records) == 1
+    assert sum("CPU 4096" in r.message for r in caplog.records) == 1
+    assert child_cpus(TimingConfig(driver_cpu=4096)) is None and child_cpus(TimingConfig()) is None
+
+
+class _StubNode:
+    """What `RealTimePacer` uses of a driver node, recording the pacer's waits."""
+
+    def __init__(self, timing: TimingConfig) -> None:
+        self.cfg = SimpleNamespace(timing=timing)
+        self.period_ns, self.heartbeat_every, self.drivers = 20_000_000, 10**9, {}   # 20 ms: room on a loaded host
+        self.lateness = SimpleNamespace(record=lambda _v: None)
+        self.stats = SimpleNamespace(overruns=0, ticks=0)
+        self.waits: list[int] = []
+        self.exits: list[object] = []
+
+    def prepare_kernels(self) -> None:
+        pass
+
+    def on_loop_exit(self, fn: object) -> None:
+        self.exits.append(fn)
+
+    def drain_until(self, deadline_ns: int) -> None:
+        self.waits.append(deadline_ns)
+        while __import__("time").monotonic_ns() < min(deadline_ns, self.waits[0]):
+            pass
+
+
+def test_pacer_busy_wait_tail_polls_up_to_the_absolute_deadline(gc_restored) -> None:
+    node = _StubNode(TimingConfig(spin_us=1000, gc_in_slack=True))
+    pacer = RealTimePacer(node)
+    pacer.start(None)
+    assert len(node.exits) == 2                     # policy and collector are undone when the loop ends
+    pacer.tick()
+    deadline = pacer.start_ns + node.period_ns
+    assert node.waits[0] == deadline - 1_000_000    # slept to the tail, then short polls
+    assert len(node.waits) > 1 and all(w <= deadline + 1000 for w in node.waits)
+    plain = _StubNode(TimingConfig(gc_in_slack=False))
+    p2 = RealTimePacer(plain)
+    p2.start(None)
+    p2.tick()
+    assert plain.waits == [p2.start_ns + plain.period_ns] and len(plain.exits) == 1
+    for undo in node.exits + plain.exits:
+        undo()
+
+
+def test_timing_section_is_validated() -> None:
+    assert load_config().timing == TimingConfig()
+    with pytest.raises(ConfigError):
+        load_config(overrides={"timing": {"realtime_priority": 100}})
+
+
+def test_payload_fast_paths_give_the_general_verdicts() -> None:
+    assert pair_field("x", [1, 2]) == (1.0, 2.0)
+    t = (0.5, -1.0)
+    assert pair_field("x", t) is t
+    for bad, reason in (((math.nan, 1.0), RejectReason.NONFINITE), ((1.0, math.inf), RejectReason.NONFINITE),
+                        ((1.0, 2.0, 3.0), RejectReason.RANGE), ("ab", RejectReason.RANGE)):
+        with pytest.raises(PayloadRejected) as err:
+            pair_field("x", bad)
+        assert err.value.reason is reason
+    assert uint_field("n", 7, 10) == 7
+    for bad in (True, -1, 11, 2.0):
+        with pytest.raises(PayloadRejected):
+            uint_field("n", bad, 10)
+    data = bytearray(encode(SetpointPayload(1, 2, 3, (0.1, 0.2), (0.0, 0.0), TriggerReason.HEARTBEAT)))
+    p = decode(bytes(data))
+    assert p.reason is TriggerReason.HEARTBEAT
+    c = PayloadCounters()
+    data[-1] = 99                                    # unknown trigger reason
+    assert c.try_decode(bytes(data)) is None and c.rejected["enum"] == 1
+    data[3] = 77                                     # unknown message type
+    assert c.try_decode(bytes(data)) is None and c.rejected["type"] == 1
+    assert int(MsgType.SETPOINT) == 2
+
+
+def test_sched_fifo_is_applied_and_undone_where_permitted() -> None:
+    seen: list[int] = []
+
+    def body() -> None:
+        policy = ThreadPolicy(TimingConfig(realtime_priority=5, switch_interval_us=500))
+        applied = policy.apply()
+        seen.append(os.sched_getscheduler(0))
+        policy.undo()
+        seen.append(os.sched_getscheduler(0))
+        seen.append(int("sched_fifo" in applied))
+    before = __import__("sys").getswitchinterval()
+    t = threading.Thread(target=body)
+    t.start()
+    t.join()
+    assert __import__("sys").getswitchinterval() == before
+    if not seen[2]:
+        pytest.skip("SCHED_FIFO not permitted here")
+    assert seen[:2] == [os.SCHED_FIFO, os.SCHED_OTHER]
