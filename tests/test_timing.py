@@ -17,6 +17,7 @@ from sea_hil.config.timing import TimingConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason, pair_field, uint_field
 from sea_hil.protocol.payloads import MsgType, PayloadCounters, SetpointPayload, TriggerReason, decode, encode
+from sea_hil.runtime import clock as clock_module
 from sea_hil.runtime.clock import RealTimePacer
 from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_cpus
 
@@ -63,15 +64,14 @@ def test_thread_policy_falls_back_with_one_log_line(monkeypatch, caplog) -> None
 
 
 class _StubNode:
-    """What `RealTimePacer` uses of a driver node, recording the pacer's waits."""
+    """What `RealTimePacer` uses of a driver node, on a fake monotonic clock: a wait until t moves the clock to t."""
 
-    def __init__(self, timing: TimingConfig) -> None:
+    def __init__(self, timing: TimingConfig, clock: list[int]) -> None:
         self.cfg = SimpleNamespace(timing=timing)
-        self.period_ns, self.heartbeat_every, self.drivers = 20_000_000, 10**9, {}   # 20 ms: room on a loaded host
+        self.period_ns, self.heartbeat_every, self.drivers = 1_000_000, 10**9, {}
         self.lateness = SimpleNamespace(record=lambda _v: None)
         self.stats = SimpleNamespace(overruns=0, ticks=0)
-        self.waits: list[int] = []
-        self.exits: list[object] = []
+        self.clock, self.waits, self.exits = clock, [], []
 
     def prepare_kernels(self) -> None:
         pass
@@ -81,24 +81,27 @@ class _StubNode:
 
     def drain_until(self, deadline_ns: int) -> None:
         self.waits.append(deadline_ns)
-        while __import__("time").monotonic_ns() < min(deadline_ns, self.waits[0]):
-            pass
+        self.clock[0] = max(self.clock[0], deadline_ns)
 
 
-def test_pacer_busy_wait_tail_polls_up_to_the_absolute_deadline(gc_restored) -> None:
-    node = _StubNode(TimingConfig(spin_us=1000, gc_in_slack=True))
+def test_pacer_busy_wait_tail_polls_up_to_the_absolute_deadline(monkeypatch, gc_restored) -> None:
+    clock = [10**9]
+    monkeypatch.setattr(clock_module, "time", SimpleNamespace(monotonic_ns=lambda: clock[0]))
+    node = _StubNode(TimingConfig(spin_us=200, gc_in_slack=True), clock)
     pacer = RealTimePacer(node)
     pacer.start(None)
     assert len(node.exits) == 2                     # policy and collector are undone when the loop ends
     pacer.tick()
-    deadline = pacer.start_ns + node.period_ns
-    assert node.waits[0] == deadline - 1_000_000    # slept to the tail, then short polls
-    assert len(node.waits) > 1 and all(w <= deadline + 1000 for w in node.waits)
-    plain = _StubNode(TimingConfig(gc_in_slack=False))
+    pacer.tick()
+    d1, d2 = 10**9 + 1_000_000, 10**9 + 2_000_000   # absolute deadlines: start + k periods
+    tail = [d1 - 200_000 + 1000 * i for i in range(201)]
+    assert node.waits[:201] == tail                 # slept to the tail, then 1 us polls to the deadline
+    assert node.waits[201] == d2 - 200_000 and clock[0] == d2 and node.stats.overruns == 0
+    plain = _StubNode(TimingConfig(gc_in_slack=False), clock)
     p2 = RealTimePacer(plain)
     p2.start(None)
     p2.tick()
-    assert plain.waits == [p2.start_ns + plain.period_ns] and len(plain.exits) == 1
+    assert plain.waits == [clock[0]] and len(plain.exits) == 1   # no tail: one wait for the deadline
     for undo in node.exits + plain.exits:
         undo()
 
