@@ -83,7 +83,8 @@ def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
     ping, pong = _keys(mode)
     receive, _, payloads = SHAPE[mode]
     latest = receive == "latest"
-    sub = LatestSubscriber(session, ping) if latest else session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024))
+    sub = (LatestSubscriber(session, ping) if latest
+           else session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)))
     pub = _publisher(session, pong, mode)
     print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
@@ -187,7 +188,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
     ap.add_argument("--mode", choices=tuple(SHAPE), default="raw", help=argparse.SUPPRESS)
     ap.add_argument("--profile", action="store_true",
-                    help="also the modes that each add one of the project's differences to raw (options, latest, codec)")
+                    help="also the modes adding one of the project's differences each to raw (options, latest, codec)")
     ap.add_argument("--certs", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--secure", action="store_true", help="also the project path over mutual TLS + ACL (figure 2s)")
     args = ap.parse_args(argv)

@@ -154,3 +154,20 @@ def test_sched_fifo_is_applied_and_undone_where_permitted() -> None:
     if not seen[2]:
         pytest.skip("SCHED_FIFO not permitted here")
     assert seen[:2] == [os.SCHED_FIFO, os.SCHED_OTHER]
+
+
+def test_session_timing_bench_records() -> None:
+    """bench/bench_session_timing.py (figure 4s) from rows, without a session: median of the runs, goal, A/B."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import bench_session_timing as bst
+    rows = [{"ticks": 10_000, "tick_misses": m, "miss_pct": m / 100, "cpu_us_per_tick": 500.0, "latency_p50_us": 1e3,
+             "latency_p99_us": 3e3, "wall_s": 12.0} for m in (5, 30, 8)]
+    rec = bst.default_record(rows)
+    assert rec["figure"] == "4s" and rec["median"] == pytest.approx(0.08) and rec["goal_met"] is True
+    assert bst.default_record(rows[1:2])["goal_met"] is False
+    lev = bst.lever_record("gc", [(rows[1], rows[0]), (rows[1], rows[2])])
+    assert lev["baseline"] == pytest.approx(0.30) and lev["median"] == pytest.approx(0.065)
+    assert "gc_in_slack = true" in bst._toml(bst.LEVERS["gc"]) and 'realtime_scope = "process"' in bst._toml(
+        bst.LEVERS["fifo-process"])

@@ -111,6 +111,7 @@ class RealTimePacer:
             n.publish_sample(drv, drv.step())
         if self.k >= self.next_heartbeat_k:  # skipped ticks must not skip the heartbeat
             n.heartbeats()
+            self.policy.refresh()   # [timing] realtime_scope = "process": threads started since
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
         if self.gc is not None:   # a due collection, if the next deadline leaves it room
             self.gc.tick(self.start_ns + (self.k + 1) * n.period_ns - time.monotonic_ns())

@@ -2,8 +2,9 @@
 node's logic, and never in lockstep (simulated time: nothing here can change a lockstep result).
 
 - `ThreadPolicy(timing).apply()`: in the calling thread: the process's GIL switch interval, SCHED_FIFO (for the
-  driver thread, or for every thread of the process) and a CPU pin; `undo()` when the loop ends. What the OS refuses (EPERM without CAP_SYS_NICE, a CPU outside the allowed set, no such call on this
-  OS) is logged once and skipped: the loop runs on, unprivileged.
+  driver thread, or for every thread of the process) and a CPU pin; `undo()` when the loop ends. What the OS
+  refuses (EPERM without CAP_SYS_NICE, a CPU outside the allowed set, no such call on this OS) is logged once and
+  skipped: the loop runs on, unprivileged.
 - `child_cpus(timing)`: the CPUs the session's child processes are pinned to (every allowed CPU but the driver's).
 - `SlackCollector`: `gc.freeze()` after start-up and automatic collection off while the loop runs; the loop calls
   `tick(remaining_ns)` after its work and a due collection runs only when at least `gc_slack_us` remain to the next
@@ -40,6 +41,26 @@ def child_cpus(timing: TimingConfig) -> set[int] | None:
     return allowed - {timing.driver_cpu}
 
 
+def child_priority(timing: TimingConfig) -> int | None:
+    """The SCHED_FIFO priority of the session's controller processes (`realtime_scope = "session"`), else None."""
+    if timing.realtime_priority <= 0 or timing.realtime_scope != "session":
+        return None
+    return max(1, timing.realtime_priority - 2)
+
+
+def raise_process(pid: int, priority: int | None) -> bool:
+    """SCHED_FIFO `priority` for process `pid` (its threads started later inherit it); a refusal is logged."""
+    if priority is None:
+        return False
+    try:
+        _fifo(pid, priority)
+        return True
+    except (AttributeError, OSError) as err:
+        log.warning("timing: SCHED_FIFO %d for pid %d not permitted (%s); it runs at normal priority", priority, pid,
+                    err)
+        return False
+
+
 def pin_process(pid: int, cpus: set[int] | None) -> bool:
     """Pin process `pid` to `cpus` (None: nothing); a refusal is logged, never raised. True if pinned."""
     if not cpus:
@@ -56,6 +77,13 @@ def _fifo(tid: int, priority: int) -> None:
     os.sched_setscheduler(tid, os.SCHED_FIFO, os.sched_param(priority))
 
 
+def _is_fifo(tid: int) -> bool:
+    try:
+        return os.sched_getscheduler(tid) == os.SCHED_FIFO
+    except OSError:
+        return False
+
+
 def _other_threads() -> list[int]:
     """The other threads of this process (Linux /proc/self/task; elsewhere none)."""
     try:
@@ -70,7 +98,8 @@ class ThreadPolicy:
     `sched_setscheduler` / `sched_setaffinity` is the calling thread); with `realtime_scope = "process"` every other
     thread of the process gets SCHED_FIFO one priority lower (so the GIL's holders are not starved by other load
     while the driver waits for them), and threads created later by them inherit it. `undo()` puts every thread it
-    raised back to SCHED_OTHER and the switch interval back."""
+    raised back to SCHED_OTHER (process scope: also the threads that inherited it meanwhile) and the switch
+    interval back."""
 
     def __init__(self, timing: TimingConfig, role: str = "driver") -> None:
         self.timing, self.role = timing, role
@@ -103,16 +132,26 @@ class ThreadPolicy:
                         "(docs/timing.md)", priority, self.role, err)
             return {}
         self._raised.append(0)
-        if self.timing.realtime_scope == "process":
-            for tid in _other_threads():
-                try:
-                    _fifo(tid, max(1, priority - 1))
-                    self._raised.append(tid)
-                except OSError:   # a thread that has just ended, or a refusal: it keeps its policy
-                    pass
+        self.refresh()
         return {"sched_fifo": priority, "fifo_threads": len(self._raised)}
 
+    def refresh(self) -> None:
+        """Process scope, once SCHED_FIFO took effect: raise the threads started since (e.g. an edge thread started
+        after the driver's); the loop calls this now and then (a scan of /proc/self/task, ~tens of us)."""
+        if self.timing.realtime_scope == "driver" or not self._raised:
+            return
+        for tid in _other_threads():
+            if tid in self._raised:
+                continue
+            try:
+                _fifo(tid, max(1, self.timing.realtime_priority - 1))
+                self._raised.append(tid)
+            except OSError:   # a thread that has just ended, or a refusal: it keeps its policy
+                pass
+
     def undo(self) -> None:
+        if self.timing.realtime_scope != "driver" and self._raised:   # threads started meanwhile inherited it
+            self._raised += [t for t in _other_threads() if t not in self._raised and _is_fifo(t)]
         for tid in self._raised:
             try:
                 os.sched_setscheduler(tid, os.SCHED_OTHER, os.sched_param(0))

@@ -33,7 +33,7 @@ from sea_hil.session.external import OutsideController
 from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_cpus
+from sea_hil.runtime.realtime import child_cpus, child_priority
 from sea_hil.session.secure import secure_profile
 
 
@@ -107,7 +107,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
                 # the child ends when this process dies (sea_hil/session/processes.py)
                 procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL,
-                                         cpus=child_cpus(cfg.timing)))
+                                         cpus=child_cpus(cfg.timing), fifo_priority=child_priority(cfg.timing)))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
