@@ -80,15 +80,15 @@ def default_record(rows: list[dict[str, Any]]) -> dict[str, Any]:
     return rec
 
 
-def lever_record(name: str, pairs: list[tuple[dict[str, Any], dict[str, Any]]]) -> dict[str, Any]:
+def lever_record(name: str, pairs: list[tuple[dict[str, Any], dict[str, Any]]], base: str = "") -> dict[str, Any]:
     a = [p[0]["miss_pct"] for p in pairs]
     b = [p[1]["miss_pct"] for p in pairs]
     details = [{"pair": i + 1, **{f"off_{k}": v for k, v in x.items()}, **{f"on_{k}": v for k, v in y.items()}}
                for i, (x, y) in enumerate(pairs)]
-    rec = record(f"4s-{name}", f"[timing] lever `{name}` ({_toml(LEVERS[name]).splitlines()[1:]}): tick misses",
+    rec = record(f"4s-{name}{'-on-' + base if base else ''}", f"[timing] lever `{name}` ({_toml(LEVERS[name]).splitlines()[1:]}): tick misses",
                  runs=len(pairs), metric="tick misses % with the lever (B) per pair; baseline = all levers off (A)",
                  unit="%", per_run=b, p99=pct([p[1]["latency_p99_us"] for p in pairs], 50), baseline=pct(a, 50),
-                 baseline_label="all [timing] levers off, same pairs", goal="(lever A/B)", command=command_line(),
+                 baseline_label=f"all [timing] levers off{' but ' + base if base else ''}, same pairs", goal="(lever A/B)", command=command_line(),
                  details=details,
                  notes="CPU per tick off/on: " + ", ".join(f"{x['cpu_us_per_tick']:.0f}/{y['cpu_us_per_tick']:.0f}"
                                                             for x, y in pairs) + " us")
@@ -99,11 +99,16 @@ def main(argv: list[str] | None = None) -> int:
     ap = bench_args(__doc__.splitlines()[0], runs=3)
     ap.add_argument("--levers", default="", help=f"comma-separated A/B levers: {','.join(LEVERS)}")
     ap.add_argument("--pairs", type=int, default=2, help="A/B pairs per lever (default 2)")
+    ap.add_argument("--base", default="", help="A side = all levers off plus this lever (default: all off); B = A "
+                                               "plus each of --levers")
     ap.add_argument("--no-default", action="store_true", help="skip the default-config sessions (levers only)")
     ap.add_argument("--workdir", type=Path, help="keep the run directories here (default: a temporary directory)")
     args = ap.parse_args(argv)
     levers = [x for x in args.levers.split(",") if x]
     unknown = set(levers) - set(LEVERS)
+    base_timing = {**OFF, **LEVERS.get(args.base, {})}
+    if args.base and args.base not in LEVERS:
+        unknown.add(args.base)
     if unknown:
         ap.error(f"unknown lever(s) {sorted(unknown)}; choose from {','.join(LEVERS)}")
     runs, pairs = (1, 1) if args.quick else (args.runs, args.pairs)
@@ -119,12 +124,12 @@ def main(argv: list[str] | None = None) -> int:
         for name in levers:
             done = []
             for i in range(pairs):
-                off = session(base / f"{name}{i + 1}-off", OFF)
-                on = session(base / f"{name}{i + 1}-on", {**OFF, **LEVERS[name]})
+                off = session(base / f"{name}{i + 1}-off", base_timing)
+                on = session(base / f"{name}{i + 1}-on", {**base_timing, **LEVERS[name]})
                 print(_line(f"{name} pair {i + 1}/{pairs} off", off), flush=True)
                 print(_line(f"{name} pair {i + 1}/{pairs} on ", on), flush=True)
                 done.append((off, on))
-            records.append(lever_record(name, done))
+            records.append(lever_record(name, done, args.base))
     emit(records, args.json)
     return 0
 

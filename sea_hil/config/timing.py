@@ -18,10 +18,10 @@ class TimingConfig(_Frozen):
     switch_interval_us: int = Field(0, ge=0, description="sys.setswitchinterval for the process hosting the driver "
                                                          "(how long a thread holds the GIL against a waiter); 0 = "
                                                          "Python's default (5000 us)")
-    realtime_priority: int = Field(0, ge=0, le=99, description="SCHED_FIFO priority of the driver thread where "
+    realtime_priority: int = Field(50, ge=0, le=99, description="SCHED_FIFO priority of the driver thread where "
                                                                "permitted (one log line when not); 0 = normal")
     realtime_scope: Literal["driver", "process", "session"] = Field(
-        "driver", description="SCHED_FIFO for the driver thread only; `process`: also (one priority lower) every "
+        "session", description="SCHED_FIFO for the driver thread only; `process`: also (one priority lower) every "
                               "other thread of its process (edge, Zenoh, taps: the GIL's holders), restored when it "
                               "stops; `session`: also (two lower) the session's controller processes")
     driver_cpu: int = Field(-1, ge=-1, description="pin the driver thread to this CPU and the session's child "

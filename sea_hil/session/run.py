@@ -100,14 +100,15 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            procs = []
+            procs = []   # [timing] pinning / SCHED_FIFO in real time only (lockstep runs as fast as it can)
+            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing),
+                                                 "fifo_priority": child_priority(cfg.timing)}
             base = controller_config(_without_live(child_cfg), listen[0])
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
                 # the child ends when this process dies (sea_hil/session/processes.py)
-                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL,
-                                         cpus=child_cpus(cfg.timing), fifo_priority=child_priority(cfg.timing)))
+                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL, **rt_child))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
