@@ -20,7 +20,7 @@ import zenoh
 from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.zsession import LatestSubscriber
-from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
+from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_priority
 
 
 class Clock:
@@ -183,8 +183,17 @@ class RealTimeControllerSync:
 
     def __init__(self, ctrl: Any) -> None:
         self.ctrl = ctrl
+        self.policy: ThreadPolicy | None = None
 
     def state_source(self, session: zenoh.Session, key: str) -> LatestStates:
+        """The newest-state source; with `[timing] realtime_scope = "session"` this process's threads get SCHED_FIFO
+        (two below the driver) from here on: after the start-up (imports, Zenoh), never during it."""
+        timing = getattr(self.ctrl.cfg, "timing", None) or TimingConfig()
+        priority = child_priority(timing)
+        if priority is not None:
+            self.policy = ThreadPolicy(TimingConfig(realtime_priority=priority, realtime_scope="process"),
+                                       "controller")
+            self.policy.apply()
         return LatestStates(LatestSubscriber(session, key))
 
     def repeat_state(self, verdict: Any, seq: int) -> bool:
@@ -206,7 +215,8 @@ class RealTimeControllerSync:
         return silent
 
     def close(self) -> None:
-        pass
+        if self.policy is not None:
+            self.policy.undo()
 
 
 class LatestStates:

@@ -48,19 +48,6 @@ def child_priority(timing: TimingConfig) -> int | None:
     return max(1, timing.realtime_priority - 2)
 
 
-def raise_process(pid: int, priority: int | None) -> bool:
-    """SCHED_FIFO `priority` for process `pid` (its threads started later inherit it); a refusal is logged."""
-    if priority is None:
-        return False
-    try:
-        _fifo(pid, priority)
-        return True
-    except (AttributeError, OSError) as err:
-        log.warning("timing: SCHED_FIFO %d for pid %d not permitted (%s); it runs at normal priority", priority, pid,
-                    err)
-        return False
-
-
 def pin_process(pid: int, cpus: set[int] | None) -> bool:
     """Pin process `pid` to `cpus` (None: nothing); a refusal is logged, never raised. True if pinned."""
     if not cpus:

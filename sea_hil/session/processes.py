@@ -2,7 +2,7 @@
 with SIGTERM, a bounded wait, then SIGKILL, always reaped.
 
 - `end_process(proc)`: SIGTERM, wait, SIGKILL, reap.
-- `spawn_child(cmd, cpus=, fifo_priority=)`: `subprocess.Popen` (pinned, SCHED_FIFO if given: `[timing]`) that
+- `spawn_child(cmd, cpus=)`: `subprocess.Popen` (pinned to `cpus` if given: `[timing] driver_cpu`) that
   tells the child who its parent is (`SEA_HIL_PARENT_PID`); the child's
   `exit_with_parent()` (called by `sea_hil.cli.main`) asks Linux for SIGTERM when that parent dies, so a parent
   that is SIGKILLed (no close path runs) leaves no controller behind. The recorder child needs no such signal: it
@@ -23,7 +23,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from sea_hil.errors import Terminated
-from sea_hil.runtime.realtime import pin_process, raise_process
+from sea_hil.runtime.realtime import pin_process
 
 PARENT_ENV = "SEA_HIL_PARENT_PID"
 _PR_SET_PDEATHSIG = 1    # <linux/prctl.h>
@@ -40,16 +40,14 @@ def end_process(proc: subprocess.Popen, timeout_s: float = 5.0) -> int:
         return proc.wait()
 
 
-def spawn_child(cmd: Sequence[str], *, cpus: set[int] | None = None, fifo_priority: int | None = None,
-                **kw: Any) -> subprocess.Popen:
+def spawn_child(cmd: Sequence[str], *, cpus: set[int] | None = None, **kw: Any) -> subprocess.Popen:
     """`subprocess.Popen(cmd, **kw)` with `SEA_HIL_PARENT_PID` set to this process (see `exit_with_parent`); with
-    `cpus`, the child is pinned to them (`[timing] driver_cpu`: the driver's CPU is kept for the driver), with
-    `fifo_priority` it runs SCHED_FIFO (`[timing] realtime_scope = "session"`); a refusal is logged, never raised."""
+    `cpus`, the child is pinned to them (`[timing] driver_cpu`: the driver's CPU is kept for the driver; a refusal
+    is logged, the child runs unpinned)."""
     env = dict(kw.pop("env", None) or os.environ)
     env[PARENT_ENV] = str(os.getpid())
     proc = subprocess.Popen(list(cmd), env=env, **kw)
     pin_process(proc.pid, cpus)
-    raise_process(proc.pid, fifo_priority)
     return proc
 
 

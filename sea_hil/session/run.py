@@ -33,7 +33,7 @@ from sea_hil.session.external import OutsideController
 from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_cpus, child_priority
+from sea_hil.runtime.realtime import child_cpus
 from sea_hil.session.secure import secure_profile
 
 
@@ -100,9 +100,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            procs = []   # [timing] pinning / SCHED_FIFO in real time only (lockstep runs as fast as it can)
-            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing),
-                                                 "fifo_priority": child_priority(cfg.timing)}
+            procs = []   # [timing] pinning in real time only (lockstep runs as fast as it can)
+            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing)}
             base = controller_config(_without_live(child_cfg), listen[0])
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
