@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import struct
+from math import isfinite
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -220,6 +221,9 @@ def decode(b: bytes) -> Payload:
     if len(b) != PAYLOAD_SIZE[mt]:
         raise PayloadRejected(RejectReason.LENGTH, f"{mt.name} must be {PAYLOAD_SIZE[mt]} bytes, got {len(b)}")
     f = _BODY[mt].unpack_from(b, HEADER_SIZE)
+    fast = _decoded(mt, seq, t_ns, epoch, f)
+    if fast is not None:
+        return fast
     if mt is MsgType.STATE:
         return StatePayload(seq, t_ns, f[0], f[1:3], f[3:5], f[5:7], f[7:9], epoch=epoch)
     if mt is MsgType.EVENT_STATE:
@@ -232,6 +236,28 @@ def decode(b: bytes) -> Payload:
             raise PayloadRejected(RejectReason.ENUM, f"ack flag {f[2]} is not 0 or 1")
         return AckPayload(seq, t_ns, f[0], f[1], f[2], epoch=epoch)
     return VoltagePayload(seq, t_ns, f[0], f[1:3], epoch=epoch)
+
+
+def _decoded(mt: MsgType, seq: int, t_ns: int, epoch: int, f: tuple) -> Payload | None:
+    """The hot messages (STATE, SETPOINT) without re-running the constructors' checks, when the checks cannot
+    fail: `struct` gives in-range unsigned integers, and one `isfinite` of the floats' sum is true only if every
+    float is finite (an overflowing sum of finite floats is false: the constructor then decides). None: take the
+    constructor (which raises the exact rejection)."""
+    if mt is MsgType.STATE and isfinite(sum(f[1:9])):
+        return _trusted(StatePayload, {"seq": seq, "t_ns": t_ns, "sample_t_ns": f[0], "theta_rad": f[1:3],
+                                       "omega_rad_s": f[3:5], "delta_m": f[5:7], "nut_vel_m_s": f[7:9],
+                                       "epoch": epoch})
+    if mt is MsgType.SETPOINT and isfinite(sum(f[1:5])) and f[5] in _REASONS:
+        return _trusted(SetpointPayload, {"seq": seq, "t_ns": t_ns, "state_seq": f[0], "deflection_m": f[1:3],
+                                          "sliding": f[3:5], "reason": _REASONS[f[5]], "epoch": epoch})
+    return None
+
+
+def _trusted(cls: type, fields: dict) -> Payload:
+    """An instance of the frozen dataclass `cls` with already-checked `fields` (every field given)."""
+    obj = object.__new__(cls)
+    obj.__dict__.update(fields)
+    return obj
 
 
 class PayloadCounters:

@@ -7,6 +7,7 @@ import gc
 import logging
 import math
 import os
+import struct
 import threading
 from types import SimpleNamespace
 
@@ -16,7 +17,8 @@ from sea_hil.config import load_config
 from sea_hil.config.timing import TimingConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason, pair_field, uint_field
-from sea_hil.protocol.payloads import MsgType, PayloadCounters, SetpointPayload, TriggerReason, decode, encode
+from sea_hil.protocol.payloads import (MsgType, PayloadCounters, SetpointPayload, StatePayload, TriggerReason, decode,
+                                       encode)
 from sea_hil.runtime import clock as clock_module
 from sea_hil.runtime.clock import RealTimePacer
 from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_cpus
@@ -134,6 +136,14 @@ def test_payload_fast_paths_give_the_general_verdicts() -> None:
     data[3] = 77                                     # unknown message type
     assert c.try_decode(bytes(data)) is None and c.rejected["type"] == 1
     assert int(MsgType.SETPOINT) == 2
+    state = StatePayload(4, 5, 6, (0.1, 0.2), (0.3, 0.4), (0.5, 0.6), (0.7, 0.8), epoch=9)
+    back = decode(encode(state))                     # the trusted fast path: equal in every field, hash, repr
+    assert back == state and hash(back) == hash(state) and repr(back) == repr(state)
+    raw = bytearray(encode(state))
+    raw[-8:] = struct.pack("<d", math.nan)           # a non-finite float still gets the constructor's verdict
+    assert c.try_decode(bytes(raw)) is None and c.rejected["nonfinite"] == 1
+    raw[-16:] = struct.pack("<2d", 1e308, 1e308)     # finite, but the sum overflows: the constructor accepts
+    assert decode(bytes(raw)).nut_vel_m_s == (1e308, 1e308)
 
 
 def test_sched_fifo_is_applied_and_undone_where_permitted() -> None:

@@ -12,7 +12,7 @@ from sea_hil.config.base import _Frozen
 class TimingConfig(_Frozen):
     spin_us: int = Field(0, ge=0, le=1000, description="driver: the last spin_us before each deadline are polled "
                                                        "(the bus, without sleeping) instead of slept; 0 = sleep")
-    gc_in_slack: bool = Field(True, description="gc.freeze() after start-up, automatic collection off while the "
+    gc_in_slack: bool = Field(False, description="gc.freeze() after start-up, automatic collection off while the "
                                                  "driver runs; collections run in the driver's slack time")
     gc_slack_us: int = Field(300, ge=0, description="collect only when at least this much remains to the deadline")
     switch_interval_us: int = Field(0, ge=0, description="sys.setswitchinterval for the process hosting the driver "
