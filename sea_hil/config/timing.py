@@ -24,5 +24,8 @@ class TimingConfig(_Frozen):
         "session", description="SCHED_FIFO for the driver thread only; `process`: also (one priority lower) every "
                               "other thread of its process (edge, Zenoh, taps: the GIL's holders), restored when it "
                               "stops; `session`: also (two lower) the session's controller processes")
+    controller_priority: int = Field(0, ge=0, le=99, description="SCHED_FIFO priority of a controller process's "
+                                                                 "threads once started; 0 = normal. `sea-hil run` sets "
+                                                                 "it in its children's config (realtime_scope session)")
     driver_cpu: int = Field(-1, ge=-1, description="pin the driver thread to this CPU and the session's child "
                                                    "processes to the others; -1 = no pinning")

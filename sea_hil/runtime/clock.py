@@ -20,7 +20,7 @@ import zenoh
 from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.zsession import LatestSubscriber
-from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_priority
+from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
 
 
 class Clock:
@@ -186,13 +186,13 @@ class RealTimeControllerSync:
         self.policy: ThreadPolicy | None = None
 
     def state_source(self, session: zenoh.Session, key: str) -> LatestStates:
-        """The newest-state source; with `[timing] realtime_scope = "session"` this process's threads get SCHED_FIFO
-        (two below the driver) from here on: after the start-up (imports, Zenoh), never during it."""
+        """The newest-state source; with `[timing] controller_priority` (set by `sea-hil run` for its controller
+        children) this process's threads get SCHED_FIFO from here on: after the start-up (imports, Zenoh), never
+        during it; undone by `close`."""
         timing = getattr(self.ctrl.cfg, "timing", None) or TimingConfig()
-        priority = child_priority(timing)
-        if priority is not None:
-            self.policy = ThreadPolicy(TimingConfig(realtime_priority=priority, realtime_scope="process"),
-                                       "controller")
+        if timing.controller_priority > 0:
+            self.policy = ThreadPolicy(TimingConfig(realtime_priority=timing.controller_priority,
+                                                    realtime_scope="process"), "controller")
             self.policy.apply()
         return LatestStates(LatestSubscriber(session, key))
 

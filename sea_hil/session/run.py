@@ -33,7 +33,7 @@ from sea_hil.session.external import OutsideController
 from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_cpus
+from sea_hil.runtime.realtime import child_cpus, child_priority
 from sea_hil.session.secure import secure_profile
 
 
@@ -69,10 +69,14 @@ def listen_endpoints(cfg: SeaHilConfig, opts: RunOptions) -> tuple[str, ...]:
     return (f"{'tls' if cfg.zenoh.tls.enabled else 'tcp'}/127.0.0.1:{free_tcp_port()}",)
 
 
-def controller_config(cfg: SeaHilConfig, endpoint: str) -> SeaHilConfig:
-    """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only."""
+def controller_config(cfg: SeaHilConfig, endpoint: str, priority: int | None = None) -> SeaHilConfig:
+    """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only; with
+    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md)."""
     z = type(cfg.zenoh).model_validate({**cfg.zenoh.model_dump(), "listen": (), "connect": (endpoint,)})
-    return cfg.model_copy(update={"zenoh": z})
+    update: dict[str, Any] = {"zenoh": z}
+    if priority is not None:
+        update["timing"] = cfg.timing.model_copy(update={"controller_priority": priority})
+    return cfg.model_copy(update=update)
 
 
 def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = print) -> dict[str, Any]:
@@ -102,7 +106,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
             procs = []   # [timing] pinning in real time only (lockstep runs as fast as it can)
             rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing)}
-            base = controller_config(_without_live(child_cfg), listen[0])
+            base = controller_config(_without_live(child_cfg), listen[0], None if opts.lockstep else
+                                     child_priority(cfg.timing))
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
