@@ -1,6 +1,6 @@
 """Figure 2: Zenoh hop latency through the project's publish/decode path vs a raw zenoh-python ping-pong.
 
-Run: python bench/bench_zenoh_hop.py [--runs 5] [--pings 2000] [--secure] [--json OUT]
+Run: python bench/bench_zenoh_hop.py [--runs 5] [--pings 2000] [--secure] [--profile] [--json OUT]
 This process listens on a free loopback TCP port; an echo child process (this script with `--echo`) connects.
 One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
@@ -12,6 +12,9 @@ One hop = round trip / 2, on this process's monotonic clock, in three modes, int
   tls        (`--secure` only, figure 2s) `project` over the secure profile (docs/security.md): mutual TLS with
              throwaway certificates, the ACL on both sides, pinging on the limb's `state` key as the edge's CN and
              answering on `setpoint` as the controller's CN.
+`--profile` adds one mode per difference between raw and project (docs/timing.md, "Zenoh hop"): `options` (raw +
+the project's publisher options), `latest` (raw + the echo's `LatestSubscriber`), `codec` (raw + the project's
+payloads, encoded and decoded on both sides).
 """
 from __future__ import annotations
 
@@ -38,6 +41,12 @@ from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.protocol.zsession import LatestSubscriber, free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")
+PROFILE_MODES = ("options", "latest", "codec")
+# mode: (echo receive: fifo | latest, publishers: default | project, payloads: opaque | project)
+SHAPE = {"raw": ("fifo", "default", "opaque"), "project": ("latest", "project", "project"),
+         "blocking": ("fifo", "project", "project"), "tls": ("latest", "project", "project"),
+         "options": ("fifo", "project", "opaque"), "latest": ("latest", "default", "opaque"),
+         "codec": ("fifo", "default", "project")}
 PING, PONG = "bench/hop/ping", "bench/hop/pong"
 PING_BYTES, PONG_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
 _LIMB = Keys.make("sea", "limb1")
@@ -63,25 +72,28 @@ def _state(seq: int) -> bytes:
                                (0.0, 0.0)))
 
 
+def _publisher(session: zenoh.Session, key: str, mode: str) -> zenoh.Publisher:
+    return publisher(session, key) if SHAPE[mode][1] == "project" else session.declare_publisher(key)
+
+
 def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
     """Child: answer every ping on the pong key until terminated."""
     session = open_session(_config(mode, certs, "controller", connect=[endpoint]))
     counters = PayloadCounters()
     ping, pong = _keys(mode)
-    if mode == "raw":
-        sub, pub = session.declare_subscriber(ping), session.declare_publisher(pong)
-    elif mode in ("project", "tls"):
-        sub, pub = LatestSubscriber(session, ping), publisher(session, pong)
-    else:
-        sub, pub = session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)), publisher(session, pong)
+    receive, _, payloads = SHAPE[mode]
+    latest = receive == "latest"
+    sub = (LatestSubscriber(session, ping) if latest
+           else session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)))
+    pub = _publisher(session, pong, mode)
     print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
     while True:
-        sample = sub.recv(1.0) if mode in ("project", "tls") else sub.recv()
+        sample = sub.recv(1.0) if latest else sub.recv()
         if sample is None:
             continue
         data = sample.payload.to_bytes()
-        if mode == "raw":
+        if payloads == "opaque":
             pub.put(data[:4] + pad)
             continue
         p = counters.try_decode(data)
@@ -118,12 +130,13 @@ def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: zenoh.Subscriber,
     """Hop time in ns (round trip / 2) for ping `seq`, or None if the watchdog fired first."""
     raw_ping = seq.to_bytes(4, "little") + bytes(PING_BYTES - 4)
     t0 = time.monotonic_ns()
-    pub.put(raw_ping if mode == "raw" else _state(seq))
+    opaque = SHAPE[mode][2] == "opaque"
+    pub.put(raw_ping if opaque else _state(seq))
     while True:
         data = sub.recv().payload.to_bytes()
         if data == SENTINEL:
             return None
-        if mode == "raw":
+        if opaque:
             ok = int.from_bytes(data[:4], "little") == seq
         else:
             p = counters.try_decode(data)
@@ -144,7 +157,7 @@ def batch(mode: str, pings: int, certs: Path | None = None) -> tuple[list[int], 
     dog = None
     try:
         wait_ready(proc)
-        pub = session.declare_publisher(ping) if mode == "raw" else publisher(session, ping)
+        pub = _publisher(session, ping, mode)
         sub = session.declare_subscriber(pong, zenoh.handlers.FifoChannel(1024))
         counters = PayloadCounters()
         dog = _Watchdog(session, timeout_s=0.05, pong=pong)   # warm-up: retry every ~0.1 s until the echo answers
@@ -173,7 +186,9 @@ def main(argv: list[str] | None = None) -> int:
     ap = bench_args(__doc__.splitlines()[0], runs=5)
     ap.add_argument("--pings", type=int, default=2000, help="timed ping-pongs per mode and run (default 2000)")
     ap.add_argument("--echo", metavar="ENDPOINT", help=argparse.SUPPRESS)
-    ap.add_argument("--mode", choices=(*MODES, "tls"), default="raw", help=argparse.SUPPRESS)
+    ap.add_argument("--mode", choices=tuple(SHAPE), default="raw", help=argparse.SUPPRESS)
+    ap.add_argument("--profile", action="store_true",
+                    help="also the modes adding one of the project's differences each to raw (options, latest, codec)")
     ap.add_argument("--certs", type=Path, help=argparse.SUPPRESS)
     ap.add_argument("--secure", action="store_true", help="also the project path over mutual TLS + ACL (figure 2s)")
     args = ap.parse_args(argv)
@@ -183,7 +198,8 @@ def main(argv: list[str] | None = None) -> int:
         certs = Path(tmp)
         if args.secure:
             make_certs(certs, ("edge", "controller"))
-        return _measure(args, (*MODES, "tls") if args.secure else MODES, certs)
+        modes = (*MODES, *(PROFILE_MODES if args.profile else ()), *(("tls",) if args.secure else ()))
+        return _measure(args, modes, certs)
 
 
 def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> int:
@@ -202,15 +218,17 @@ def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> i
                   f"  lost {n_lost}", flush=True)
     details = [{"mode": m, "hops": len(pooled[m]), "lost": lost[m], "median_us": pct(pooled[m], 50) / 1e3,
                 "p99_us": pct(pooled[m], 99) / 1e3, "min_us": min(pooled[m], default=0) / 1e3,
-                "max_us": max(pooled[m], default=0) / 1e3} for m in modes]
+                "max_us": max(pooled[m], default=0) / 1e3,
+                "ratio_to_raw": pct([x / r for x, r in zip(medians[m], medians["raw"])], 50)} for m in modes]
     base = pct(medians["raw"], 50)
     rec = record("2", "Zenoh hop latency, project path vs raw zenoh-python", runs=runs,
                  metric=f"one-way hop (round trip / 2) on loopback, median per run of {pings} pings; p99 pooled",
                  unit="us", per_run=medians["project"], p99=pct(pooled["project"], 99) / 1e3, baseline=base,
                  baseline_label="raw zenoh-python ping-pong, same payload sizes (median of run medians)",
                  goal="ratio <= 1.3", details=details,
-                 notes="`blocking` row = project payloads/publishers with a blocking receive at the echo: the gap "
-                       "between `project` and `blocking` is the controller's 100 us polling receive.")
+                 notes="`blocking` row = project payloads and publishers with a FIFO receive at the echo: the gap "
+                       "between `project` and `blocking` is the newest-only hand-off (`LatestSubscriber`); "
+                       "`ratio_to_raw` = median of the per-run ratios (`--profile` rows: one difference each).")
     ratios = [p / r for p, r in zip(medians["project"], medians["raw"])]
     rec["ratio"] = pct(ratios, 50)   # per-run ratios: both modes of a run share the machine's state
     rec["notes"] += f" Ratio = median of the per-run ratios project/raw: {', '.join(f'{x:.2f}' for x in ratios)}."

@@ -97,7 +97,9 @@ class LatestSubscriber:
         self.overwritten = 0
         self._latest: zenoh.Sample | None = None
         self._cond = threading.Condition()
-        self._sub = session.declare_subscriber(key, self._on_sample)
+        # indirect=False: the callback runs in zenoh's receiving thread; the default (a plain callable) hands every
+        # sample to one more Python thread first, an extra wake-up and GIL hand-off per sample (docs/timing.md)
+        self._sub = session.declare_subscriber(key, zenoh.handlers.Callback(self._on_sample, indirect=False))
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         with self._cond:

@@ -12,6 +12,7 @@ from sea_hil.config.live import LiveConfig
 from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
                                   TriggerConfig)
 from sea_hil.config.safety import SafetyConfig
+from sea_hil.config.timing import TimingConfig
 
 
 class SeaHilConfig(_Frozen):
@@ -27,6 +28,7 @@ class SeaHilConfig(_Frozen):
     record: RecordConfig = RecordConfig()
     live: LiveConfig = LiveConfig()
     safety: SafetyConfig = SafetyConfig()
+    timing: TimingConfig = TimingConfig()   # [timing]: real-time levers of the 1 kHz loops (docs/timing.md)
     limbs: tuple[LimbConfig, ...] = ()   # [[limbs]]; empty = the one default limb (sea_hil/config/limbs.py)
 
     @field_validator("limbs")

@@ -17,8 +17,10 @@ from typing import Any
 
 import zenoh
 
+from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.zsession import LatestSubscriber
+from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
 
 
 class Clock:
@@ -62,10 +64,22 @@ class RealTimePacer:
     def __init__(self, node: Any) -> None:
         self.node = node
         self.done = False
+        timing = getattr(getattr(node, "cfg", None), "timing", None) or TimingConfig()
+        self.timing = timing
+        self.spin_ns = timing.spin_us * 1000
+        self.gc = SlackCollector.from_config(timing)
+        self.policy = ThreadPolicy(timing, "driver")
+        self.applied: dict[str, object] = {}
 
     def start(self, duration_s: float | None) -> None:
+        """In the driver's thread: its `[timing]` policy (docs/timing.md), the compiled kernels, then the schedule."""
         n = self.node
+        self.applied = self.policy.apply()
+        n.on_loop_exit(self.policy.undo)
         n.prepare_kernels()
+        if self.gc is not None:
+            self.gc.start()
+            n.on_loop_exit(self.gc.stop)
         self.start_ns = time.monotonic_ns()
         self.end_ns = None if duration_s is None else self.start_ns + int(duration_s * 1e9)
         for drv in n.drivers.values():
@@ -77,7 +91,12 @@ class RealTimePacer:
         n = self.node
         self.k += 1
         deadline = self.start_ns + self.k * n.period_ns
-        n.drain_until(deadline)
+        if self.spin_ns:   # sleep until the tail, then poll the bus (a GIL-releasing wait of ~1 us) to the deadline
+            n.drain_until(deadline - self.spin_ns)
+            while (now := time.monotonic_ns()) < deadline:
+                n.drain_until(now + 1000)
+        else:
+            n.drain_until(deadline)
         now = time.monotonic_ns()
         late = now - deadline
         n.lateness.record(max(late, 0) * 1e-9 + 1e-7)
@@ -93,7 +112,10 @@ class RealTimePacer:
             n.publish_sample(drv, feedback)
         if self.k >= self.next_heartbeat_k:  # skipped ticks must not skip the heartbeat
             n.heartbeats()
+            self.policy.refresh()   # [timing] realtime_scope = "process": threads started since
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
+        if self.gc is not None:   # a due collection, if the next deadline leaves it room
+            self.gc.tick(self.start_ns + (self.k + 1) * n.period_ns - time.monotonic_ns())
         if self.end_ns is not None and now >= self.end_ns:
             self.done = True
 
@@ -162,8 +184,17 @@ class RealTimeControllerSync:
 
     def __init__(self, ctrl: Any) -> None:
         self.ctrl = ctrl
+        self.policy: ThreadPolicy | None = None
 
     def state_source(self, session: zenoh.Session, key: str) -> LatestStates:
+        """The newest-state source; with `[timing] controller_priority` (set by `sea-hil run` for its controller
+        children) this process's threads get SCHED_FIFO from here on: after the start-up (imports, Zenoh), never
+        during it; undone by `close`."""
+        timing = getattr(self.ctrl.cfg, "timing", None) or TimingConfig()
+        if timing.controller_priority > 0:
+            self.policy = ThreadPolicy(TimingConfig(realtime_priority=timing.controller_priority,
+                                                    realtime_scope="process"), "controller")
+            self.policy.apply()
         return LatestStates(LatestSubscriber(session, key))
 
     def repeat_state(self, verdict: Any, seq: int) -> bool:
@@ -185,7 +216,8 @@ class RealTimeControllerSync:
         return silent
 
     def close(self) -> None:
-        pass
+        if self.policy is not None:
+            self.policy.undo()
 
 
 class LatestStates:

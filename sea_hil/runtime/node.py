@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections.abc import Callable
 from typing import Any, ClassVar
 
 from sea_hil.stats import schema as stats_schema
@@ -34,6 +35,7 @@ class Node:
         self.stats_pub: Any = None      # a publisher (`put(bytes)`) for `publish_stats`, set by the subclass
         self._thread: threading.Thread | None = None
         self._closed = False
+        self._loop_exit: list[Callable[[], None]] = []   # run when a `run` ends (`on_loop_exit`)
 
     # ---- the loop -------------------------------------------------------------------------------------------------
     def run(self, duration_s: float | None = None) -> bool:
@@ -47,7 +49,14 @@ class Node:
                     return False
         finally:
             self._on_stop()
+            while self._loop_exit:
+                self._loop_exit.pop()()
         return self.finished()
+
+    def on_loop_exit(self, fn: Callable[[], None]) -> None:
+        """Run `fn` once when the current `run` ends (after `_on_stop`, last registered first): a clock's part
+        undoing what it did to the thread or process for the loop (e.g. `SlackCollector.stop`)."""
+        self._loop_exit.append(fn)
 
     def start(self, duration_s: float | None = None) -> threading.Thread:
         """`run` in a daemon thread named after the node."""

@@ -33,6 +33,7 @@ from sea_hil.session.external import OutsideController
 from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
+from sea_hil.runtime.realtime import child_cpus, child_priority
 from sea_hil.session.secure import secure_profile
 
 
@@ -68,10 +69,14 @@ def listen_endpoints(cfg: SeaHilConfig, opts: RunOptions) -> tuple[str, ...]:
     return (f"{'tls' if cfg.zenoh.tls.enabled else 'tcp'}/127.0.0.1:{free_tcp_port()}",)
 
 
-def controller_config(cfg: SeaHilConfig, endpoint: str) -> SeaHilConfig:
-    """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only."""
+def controller_config(cfg: SeaHilConfig, endpoint: str, priority: int | None = None) -> SeaHilConfig:
+    """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only; with
+    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md)."""
     z = type(cfg.zenoh).model_validate({**cfg.zenoh.model_dump(), "listen": (), "connect": (endpoint,)})
-    return cfg.model_copy(update={"zenoh": z})
+    update: dict[str, Any] = {"zenoh": z}
+    if priority is not None:
+        update["timing"] = cfg.timing.model_copy(update={"controller_priority": priority})
+    return cfg.model_copy(update=update)
 
 
 def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = print) -> dict[str, Any]:
@@ -101,13 +106,15 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            procs = []
-            base = controller_config(_without_live(child_cfg), listen[0])
+            procs = []   # [timing] pinning in real time only (lockstep runs as fast as it can)
+            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing)}
+            base = controller_config(_without_live(child_cfg), listen[0], None if opts.lockstep else
+                                     child_priority(cfg.timing))
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
                 # the child ends when this process dies (sea_hil/session/processes.py)
-                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
+                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL, **rt_child))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):

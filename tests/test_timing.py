@@ -1,0 +1,183 @@
+"""The `[timing]` levers of the real-time driver loop (sea_hil/runtime/realtime.py, docs/timing.md) as pure units:
+the slack-time garbage collector, the thread policy's fallbacks, the pacer's busy-wait tail on a stub node; and
+the payload validation fast paths taken for the Zenoh hop (same verdicts as the general path)."""
+from __future__ import annotations
+
+import gc
+import logging
+import math
+import os
+import struct
+import threading
+from types import SimpleNamespace
+
+import pytest
+
+from sea_hil.config import load_config
+from sea_hil.config.timing import TimingConfig
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason, pair_field, uint_field
+from sea_hil.protocol.payloads import (MsgType, PayloadCounters, SetpointPayload, StatePayload, TriggerReason, decode,
+                                       encode)
+from sea_hil.runtime import clock as clock_module
+from sea_hil.runtime.clock import RealTimePacer
+from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_cpus
+
+
+@pytest.fixture
+def gc_restored():
+    enabled = gc.isenabled()
+    yield
+    gc.unfreeze()
+    gc.enable() if enabled else gc.disable()
+
+
+def test_slack_collector_collects_only_in_slack_and_restores(gc_restored) -> None:
+    col = SlackCollector(slack_ns=300_000)
+    col.start()
+    assert not gc.isenabled() and gc.get_freeze_count() > 0
+    keep = [[] for _ in range(3 * gc.get_threshold()[0])]   # gen-0 count above its threshold
+    col.tick(remaining_ns=100_000)                            # no slack: postponed
+    assert (col.collections, col.postponed) == (0, 1)
+    col.tick(remaining_ns=500_000)
+    assert col.collections == 1 and gc.get_count()[0] < gc.get_threshold()[0]
+    more = [[] for _ in range(9 * gc.get_threshold()[0])]   # postponed too long: collected without slack
+    col.tick(remaining_ns=0)
+    assert col.collections == 2
+    col.stop()
+    assert gc.isenabled() and len(keep) + len(more) > 0
+
+
+def test_thread_policy_falls_back_with_one_log_line(monkeypatch, caplog) -> None:
+    def refuse(*_a: object) -> None:
+        raise PermissionError(1, "Operation not permitted")
+    monkeypatch.setattr(os, "sched_setscheduler", refuse)
+    out: dict[str, object] = {}
+    policy = ThreadPolicy(TimingConfig(realtime_priority=50, realtime_scope="process", driver_cpu=4096))
+    t = threading.Thread(target=lambda: out.update(policy.apply()))
+    with caplog.at_level(logging.INFO, logger="sea_hil.runtime"):
+        t.start()
+        t.join()
+    assert out == {}   # nothing took effect, nothing raised
+    policy.undo()
+    assert sum("SCHED_FIFO" in r.message for r in caplog.records) == 1
+    assert sum("CPU 4096" in r.message for r in caplog.records) == 1
+    assert child_cpus(TimingConfig(driver_cpu=4096)) is None and child_cpus(TimingConfig()) is None
+
+
+class _StubNode:
+    """What `RealTimePacer` uses of a driver node, on a fake monotonic clock: a wait until t moves the clock to t."""
+
+    def __init__(self, timing: TimingConfig, clock: list[int]) -> None:
+        self.cfg = SimpleNamespace(timing=timing)
+        self.period_ns, self.heartbeat_every, self.drivers = 1_000_000, 10**9, {}
+        self.lateness = SimpleNamespace(record=lambda _v: None)
+        self.stats = SimpleNamespace(overruns=0, ticks=0)
+        self.clock, self.waits, self.exits = clock, [], []
+
+    def prepare_kernels(self) -> None:
+        pass
+
+    def on_loop_exit(self, fn: object) -> None:
+        self.exits.append(fn)
+
+    def drain_until(self, deadline_ns: int) -> None:
+        self.waits.append(deadline_ns)
+        self.clock[0] = max(self.clock[0], deadline_ns)
+
+
+def test_pacer_busy_wait_tail_polls_up_to_the_absolute_deadline(monkeypatch, gc_restored) -> None:
+    clock = [10**9]
+    monkeypatch.setattr(clock_module, "time", SimpleNamespace(monotonic_ns=lambda: clock[0]))
+    node = _StubNode(TimingConfig(spin_us=200, gc_in_slack=True), clock)
+    pacer = RealTimePacer(node)
+    pacer.start(None)
+    assert len(node.exits) == 2                     # policy and collector are undone when the loop ends
+    pacer.tick()
+    pacer.tick()
+    d1, d2 = 10**9 + 1_000_000, 10**9 + 2_000_000   # absolute deadlines: start + k periods
+    tail = [d1 - 200_000 + 1000 * i for i in range(201)]
+    assert node.waits[:201] == tail                 # slept to the tail, then 1 us polls to the deadline
+    assert node.waits[201] == d2 - 200_000 and clock[0] == d2 and node.stats.overruns == 0
+    plain = _StubNode(TimingConfig(gc_in_slack=False), clock)
+    p2 = RealTimePacer(plain)
+    p2.start(None)
+    p2.tick()
+    assert plain.waits == [clock[0]] and len(plain.exits) == 1   # no tail: one wait for the deadline
+    for undo in node.exits + plain.exits:
+        undo()
+
+
+def test_timing_section_is_validated() -> None:
+    assert load_config().timing == TimingConfig()
+    with pytest.raises(ConfigError):
+        load_config(overrides={"timing": {"realtime_priority": 100}})
+
+
+def test_payload_fast_paths_give_the_general_verdicts() -> None:
+    assert pair_field("x", [1, 2]) == (1.0, 2.0)
+    t = (0.5, -1.0)
+    assert pair_field("x", t) is t
+    for bad, reason in (((math.nan, 1.0), RejectReason.NONFINITE), ((1.0, math.inf), RejectReason.NONFINITE),
+                        ((1.0, 2.0, 3.0), RejectReason.RANGE), ("ab", RejectReason.RANGE)):
+        with pytest.raises(PayloadRejected) as err:
+            pair_field("x", bad)
+        assert err.value.reason is reason
+    assert uint_field("n", 7, 10) == 7
+    for bad in (True, -1, 11, 2.0):
+        with pytest.raises(PayloadRejected):
+            uint_field("n", bad, 10)
+    data = bytearray(encode(SetpointPayload(1, 2, 3, (0.1, 0.2), (0.0, 0.0), TriggerReason.HEARTBEAT)))
+    p = decode(bytes(data))
+    assert p.reason is TriggerReason.HEARTBEAT
+    c = PayloadCounters()
+    data[-1] = 99                                    # unknown trigger reason
+    assert c.try_decode(bytes(data)) is None and c.rejected["enum"] == 1
+    data[3] = 77                                     # unknown message type
+    assert c.try_decode(bytes(data)) is None and c.rejected["type"] == 1
+    assert int(MsgType.SETPOINT) == 2
+    state = StatePayload(4, 5, 6, (0.1, 0.2), (0.3, 0.4), (0.5, 0.6), (0.7, 0.8), epoch=9)
+    back = decode(encode(state))                     # the trusted fast path: equal in every field, hash, repr
+    assert back == state and hash(back) == hash(state) and repr(back) == repr(state)
+    raw = bytearray(encode(state))
+    raw[-8:] = struct.pack("<d", math.nan)           # a non-finite float still gets the constructor's verdict
+    assert c.try_decode(bytes(raw)) is None and c.rejected["nonfinite"] == 1
+    raw[-16:] = struct.pack("<2d", 1e308, 1e308)     # finite, but the sum overflows: the constructor accepts
+    assert decode(bytes(raw)).nut_vel_m_s == (1e308, 1e308)
+
+
+def test_sched_fifo_is_applied_and_undone_where_permitted() -> None:
+    seen: list[int] = []
+
+    def body() -> None:
+        policy = ThreadPolicy(TimingConfig(realtime_priority=5, switch_interval_us=500))
+        applied = policy.apply()
+        seen.append(os.sched_getscheduler(0))
+        policy.undo()
+        seen.append(os.sched_getscheduler(0))
+        seen.append(int("sched_fifo" in applied))
+    before = __import__("sys").getswitchinterval()
+    t = threading.Thread(target=body)
+    t.start()
+    t.join()
+    assert __import__("sys").getswitchinterval() == before
+    if not seen[2]:
+        pytest.skip("SCHED_FIFO not permitted here")
+    assert seen[:2] == [os.SCHED_FIFO, os.SCHED_OTHER]
+
+
+def test_session_timing_bench_records() -> None:
+    """bench/bench_session_timing.py (figure 4s) from rows, without a session: median of the runs, goal, A/B."""
+    import sys
+    from pathlib import Path
+    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
+    import bench_session_timing as bst
+    rows = [{"ticks": 10_000, "tick_misses": m, "miss_pct": m / 100, "cpu_us_per_tick": 500.0, "latency_p50_us": 1e3,
+             "latency_p99_us": 3e3, "wall_s": 12.0} for m in (5, 30, 8)]
+    rec = bst.default_record(rows)
+    assert rec["figure"] == "4s" and rec["median"] == pytest.approx(0.08) and rec["goal_met"] is True
+    assert bst.default_record(rows[1:2])["goal_met"] is False
+    lev = bst.lever_record("gc", [(rows[1], rows[0]), (rows[1], rows[2])])
+    assert lev["baseline"] == pytest.approx(0.30) and lev["median"] == pytest.approx(0.065)
+    assert "gc_in_slack = true" in bst._toml(bst.LEVERS["gc"]) and 'realtime_scope = "process"' in bst._toml(
+        bst.LEVERS["fifo-process"])
