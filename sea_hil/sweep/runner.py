@@ -133,11 +133,12 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
         futures = {client.submit(run_point, specs[p.index], key=f"{p.name}-{specs[p.index].config_sha256[:12]}",
                                  pure=False): p for p in todo}
         try:
-            for fut in as_completed(futures):
-                point = futures[fut]
-                rows[point.index] = fut.result()
-                csv_log.append(rows[point.index])
-                progress.update(rows[point.index], point)
+            for batch in as_completed(futures).batches():   # one gather per batch of finished points
+                for fut, row in zip(batch, client.gather(batch, direct=True)):
+                    point = futures[fut]
+                    rows[point.index] = row
+                    csv_log.append(row)
+                    progress.update(row, point)
         except KeyboardInterrupt:
             interrupted = True
             log("sweep: interrupted, ending running points ...")
