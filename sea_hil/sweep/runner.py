@@ -63,7 +63,7 @@ def point_spec(opts: SweepOptions, point: GridPoint, cfg: SeaHilConfig, stop_eve
     toml = config_to_toml(cfg)
     return PointSpec(point, opts.mode, opts.cycles, str(opts.out), toml, hashlib.sha256(toml.encode()).hexdigest(),
                      cfg.link.seed, point_timeout_s(cfg, opts.cycles), stop_event,
-                     tuple(scheme_columns(cfg).items()))
+                     tuple(scheme_columns(cfg).items()), cfg if opts.mode == "offline" else None)
 
 
 def progress_line(done: int, total: int, elapsed_s: float, row: dict[str, Any], point: GridPoint) -> str:
