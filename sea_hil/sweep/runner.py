@@ -133,8 +133,9 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
         futures = {client.submit(run_point, specs[p.index], key=f"{p.name}-{specs[p.index].config_sha256[:12]}",
                                  pure=False): p for p in todo}
         try:
+            direct = True if opts.scheduler is None else None   # a remote cluster's workers may be unreachable
             for batch in as_completed(futures).batches():   # one gather per batch of finished points
-                for fut, row in zip(batch, client.gather(batch, direct=True)):
+                for fut, row in zip(batch, client.gather(batch, direct=direct)):
                     point = futures[fut]
                     rows[point.index] = row
                     csv_log.append(row)
