@@ -35,6 +35,7 @@ def test_full_length_grid_point(spec):
 def test_uncovered_session_takes_the_message_path(monkeypatch):
     calls = []
     monkeypatch.setattr(session_engine, "run_kernel", lambda *a: calls.append(a))
-    cfg = load_config(None, {"trajectory": {"period_s": 1.5, "lead_in_s": 0.3}, "controller": {"compensation": "predict"}})
+    cfg = load_config(None, {"trajectory": {"period_s": 1.5, "lead_in_s": 0.3},
+                             "controller": {"compensation": "predict"}})
     assert engine_summary(cfg, "et") == session_summary(run_engine(cfg, "et").data, "et")
     assert calls == []
