@@ -7,13 +7,15 @@ each (plus the 0.5 s lead-in), seed 1, on the embedded local Dask cluster (`--jo
 covers the whole command: interpreter start, cluster start, numba load in every worker, every point, the CSV and the
 figure. Before the first run the offline session kernel is compiled into numba's disk cache (`warm-up`, reported
 apart: a one-time cost after an install or a source change, which every later sweep skips). Per run it also reports
-the mean point wall time inside the workers (the `wall_s` column). `--quick`: 2 link conditions (32 points), numbers
-not meaningful.
+the mean point wall time inside the workers (the `wall_s` column) and the CPU time of the whole command (its process
+and every worker process: user + system, less sensitive to a loaded machine than the wall time). `--quick`: 2 link
+conditions (32 points), numbers not meaningful.
 """
 from __future__ import annotations
 
 import csv
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -42,21 +44,27 @@ def warm_up() -> float:
     return time.monotonic() - t0
 
 
-def run_once(grid: dict[str, str], jobs: int, out: Path) -> tuple[float, int, int, float]:
-    """(wall s, points, ok points, mean point wall s inside the workers) of one sweep command."""
+def _children_cpu_s() -> float:
+    use = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return use.ru_utime + use.ru_stime
+
+
+def run_once(grid: dict[str, str], jobs: int, out: Path) -> tuple[float, int, int, float, float]:
+    """(wall s, points, ok points, mean point wall s inside the workers, CPU s of the command and its workers) of
+    one sweep command."""
     cmd = [sys.executable, "-m", "sea_hil.cli", "sweep", "--out", str(out), "--engine", "offline", "--seed", "1",
            "--jobs", str(jobs)]
     for k, v in grid.items():
         cmd += [k, v]
-    t0 = time.monotonic()
+    cpu0, t0 = _children_cpu_s(), time.monotonic()
     proc = subprocess.run(cmd, cwd=REPO, capture_output=True, text=True, stdin=subprocess.DEVNULL, timeout=3600)
-    wall_s = time.monotonic() - t0
+    wall_s, cpu_s = time.monotonic() - t0, _children_cpu_s() - cpu0
     if proc.returncode not in (0, 1):
         raise SystemExit(f"sweep failed ({proc.returncode}): {proc.stderr[-2000:]}")
     with (out / "sweep.csv").open(encoding="utf-8") as fh:
         rows = list(csv.DictReader(fh))
     point_s = sum(float(r["wall_s"]) for r in rows) / max(1, len(rows))
-    return wall_s, len(rows), sum(r["status"] == "ok" for r in rows), point_s
+    return wall_s, len(rows), sum(r["status"] == "ok" for r in rows), point_s, cpu_s
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -70,12 +78,13 @@ def main(argv: list[str] | None = None) -> int:
     details = []
     for i in range(args.runs):
         with tempfile.TemporaryDirectory(prefix="sea-hil-bench-sweep-") as tmp:
-            wall_s, n, ok, point_s = run_once(grid, args.jobs, Path(tmp) / "sw")
+            wall_s, n, ok, point_s, cpu_s = run_once(grid, args.jobs, Path(tmp) / "sw")
         walls.append(wall_s)
         details.append({"run": i + 1, "points": n, "ok": ok, "wall_s": wall_s, "points_per_s": n / wall_s,
-                        "jobs": args.jobs, "point_wall_ms": point_s * 1e3, "warm_up_s": warm_s})
+                        "jobs": args.jobs, "point_wall_ms": point_s * 1e3, "warm_up_s": warm_s, "cpu_s": cpu_s})
         print(f"run {i + 1}: {n} points ({ok} ok) in {wall_s:.1f} s wall, {n / wall_s:.1f} points/s, "
-              f"{args.jobs} worker processes, {point_s * 1e3:.0f} ms per point in a worker", flush=True)
+              f"{args.jobs} worker processes, {point_s * 1e3:.0f} ms per point in a worker, {cpu_s:.1f} s CPU "
+              "(command + workers)", flush=True)
     worst = max(walls)
     rec = record("9", f"offline sweep of {details[0]['points']} points with delay, jitter and loss", runs=args.runs,
                  metric="wall_s", unit="s", per_run=walls, p99=worst, goal=f"< {GOAL_S:.0f} s for 1,000 points",

@@ -1,6 +1,8 @@
 """Loading a `SeaHilConfig`: embedded default TOML, a user file, overrides; and back to TOML."""
 from __future__ import annotations
 
+import copy
+import functools
 import tomllib
 from importlib import resources
 from pathlib import Path
@@ -27,6 +29,12 @@ def default_toml_text() -> str:
     return resources.files("sea_hil.config").joinpath("default_config.toml").read_text(encoding="utf-8")
 
 
+@functools.lru_cache(maxsize=1)
+def _default_data() -> dict[str, Any]:
+    """The embedded defaults, parsed once per process (a sweep loads a config per grid point)."""
+    return tomllib.loads(default_toml_text())
+
+
 def _one_line(err: ValidationError) -> str:
     parts = []
     for e in err.errors():
@@ -45,7 +53,7 @@ def config_from_dict(data: dict[str, Any]) -> SeaHilConfig:
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
     """Embedded defaults, overlaid with the TOML file at `path` (if any), then `overrides` (nested dict). Keys of
     older files are moved to their one source or dropped, with a warning (sea_hil/config/legacy.py)."""
-    data = tomllib.loads(default_toml_text())
+    data = copy.deepcopy(_default_data())
     if path is not None:
         p = Path(path)
         try:

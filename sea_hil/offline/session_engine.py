@@ -37,7 +37,7 @@ from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
-from sea_hil.offline.session_fast import run_compiled, unsupported
+from sea_hil.offline.session_fast import run_compiled, run_kernel, unsupported
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, SessionRecords
 from sea_hil.offline.wire_quantiser import dbc_resolutions
@@ -50,8 +50,8 @@ from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.errors import SeaHilError
 
-__all__ = ["EngineOptions", "EngineResult", "SessionRecords", "driver_disturbance_table", "run_engine",
-           "tracking_record"]
+__all__ = ["EngineOptions", "EngineResult", "SessionRecords", "driver_disturbance_table", "engine_summary",
+           "run_engine", "tracking_record"]
 
 _log = logging.getLogger("sea_hil.offline")
 
@@ -125,6 +125,32 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
         return run_session(cfg, mode, cycles, jit, opts, whole)
 
 
+def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, Any]:
+    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs), without cyclic garbage
+    collection: where the compiled kernel covers it, straight from the kernel's records
+    (`sea_hil.offline.kernel_summary`, no messages built), else `session_summary` of the engine's messages; the
+    same dict either way (tests/test_kernel_summary.py)."""
+    from sea_hil.offline.kernel_summary import kernel_summary
+    from sea_hil.report.session_summary import session_summary
+    with gc_paused():
+        opts = EngineOptions.from_config(cfg)
+        env, x, p, lsb, dist_tab = _prepare(cfg, mode, cycles, True)
+        if not unsupported(cfg, opts, env.traj):
+            run = run_kernel(env, cfg, x, p, lsb, dist_tab)
+            if run is not None:
+                return kernel_summary(run, env.rec.keys.state, env.rec.state_bytes, mode)
+        return session_summary(run_session(cfg, mode, cycles, opts=opts).data, mode)
+
+
+def _prepare(cfg: SeaHilConfig, mode: str, cycles: int, jit: bool) -> tuple[_Env, State, Any, tuple, np.ndarray]:
+    """A session's parts, its plant's start state and parameters, the DBC resolutions and the disturbance table."""
+    p = limb_params(cfg.plant)
+    env = _Env(cfg, mode, cycles, p, jit)
+    theta0 = tuple(cfg.plant.initial_theta_rad)
+    x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
+    return env, x, p, dbc_resolutions(cfg.can.fd), driver_disturbance_table(cfg, env.n_max, env.period_ns)
+
+
 def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
                 opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
     """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` selects the trigger
@@ -132,12 +158,7 @@ def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
     lockstep session bit for bit). `whole` (with `jit`): the session in one compiled call where it covers the options
     (`sea_hil.offline.session_fast`), else (and with whole=False) the Python sample loop; both give the same result."""
     opts = EngineOptions.from_config(cfg) if opts is None else opts
-    p = limb_params(cfg.plant)
-    env = _Env(cfg, mode, cycles, p, jit)
-    theta0 = tuple(cfg.plant.initial_theta_rad)
-    x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
-    lsb = dbc_resolutions(cfg.can.fd)
-    dist_tab = driver_disturbance_table(cfg, env.n_max, env.period_ns)
+    env, x, p, lsb, dist_tab = _prepare(cfg, mode, cycles, jit)
     if whole and jit and not unsupported(cfg, opts, env.traj):
         res = run_compiled(env, cfg, x, p, lsb, dist_tab)
         if res is not None:

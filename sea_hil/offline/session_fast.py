@@ -7,7 +7,7 @@ gait trajectory, links without a trace or a rate limit. Anything else runs the P
 (`tests/test_session_kernel.py`)."""
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -65,27 +65,49 @@ def kernel_inputs(env: Any, cfg: SeaHilConfig, x0: tuple, p: Any, lsb: tuple, di
     return drive, edge, ctl, links, new_records(n)
 
 
-def run_compiled(env: Any, cfg: SeaHilConfig, x0: tuple, p: Any, lsb: tuple, dist_tab: np.ndarray
-                 ) -> EngineResult | None:
-    """The session on the compiled kernel, or None without numba."""
+class KernelRun(NamedTuple):
+    """A finished kernel call: its records (filled up to the counts) and counters."""
+    rec: Records
+    k: int
+    n_recv: int
+    n_sp: int
+    n_tr: int
+    saturated: int
+    u_max_v: tuple[float, float]
+    faulted: bool
+
+
+def run_kernel(env: Any, cfg: SeaHilConfig, x0: tuple, p: Any, lsb: tuple, dist_tab: np.ndarray) -> KernelRun | None:
+    """The session on the compiled kernel (the envelope's rejections counted and logged by `env.envelope`; a diverged
+    session or a non-finite setpoint a SeaHilError), or None without numba."""
     kernel = compiled(make_session_kernel)
     if kernel is None:
         return None
     drive, edge, ctl, links, rec = kernel_inputs(env, cfg, x0, p, lsb, dist_tab)
     status, k, n_recv, n_sp, n_tr, n_rej, sat, u1_max, u2_max, faulted = kernel(drive, edge, ctl, links, rec)
-    sp_i, sp_f = rec.sp_i[:n_sp].tolist(), rec.sp_f[:n_sp].tolist()
+    sp_f = rec.sp_f[:n_sp]
     for j in rec.rejected[:n_rej].tolist():           # the edge's count and log of rejected setpoints, in order
-        if env.envelope.admit(j + 1, (sp_f[j][0], sp_f[j][1])):
+        if env.envelope.admit(j + 1, (float(sp_f[j, 0]), float(sp_f[j, 1]))):
             raise SeaHilError(f"offline session kernel: setpoint {j + 1} rejected by the kernel, not by the envelope")
     if status == DIVERGED:
         raise SeaHilError(f"offline session diverged at sample {k} (t = {k * env.period_ns * 1e-9:.3f} s)")
     if status == BAD_SETPOINT:      # the payload's own validation says why
-        (now, state_seq, code), f = sp_i[-1], sp_f[-1]
+        (now, state_seq, code), f = rec.sp_i[n_sp - 1].tolist(), sp_f[n_sp - 1].tolist()
         SetpointPayload(n_sp, now, state_seq, (f[0], f[1]), (f[2], f[3]), TriggerReason(code))
         raise SeaHilError(f"offline session kernel: setpoint {n_sp} is not finite: {f}")
-    _messages(env.rec, rec, n_recv, sp_i, sp_f, n_tr)
-    env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u1_max, "u2_v": u2_max})]
-    return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, sat, bool(faulted),
+    return KernelRun(rec, k, n_recv, n_sp, n_tr, sat, (u1_max, u2_max), bool(faulted))
+
+
+def run_compiled(env: Any, cfg: SeaHilConfig, x0: tuple, p: Any, lsb: tuple, dist_tab: np.ndarray
+                 ) -> EngineResult | None:
+    """The session on the compiled kernel, its messages built from the records, or None without numba."""
+    run = run_kernel(env, cfg, x0, p, lsb, dist_tab)
+    if run is None:
+        return None
+    rec = run.rec
+    _messages(env.rec, rec, run.n_recv, rec.sp_i[:run.n_sp].tolist(), rec.sp_f[:run.n_sp].tolist(), run.n_tr)
+    env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": run.u_max_v[0], "u2_v": run.u_max_v[1]})]
+    return EngineResult(SessionData(messages=env.rec.messages, complete=True), run.k, run.saturated, run.faulted,
                         env.envelope.rejected)
 
 

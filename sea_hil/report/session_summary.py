@@ -76,7 +76,7 @@ def _counts(down: list[dict[str, Any]], up: list[dict[str, Any]]) -> dict[str, i
                                len(up), int(sum(u["payload_bytes"] for u in up)))
 
 
-def _tracking(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[float]]:
+def tracking_or_zero(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[float]]:
     if len(theta):
         return tracking_block(theta, desired)
     return {"max_abs_error_rad": [0.0, 0.0], "rms_error_rad": [0.0, 0.0]}
@@ -145,10 +145,10 @@ def one_limb_summary(data: SessionData, controller: str) -> dict[str, Any]:
         "lead_in": {"duration_s": float(-tr_lead["t_s"][0]) if len(tr_lead["t_s"]) else 0.0,
                     **_counts([d for d in down_all if phase(d["state_seq"]) == "lead_in"],
                               [u for u in up_all if phase(u["seq"]) == "lead_in"]),
-                    "tracking": _tracking(tr_lead["theta_rad"], tr_lead["desired_rad"])},
+                    "tracking": tracking_or_zero(tr_lead["theta_rad"], tr_lead["desired_rad"])},
         "uplink_outside_msgs": sum(phase(u["seq"]) == "outside" for u in up_all),
         "events_by_reason": dict(sorted(reasons.items())),
-        "tracking": _tracking(tr["theta_rad"], tr["desired_rad"]),
+        "tracking": tracking_or_zero(tr["theta_rad"], tr["desired_rad"]),
         "inter_event_s": inter_event_block(tr["event_t_s"]),
         "max_abs_voltage_v": [float(v[0]), float(v[1])],
         "edge": edge_det,

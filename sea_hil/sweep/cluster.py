@@ -8,25 +8,34 @@ from collections.abc import Iterator
 
 from sea_hil.errors import ConfigError
 
+# the embedded cluster's own bookkeeping, slowed down: by default the scheduler, each nanny and each worker sample
+# CPU, memory and disk I/O with psutil every 0.5 s and each nanny its worker's memory every 0.1 s, in the client
+# process and the workers, which share the machine's cores with the points (a dashboard would show these samples;
+# the embedded cluster has none). The memory limit still holds, checked every second.
+QUIET_MONITORS = {"distributed.admin.system-monitor.interval": "5s", "distributed.admin.system-monitor.disk": False,
+                  "distributed.worker.memory.monitor-interval": "1s"}
+
 
 @contextlib.contextmanager
 def open_client(scheduler: str | None, jobs: int, engine: str = "offline") -> Iterator[object]:
     """A `distributed.Client`. Without `scheduler`, a local cluster (no dashboard, closed on exit): engine `offline`
     computes in the worker (CPU and GIL bound), so `jobs` worker processes of one thread; engine `lockstep` points
     are child processes a thread waits on, so one in-process worker with `jobs` threads (no GIL cost)."""
+    import dask
     from distributed import Client, LocalCluster
     if scheduler is None:
-        if engine == "offline":
-            cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
-                                   silence_logs=logging.WARNING)
-        else:
-            cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, dashboard_address=None,
-                                   silence_logs=logging.WARNING)
-        try:
-            with Client(cluster) as client:
-                yield client
-        finally:
-            cluster.close()
+        with dask.config.set(QUIET_MONITORS):
+            if engine == "offline":
+                cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
+                                       silence_logs=logging.WARNING)
+            else:
+                cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, dashboard_address=None,
+                                       silence_logs=logging.WARNING)
+            try:
+                with Client(cluster) as client:
+                    yield client
+            finally:
+                cluster.close()
         return
     try:
         client = Client(scheduler, timeout="10s")

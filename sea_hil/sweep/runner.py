@@ -63,7 +63,7 @@ def point_spec(opts: SweepOptions, point: GridPoint, cfg: SeaHilConfig, stop_eve
     toml = config_to_toml(cfg)
     return PointSpec(point, opts.mode, opts.cycles, str(opts.out), toml, hashlib.sha256(toml.encode()).hexdigest(),
                      cfg.link.seed, point_timeout_s(cfg, opts.cycles), stop_event,
-                     tuple(scheme_columns(cfg).items()))
+                     tuple(scheme_columns(cfg).items()), cfg if opts.mode == "offline" else None)
 
 
 def progress_line(done: int, total: int, elapsed_s: float, row: dict[str, Any], point: GridPoint) -> str:
@@ -133,11 +133,13 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
         futures = {client.submit(run_point, specs[p.index], key=f"{p.name}-{specs[p.index].config_sha256[:12]}",
                                  pure=False): p for p in todo}
         try:
-            for fut in as_completed(futures):
-                point = futures[fut]
-                rows[point.index] = fut.result()
-                csv_log.append(rows[point.index])
-                progress.update(rows[point.index], point)
+            direct = True if opts.scheduler is None else None   # a remote cluster's workers may be unreachable
+            for batch in as_completed(futures).batches():   # one gather per batch of finished points
+                for fut, row in zip(batch, client.gather(batch, direct=direct)):
+                    point = futures[fut]
+                    rows[point.index] = row
+                    csv_log.append(row)
+                    progress.update(row, point)
         except KeyboardInterrupt:
             interrupted = True
             log("sweep: interrupted, ending running points ...")
