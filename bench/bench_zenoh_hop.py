@@ -31,7 +31,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 import zenoh  # noqa: E402
 
 from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-from sea_hil.commands.certs import make_certs  # noqa: E402
+from sea_hil.protocol.zcerts import make_certs  # noqa: E402
 from sea_hil.config import ZenohConfig  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload,  # noqa: E402

@@ -1,22 +1,81 @@
 """Test-suite set-up: pytest's own `pytester` (tests/test_api.py runs a user's test with the sea-hil plugin), and
 the with-vcan guest's socketcan suite started in the background as soon as its host test is collected
-(tests/uml_suite.py), so it overlaps the rest of the run; it is ended when pytest ends."""
+(tests/uml_suite.py), so it overlaps the rest of the run; it is ended when pytest ends. Under pytest-xdist
+(`SEA_HIL_TEST_WORKERS=2 scripts/test` runs `-n 2 --dist loadgroup`) the controller process starts and ends it,
+once, and the tests that run sessions share one xdist group (`SERIAL_GROUP`), so no two of them run at a time."""
 from __future__ import annotations
 
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Any
+
 import pytest
-from uml_suite import BACKGROUND_KEY, SUITE_ARGS, SUITE_TEST, BackgroundRun, can_boot
+from uml_suite import BACKGROUND_KEY, RUN_DIR_KEY, SUITE_ARGS, SUITE_TEST, WORKER_RUN_DIR, BackgroundRun, can_boot
 
 pytest_plugins = ["pytester"]
 
+SERIAL_GROUP = "sessions"
+# Tests that run a live session (real-time or lockstep nodes, threads or child processes) or that are
+# timing-sensitive: under xdist they all go to one worker, one at a time, beside the other worker's pure tests.
+SERIAL_FILES = frozenset({
+    "test_api.py", "test_bench_smoke.py", "test_bench_soak.py", "test_bus_timing.py", "test_can_fd_session.py",
+    "test_chaos.py", "test_cli_errors.py", "test_compose_topology.py", "test_console.py", "test_edge_arrival.py",
+    "test_examples.py", "test_faults.py", "test_fuzz_can.py", "test_fuzz_zenoh.py", "test_limbs.py", "test_live.py",
+    "test_lockstep_link.py", "test_mcap_node.py", "test_period_option.py", "test_plant_node.py",
+    "test_pre_refactor_equality.py", "test_recorder_process.py", "test_recording.py", "test_replay.py",
+    "test_robustness_session.py", "test_run_secure.py", "test_runtime.py", "test_safety.py", "test_secure.py",
+    "test_session.py", "test_session_engine.py", "test_session_signals.py", "test_sessionwatch.py",
+    "test_udp_multicast.py", "test_uml_vcan.py", "test_zsession.py",
+})
+
+
+def _is_worker(config: pytest.Config) -> bool:
+    return hasattr(config, "workerinput")
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    if _is_worker(config):
+        config.stash[RUN_DIR_KEY] = Path(config.workerinput[WORKER_RUN_DIR])  # type: ignore[attr-defined]
+    else:
+        config.stash[RUN_DIR_KEY] = Path(tempfile.mkdtemp(prefix="sea-hil-uml-"))
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_configure_node(node: Any) -> None:
+    """xdist controller: every worker waits for the guest run in the controller's run directory."""
+    node.workerinput[WORKER_RUN_DIR] = str(node.config.stash[RUN_DIR_KEY])
+
+
+def _start_background(config: pytest.Config) -> None:
+    if BACKGROUND_KEY not in config.stash and can_boot():
+        config.stash[BACKGROUND_KEY] = BackgroundRun(config.stash[RUN_DIR_KEY], *SUITE_ARGS)
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    del config
+    for item in items:
+        if item.path.name in SERIAL_FILES:
+            item.add_marker(pytest.mark.xdist_group(SERIAL_GROUP))
+
 
 def pytest_collection_finish(session: pytest.Session) -> None:
-    if session.config.option.collectonly or not any(item.nodeid == SUITE_TEST for item in session.items):
+    if session.config.option.collectonly or _is_worker(session.config):
         return
-    if can_boot():
-        session.config.stash[BACKGROUND_KEY] = BackgroundRun(*SUITE_ARGS)
+    if any(item.nodeid == SUITE_TEST for item in session.items):
+        _start_background(session.config)
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
+    """xdist controller: start the guest run when the first worker reports that it collected its host test."""
+    if SUITE_TEST in ids and not node.config.option.collectonly:
+        _start_background(node.config)
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
     background = config.stash.get(BACKGROUND_KEY, None)
     if background is not None:
         background.stop()
+    if not _is_worker(config):
+        shutil.rmtree(config.stash[RUN_DIR_KEY], ignore_errors=True)

@@ -26,7 +26,8 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
 from sea_hil.protocol.zsecurity import acl_document, security_settings
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, session_config
-from sea_hil.commands.certs import CertSet, make_certs, node_cn, register
+from sea_hil.commands.certs import register
+from sea_hil.protocol.zcerts import CertSet, make_certs, node_cn
 
 DEADLINE_S = 20.0
 KEYS = Keys.make("sea", "limb1")

@@ -15,7 +15,8 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from uml_suite import BACKGROUND_KEY, HOST_TIMEOUT_S, REPO, SUITE_ARGS, WITH_VCAN, BackgroundRun, load_with_vcan
+from uml_suite import (HOST_TIMEOUT_S, REPO, RUN_DIR_KEY, SUITE_ARGS, WITH_VCAN, BackgroundRun, load_with_vcan, started,
+                       wait_result)
 
 pytestmark = pytest.mark.uml
 
@@ -58,11 +59,19 @@ def run_with_vcan(*args: str, cwd: Path = REPO, env: dict[str, str] | None = Non
 Runner = Callable[..., subprocess.CompletedProcess[str]]
 
 
-def test_socketcan_suite_passes_on_real_vcan(with_vcan_runner: Runner, request: pytest.FixtureRequest) -> None:
-    """The guest run was started in the background when pytest had collected this test (tests/conftest.py);
-    started here when it was not."""
-    background = request.config.stash.get(BACKGROUND_KEY, None) or BackgroundRun(*SUITE_ARGS)
-    returncode, output = background.result()
+def test_socketcan_suite_passes_on_real_vcan(with_vcan_runner: Runner, request: pytest.FixtureRequest,
+                                             tmp_path: Path) -> None:
+    """The guest run was started in the background when pytest (or the xdist controller) had collected this test
+    (tests/conftest.py); started here when it was not."""
+    run_dir = request.config.stash[RUN_DIR_KEY]
+    if started(run_dir):
+        returncode, output = wait_result(run_dir)
+    else:
+        background = BackgroundRun(tmp_path, *SUITE_ARGS)
+        try:
+            returncode, output = background.result()
+        finally:
+            background.stop()
     assert returncode is not None, f"with-vcan did not finish within {HOST_TIMEOUT_S} s:\n{output}"
     assert returncode == 0, output
     summary = re.search(r"(\d+) passed", output)

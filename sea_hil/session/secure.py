@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from sea_hil.commands.certs import DEFAULT_NODES, make_certs
+from sea_hil.protocol.zcerts import DEFAULT_NODES, make_certs
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import ConfigError
 

@@ -12,8 +12,6 @@ import signal
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
-from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
@@ -59,8 +57,8 @@ def write_client_config(directory: Path) -> Path:
 
 
 class NodeGroup:
-    """Processes started by a test; each one's output goes to ``<log_dir>/<name>.log``. On exit every process
-    still running is terminated (then killed) and reaped."""
+    """Processes started by a test; each one's output goes to ``<log_dir>/<name>.log``. A context manager: on exit
+    (also when the test fails) every process still running is terminated (then killed) and reaped."""
 
     def __init__(self, log_dir: Path) -> None:
         self.log_dir = log_dir
@@ -97,15 +95,11 @@ class NodeGroup:
         for log in self._logs:
             log.close()
 
+    def __enter__(self) -> NodeGroup:
+        return self
 
-@contextmanager
-def node_group(log_dir: Path) -> Iterator[NodeGroup]:
-    """A :class:`NodeGroup` closed on exit (also when the test fails)."""
-    group = NodeGroup(log_dir)
-    try:
-        yield group
-    finally:
-        group.close()
+    def __exit__(self, *exc: object) -> None:
+        self.close()
 
 
 def tcp_sockets(port: int, state: str, netns: str | None) -> int:
@@ -166,7 +160,7 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
     """Run one lockstep cycle with plant, edge, recorder and controller as separate processes, stop them in order
     (the edge before the recorder, so that its final stats are recorded) and summarise ``out/session.mcap``."""
     cfg, mcap = str(s.config), out / "session.mcap"
-    with node_group(out) as nodes:
+    with NodeGroup(out) as nodes:
         edge = nodes.start("edge", sea_hil_cmd("edge", "--can", s.can, "--lockstep", "--listen", s.endpoint,
                                                "--config", cfg, netns=s.bus_netns))
         nodes.start("plant", sea_hil_cmd("plant", "--can", s.can, "--lockstep", "--config", cfg, netns=s.bus_netns))
