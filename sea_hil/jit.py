@@ -57,6 +57,20 @@ def compiled(factory: Callable[[str], Callable[..., Any]]) -> Any | None:
     if importlib.util.find_spec("numba") is None:
         log.info("numba is not installed: %s runs as plain Python", factory.__qualname__)
         return None
+    from numba.core.compiler_lock import global_compiler_lock
+
+    # numba builds its CPU target context (refresh -> load_additional_registries, which imports and registers the
+    # numpy-polynomial boxers) on the first dispatcher of a process, outside its compiler lock. Two node threads of
+    # an in-process session creating their first kernels at once raced there ("duplicate registration for
+    # PolynomialType", seen in a pytest-xdist run). The compiler lock (reentrant, held by numba while it compiles or
+    # loads from its cache) serialises registration and dispatcher creation with any compilation in flight; the
+    # inner cache makes a second thread that missed the outer cache at the same time get the same dispatcher.
+    with global_compiler_lock:
+        return _dispatcher(factory)
+
+
+@functools.cache
+def _dispatcher(factory: Callable[[str], Callable[..., Any]]) -> Any:
     import numba
     from numba.extending import register_jitable
 
