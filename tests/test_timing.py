@@ -81,6 +81,9 @@ class _StubNode:
     def on_loop_exit(self, fn: object) -> None:
         self.exits.append(fn)
 
+    def step_drivers(self) -> list:
+        return []                                   # no limbs: the pacer's schedule alone
+
     def drain_until(self, deadline_ns: int) -> None:
         self.waits.append(deadline_ns)
         self.clock[0] = max(self.clock[0], deadline_ns)
