@@ -22,7 +22,7 @@ from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController, Setpoint
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
-from sea_hil.controller.trajectory import LeadIn, make_trajectory, trajectory_id
+from sea_hil.controller.trajectory import LeadIn, lead_in_duration_s, make_trajectory, trajectory_id
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, VoltagePayload, encode
 
 
@@ -67,9 +67,13 @@ class ControllerCore:
         """The answer to one new state; None once past the cycles (`done`). Raises ArithmeticError / ValueError /
         MalformedPayload for a state it cannot use (the node counts it)."""
         if self.t0_ns is None:
+            if self.lead_in_ns:     # stretched if the limb starts far from the trajectory (a restart, issue 19)
+                tc, target = self.cfg.trajectory, self.traj.sample(0.0)
+                lead_s = lead_in_duration_s(p.theta_rad, p.omega_rad_s, target, tc.lead_in_s,
+                                            tc.lead_in_max_velocity_rad_s)
+                self.lead_in_ns = int(round(lead_s * 1e9))
+                self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, target, self.lead_in_ns * 1e-9)
             self.t0_ns = p.sample_t_ns + self.lead_in_ns
-            if self.lead_in_ns:
-                self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9)
         t_ns = p.sample_t_ns - self.t0_ns
         self.last_t_ns = t_ns
         if t_ns > self.duration_ns:

@@ -11,6 +11,12 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
+
+from recovery_rig import RecoveryRig
+from sea_hil.config import load_config
+from sea_hil.controller.trajectory import LeadIn, lead_in_duration_s, make_trajectory
+from sea_hil.session.builder import SessionBuilder
 from test_udp_multicast import require_netns
 
 CHAOS = Path(__file__).resolve().parent / "multicast" / "chaos.py"
@@ -18,16 +24,48 @@ REPO = Path(__file__).resolve().parents[1]
 GROUP = "239.74.163.23"
 SEED = 19
 # the compose services' config (client mode, through the router) with a short flush period: a SIGKILLed recorder
-# loses at most its open chunk, and a state is in the file within ~0.1 s. The drive's soft limits are off: the
-# catch-up after a safe-state stop (0.3-0.7 s at zero voltage) can exceed the spring-force limit, and a soft-limit
-# fault is left to the operator by design (docs/reliability.md), which would end the session this test restarts
+# loses at most its open chunk, and a state is in the file within ~0.1 s. The drive's soft limits are on (defaults):
+# the edge resumes bumplessly after the safe state and a restarted controller's lead-in is speed-bounded (below)
 OVERLAY = """
 [record]
 flush_period_s = 0.1
-
-[safety.drive]
-enabled = false
 """
+NO_BUMPLESS = {"safety": {"setpoint": {"resume_ramp_s": 0.0}}, "trajectory": {"lead_in_max_velocity_rad_s": 100.0}}
+
+
+@pytest.mark.parametrize("kind", ["controller", "edge"])
+def test_recovery_from_the_safe_state_is_bumpless_and_within_the_drive_limits(kind: str) -> None:
+    """A controller or edge killed at 1.2 s for 0.7 s (the drive's watchdog faults it, 0 V), then restarted: the edge
+    restarts its observer and ramps the deflection command from the measured one, so the drive is RUNNING again, with
+    its soft limits on none trips and the voltage stays far from saturation. Without it (`resume_ramp_s = 0`) the
+    stale observer of a controller restart kicks the hip with a saturated 24 V command (the transient that tripped
+    the spring-force limit on a loaded host, where such a command is held for several periods)."""
+    cfg = load_config()
+    with SessionBuilder(cfg) as b:
+        r = RecoveryRig(cfg, b).run(kind, 1.2, 0.7, 1.0)
+    assert r.watchdog_trips == 1 and r.resumes == 1 and r.running_again, r
+    assert r.limit_trips == 0 and r.peak_voltage_v < 12.0, r
+    assert r.peak_force_n < 0.5 * cfg.safety.drive.spring_force_max_n[0], r
+    assert r.peak_velocity_rad_s < 0.75 * cfg.safety.drive.velocity_max_rad_s[0], r
+    if kind == "controller":
+        old = load_config(overrides=NO_BUMPLESS)
+        with SessionBuilder(old) as b:
+            step = RecoveryRig(old, b).run(kind, 1.2, 0.7, 1.0)
+        assert step.peak_voltage_v == old.plant.voltage_limit_v, step
+
+
+def test_a_restarted_controllers_lead_in_is_stretched_to_the_velocity_bound() -> None:
+    """From the default rest pose the lead-in keeps `lead_in_s`; from a pose far from the gait's start (a controller
+    restarted after a safe-state stop) it is stretched until its peak velocity is within the bound."""
+    tc = load_config().trajectory
+    target = make_trajectory(tc).sample(0.0)
+    assert lead_in_duration_s(target.theta_rad, (0.0, 0.0), target, tc.lead_in_s, 1.0) == tc.lead_in_s
+    far = (target.theta_rad[0] + 0.45, target.theta_rad[1] + 0.6)
+    assert 1.875 * 0.6 / tc.lead_in_s > 2.0          # the fixed 0.5 s lead-in would cross the drive's 2 rad/s
+    duration_s = lead_in_duration_s(far, (0.0, 0.0), target, tc.lead_in_s, 1.0)
+    lead = LeadIn(far, (0.0, 0.0), target, duration_s)
+    peak = max(abs(w) for k in range(1001) for w in lead.sample(duration_s * (k / 1000 - 1)).omega_rad_s)
+    assert tc.lead_in_s < duration_s < 4 * tc.lead_in_s and 0.8 < peak <= 1.0 + 1e-3
 
 
 def test_chaos_kills_and_restarts_keep_the_invariants(tmp_path: Path) -> None:
