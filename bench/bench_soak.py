@@ -197,15 +197,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--minutes", type=float, default=10.0, help="session length (default 10)")
     ap.add_argument("--sample-s", type=float, default=1.0, help="sampling period of the processes (about)")
     ap.add_argument("--workdir", type=Path, help="keep the run directory here (default: temporary, kept on failure)")
+    ap.add_argument("--tracemalloc", action="store_true",
+                    help="leak finder: run `run` under tracemalloc (bench/soak_tracemalloc.py) and write the "
+                         "allocations grown between minute 1 and the end of the session to tracemalloc.txt")
     args = ap.parse_args(argv)
     period_s = load_config(None).trajectory.period_s
     minutes = 0.2 if args.quick else args.minutes
     cycles = max(1, math.ceil(minutes * 60.0 / period_s))
     base = args.workdir or Path(tempfile.mkdtemp(prefix="bench-soak-"))
     out = base / "soak"
-    cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--controller", "et", "--cycles", str(cycles), "--out", str(out)]
+    run_args = ["run", "--controller", "et", "--cycles", str(cycles), "--out", str(out)]
+    cmd = [sys.executable, "-m", "sea_hil.cli", *run_args]
+    if args.tracemalloc:
+        cmd = [sys.executable, str(Path(__file__).parent / "soak_tracemalloc.py"), str(out / "tracemalloc.txt"),
+               str(FIRST_MINUTE_S), str(minutes * 60.0), "--", *run_args]
     sampler = Sampler()
-    res = watch_run(cmd, out, cwd=REPO, stall_s=60.0, silent_s=1800.0, timeout_s=3 * 60 * minutes + 1800,
+    # the post-run phase prints nothing: the recorder child drains its backlog, then `run` reads the file back
+    post_s = 1800.0 + 240.0 * minutes
+    res = watch_run(cmd, out, cwd=REPO, stall_s=60.0, silent_s=post_s, timeout_s=3 * 60 * minutes + post_s,
                     on_tick=sampler.tick)
     print(f"session {res.status} in {res.wall_s:.0f} s (exit {res.returncode}); last progress {res.last_progress!r}",
           flush=True)
