@@ -108,6 +108,7 @@ def recording_check(mcap: Path) -> dict[str, Any]:
     counts: dict[str, int] = defaultdict(int)
     seqs: dict[str, list[int]] = {"/zenoh/state": [], "/zenoh/setpoint": []}
     finals: dict[str, dict[str, Any]] = {}
+    limit_faults: list[str] = []
 
     def on_message(topic: str, m: RecordedMessage) -> None:
         counts[topic] += 1
@@ -115,6 +116,8 @@ def recording_check(mcap: Path) -> dict[str, Any]:
             seqs[topic].append(int(m.payload["seq"]))
         elif topic == "/stats" and m.payload.get("final") is True:
             finals[str(m.payload.get("node"))] = m.payload
+        elif topic == "/log/faults" and "_LIMIT" in str(m.payload.get("message", "")):
+            limit_faults.append(f"{m.log_time_ns}: {m.payload.get('message')}")   # the drive left a soft limit
 
     data = read_session(mcap, on_message=on_message)
     final, edge, ctl = data.metadata.get("sea-hil.final", {}), finals.get("edge", {}), finals.get("controller", {})
@@ -138,7 +141,8 @@ def recording_check(mcap: Path) -> dict[str, Any]:
            "setpoints_sent": int(ctl.get("setpoints_sent", -1)), "setpoints_recorded": counts.get("/zenoh/setpoint", 0),
            "setpoint_seq_gaps_recorded": gaps(seqs["/zenoh/setpoint"]),
            "zenoh_down_dropped": int(ctl.get("setpoints_sent", 0)) - counts.get("/zenoh/setpoint", 0),
-           "controller_states_skipped": int(ctl.get("state_seq_lost", -1))}
+           "controller_states_skipped": int(ctl.get("state_seq_lost", -1)),
+           "drive_limit_faults": len(limit_faults), "first_limit_fault": limit_faults[0] if limit_faults else ""}
     out["recorder_lost"] = (out["writer_dropped"] + out["recorder_dropped_ops"] + out["write_errors"]
                             + out["topic_count_mismatches"] + abs(out["states_published"] - out["states_recorded"])
                             + abs(out["setpoints_sent"] - out["setpoints_recorded"]) + out["state_seq_gaps_recorded"]
@@ -157,7 +161,9 @@ def soak_records(growth: dict[str, dict[str, float]], rec: dict[str, Any], minut
                 f"{growth[r].get('rss_at_1min_mb', math.nan):.0f} -> {growth[r]['rss_end_mb']:.0f} MB, "
                 f"CPU {growth[r].get('cpu_pct', math.nan):.0f} %)" for r in roles)
             + f". After the session, `run` reads the whole file for its report: peak RSS {post_peak_mb:.0f} MB. "
-            f"Session status: {status}.")
+            f"Session status: {status}. Drive soft-limit faults logged: {rec.get('drive_limit_faults', 0)} (a soft-limit "
+            "fault is left to the operator: the drive stays at 0 V from then on, the message flows go on)"
+            + (f", the first {rec['first_limit_fault']}" if rec.get("first_limit_fault") else "") + ".")
     rss = record("10a", f"soak {minutes:g} min: RSS growth per process after the first minute", runs=1,
                  metric="max over processes of (median RSS of the last 10 samples - median over [60 s, 70 s))",
                  unit="MB", per_run=[worst], p99=float("nan"), goal=f"< {GOAL_RSS_MB:g} MB per process",
