@@ -69,8 +69,7 @@ class ControllerCore:
         if self.t0_ns is None:
             if self.lead_in_ns:     # stretched if the limb starts far from the trajectory (a restart, issue 19)
                 tc, target = self.cfg.trajectory, self.traj.sample(0.0)
-                lead_s = lead_in_duration_s(p.theta_rad, p.omega_rad_s, target, tc.lead_in_s,
-                                            tc.lead_in_max_velocity_rad_s)
+                lead_s = lead_in_duration_s(p.theta_rad, target, tc.lead_in_s, tc.lead_in_max_velocity_rad_s)
                 self.lead_in_ns = int(round(lead_s * 1e9))
                 self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, target, self.lead_in_ns * 1e-9)
             self.t0_ns = p.sample_t_ns + self.lead_in_ns

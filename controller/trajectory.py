@@ -115,20 +115,15 @@ class LeadIn:
         return DesiredSample(*lead_in_sample(self._c[0], self._c[1], self.duration_s, t_s))
 
 
-def lead_in_duration_s(theta_rad: tuple[float, float], omega_rad_s: tuple[float, float], target: DesiredSample,
-                       min_s: float, max_velocity_rad_s: float) -> float:
-    """The lead-in's duration: `min_s` (`trajectory.lead_in_s`), stretched in steps of x1.25 (up to 16 x `min_s`)
-    until the quintic's peak joint velocity is within `max_velocity_rad_s`. A start far from the trajectory (a
-    controller started, or restarted, while the limb is elsewhere: after a safe-state stop) then reaches it without
-    tripping the drive's velocity limit; from the default rest pose `min_s` is kept."""
-    duration_s = min_s
-    while duration_s > 0 and duration_s < 16.0 * min_s:
-        lead = LeadIn(theta_rad, omega_rad_s, target, duration_s)
-        peak = max(abs(w) for k in range(101) for w in lead.sample(duration_s * (k / 100.0 - 1.0)).omega_rad_s)
-        if peak <= max_velocity_rad_s:
-            break
-        duration_s *= 1.25
-    return duration_s
+def lead_in_duration_s(theta_rad: tuple[float, float], target: DesiredSample, min_s: float,
+                       max_velocity_rad_s: float) -> float:
+    """The lead-in's duration: `min_s` (`trajectory.lead_in_s`), or longer when the distance to cover needs it, so
+    that the rest-to-rest part of the quintic peaks (1.875 x distance / duration) at `max_velocity_rad_s`. A start
+    far from the trajectory (a controller started, or restarted, while the limb is elsewhere: after a safe-state stop)
+    then reaches it without tripping the drive's velocity limit; a start on the trajectory's first sample (the default
+    rest pose, whatever the gait's speed) keeps `min_s` exactly."""
+    distance = max(abs(target.theta_rad[j] - theta_rad[j]) for j in (0, 1))
+    return max(min_s, 1.875 * distance / max_velocity_rad_s) if min_s > 0 else min_s
 
 
 def lead_in_sample(c_hip: tuple, c_knee: tuple, duration_s: float, t_s: float

@@ -62,42 +62,19 @@ def test_recovery_from_the_safe_state_is_bumpless_and_within_the_drive_limits(ki
 
 
 def test_a_restarted_controllers_lead_in_is_stretched_to_the_velocity_bound() -> None:
-    """From the default rest pose the lead-in keeps `lead_in_s`; from a pose far from the gait's start (a controller
-    restarted after a safe-state stop) it is stretched until its peak velocity is within the bound."""
+    """From the trajectory's first sample the lead-in keeps `lead_in_s` (also for a fast gait); from a pose far from
+    it (a controller restarted after a safe-state stop) it is stretched so that the move stays well inside the
+    drive's velocity limit, where the fixed 0.5 s lead-in would cross it."""
     tc = load_config().trajectory
     target = make_trajectory(tc).sample(0.0)
-    assert lead_in_duration_s(target.theta_rad, (0.0, 0.0), target, tc.lead_in_s, 1.0) == tc.lead_in_s
+    assert lead_in_duration_s(target.theta_rad, target, tc.lead_in_s, 1.0) == tc.lead_in_s
+    fast = make_trajectory(tc.model_copy(update={"period_s": 1.0})).sample(0.0)     # 2.8 rad/s at t = 0
+    assert lead_in_duration_s(fast.theta_rad, fast, 0.25, 1.0) == 0.25
     far = (target.theta_rad[0] + 0.45, target.theta_rad[1] + 0.6)
-    assert 1.875 * 0.6 / tc.lead_in_s > 2.0          # the fixed 0.5 s lead-in would cross the drive's 2 rad/s
-    duration_s = lead_in_duration_s(far, (0.0, 0.0), target, tc.lead_in_s, 1.0)
-    lead = LeadIn(far, (0.0, 0.0), target, duration_s)
-    peak = max(abs(w) for k in range(1001) for w in lead.sample(duration_s * (k / 1000 - 1)).omega_rad_s)
-    assert tc.lead_in_s < duration_s < 4 * tc.lead_in_s and 0.8 < peak <= 1.0 + 1e-3
 
-
-def test_chaos_kills_and_restarts_keep_the_invariants(tmp_path: Path) -> None:
-    require_netns("chaos")
-    config = tmp_path / "chaos.toml"
-    config.write_text((REPO / "configs" / "session.toml").read_text() + OVERLAY, encoding="utf-8")
-    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(CHAOS))} {shlex.quote(str(config))} {shlex.quote(str(tmp_path))} {GROUP} {SEED}")
-    # its own PID namespace (and /proc, so the helper sees exactly the session's processes): if the helper dies (even
-    # SIGKILLed on the timeout) every node process dies with it
-    result = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c", script],
-                            capture_output=True, text=True, timeout=240, check=False, stdin=subprocess.DEVNULL)
-    # the nodes' warnings (restarts seen, out-of-envelope setpoints rejected) are expected; show the helper's error
-    assert result.returncode == 0, "\n".join(ln for ln in result.stderr.splitlines() if " WARNING: " not in ln)[-4000:]
-    report = json.loads(result.stdout.strip().splitlines()[-1])
-    faults = report["faults"]
-    assert len(faults) == 10 and {f["kind"] for f in faults} == {"edge", "controller", "recorder"}, faults
-    assert all(f["safe_s"] <= report["safe_bound_s"] for f in faults if f["kind"] != "recorder"), faults
-    assert all(0 < f["logged"] <= f["kept"] for f in faults if f["kind"] == "recorder"), faults
-    assert report["left"] == [], report          # no process of the session left in its PID namespace
-    assert report["started"] == 4 + 10
-    # the last generation of each node ended by the helper's SIGTERM: cleanly, the controller with 3 (stopped before
-    # its cycles were done)
-    assert report["codes"] == {"plant": 0, "edge": 0, "recorder": 0, "controller": 3}, report["codes"]
-    print(f"\nchaos seed {SEED}: {len(faults)} faults in {report['span_s']:.0f} s; " + "; ".join(
-        f"{f['kind']} " + (f"safe {f['safe_s']:.2f} s (wall {f['safe_wall_s']:.2f}) " if "safe_s" in f else
-                           f"kept {f['kept']} of {f['logged']} logged, state gaps {f['state_gaps']} ")
-        + f"resume {f['resume_s']:.1f} s" for f in faults))
+    def peak(duration_s: float) -> float:
+        lead = LeadIn(far, (0.0, 0.0), target, duration_s)
+        return max(abs(w) for k in range(1001) for w in lead.sample(duration_s * (k / 1000 - 1)).omega_rad_s)
+    duration_s = lead_in_duration_s(far, target, tc.lead_in_s, 1.0)
+    assert duration_s == 1.875 * 0.6 / 1.0
+    assert peak(tc.lead_in_s) > 2.0 > 1.5 > peak(duration_s)      # the drive's limit is 2 rad/s
