@@ -1,8 +1,9 @@
 """`python bench/soak_tracemalloc.py OUT.txt T1_S T2_S -- <sea-hil cli args>`: run the `sea-hil` command line in
-this process with tracemalloc on (25 frames) and write, at T2_S after the start, the allocations that grew most
-since T1_S (snapshot diff by traceback, top 15) to OUT.txt: the soak's leak finder (`bench_soak.py
---tracemalloc`) for the `run` process, which hosts the plant, the edge and the recorder taps. tracemalloc slows the
-process (about 2x): the figures of a traced soak are not the soak's figures."""
+this process; at T1_S after the start begin tracing (tracemalloc, 25 frames; not earlier, so the imports and the
+session's start-up run at full speed) and take a snapshot, at T2_S another, and write the allocations that grew most
+between them (snapshot diff by traceback, top 15), i.e. what was allocated after T1_S and is still alive at T2_S, to
+OUT.txt: the soak's leak finder (`bench_soak.py --tracemalloc`) for the `run` process, which hosts the plant, the
+edge and the recorder taps. Tracing slows the process: the figures of a traced soak are not the soak's figures."""
 from __future__ import annotations
 
 import runpy
@@ -18,6 +19,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 def _diff(out: Path, t1_s: float, t2_s: float) -> None:
     t0 = time.monotonic()
     time.sleep(t1_s)      # a timer thread: when to snapshot, not synchronisation of the session
+    tracemalloc.start(25)
     first = tracemalloc.take_snapshot()
     time.sleep(max(t2_s - (time.monotonic() - t0), 0.0))
     second = tracemalloc.take_snapshot()
@@ -35,7 +37,6 @@ def main() -> None:
     out, t1, t2, sep, *cli = sys.argv[1:]
     if sep != "--":
         raise SystemExit(__doc__)
-    tracemalloc.start(25)
     threading.Thread(target=_diff, args=(Path(out), float(t1), float(t2)), daemon=True).start()
     sys.argv = ["sea-hil", *cli]
     runpy.run_module("sea_hil.cli", run_name="__main__")
