@@ -108,6 +108,7 @@ def recording_check(mcap: Path) -> dict[str, Any]:
     counts: dict[str, int] = defaultdict(int)
     seqs: dict[str, list[int]] = {"/zenoh/state": [], "/zenoh/setpoint": []}
     finals: dict[str, dict[str, Any]] = {}
+    limit_faults: list[str] = []
 
     def on_message(topic: str, m: RecordedMessage) -> None:
         counts[topic] += 1
@@ -115,6 +116,8 @@ def recording_check(mcap: Path) -> dict[str, Any]:
             seqs[topic].append(int(m.payload["seq"]))
         elif topic == "/stats" and m.payload.get("final") is True:
             finals[str(m.payload.get("node"))] = m.payload
+        elif topic == "/log/faults" and "_LIMIT" in str(m.payload.get("message", "")):
+            limit_faults.append(f"{m.log_time_ns}: {m.payload.get('message')}")   # the drive left a soft limit
 
     data = read_session(mcap, on_message=on_message)
     final, edge, ctl = data.metadata.get("sea-hil.final", {}), finals.get("edge", {}), finals.get("controller", {})
@@ -138,7 +141,8 @@ def recording_check(mcap: Path) -> dict[str, Any]:
            "setpoints_sent": int(ctl.get("setpoints_sent", -1)), "setpoints_recorded": counts.get("/zenoh/setpoint", 0),
            "setpoint_seq_gaps_recorded": gaps(seqs["/zenoh/setpoint"]),
            "zenoh_down_dropped": int(ctl.get("setpoints_sent", 0)) - counts.get("/zenoh/setpoint", 0),
-           "controller_states_skipped": int(ctl.get("state_seq_lost", -1))}
+           "controller_states_skipped": int(ctl.get("state_seq_lost", -1)),
+           "drive_limit_faults": len(limit_faults), "first_limit_fault": limit_faults[0] if limit_faults else ""}
     out["recorder_lost"] = (out["writer_dropped"] + out["recorder_dropped_ops"] + out["write_errors"]
                             + out["topic_count_mismatches"] + abs(out["states_published"] - out["states_recorded"])
                             + abs(out["setpoints_sent"] - out["setpoints_recorded"]) + out["state_seq_gaps_recorded"]
@@ -157,7 +161,9 @@ def soak_records(growth: dict[str, dict[str, float]], rec: dict[str, Any], minut
                 f"{growth[r].get('rss_at_1min_mb', math.nan):.0f} -> {growth[r]['rss_end_mb']:.0f} MB, "
                 f"CPU {growth[r].get('cpu_pct', math.nan):.0f} %)" for r in roles)
             + f". After the session, `run` reads the whole file for its report: peak RSS {post_peak_mb:.0f} MB. "
-            f"Session status: {status}.")
+            f"Session status: {status}. Drive soft-limit faults logged: {rec.get('drive_limit_faults', 0)} (a soft-limit "
+            "fault is left to the operator: the drive stays at 0 V from then on, the message flows go on)"
+            + (f", the first {rec['first_limit_fault']}" if rec.get("first_limit_fault") else "") + ".")
     rss = record("10a", f"soak {minutes:g} min: RSS growth per process after the first minute", runs=1,
                  metric="max over processes of (median RSS of the last 10 samples - median over [60 s, 70 s))",
                  unit="MB", per_run=[worst], p99=float("nan"), goal=f"< {GOAL_RSS_MB:g} MB per process",
@@ -197,15 +203,24 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--minutes", type=float, default=10.0, help="session length (default 10)")
     ap.add_argument("--sample-s", type=float, default=1.0, help="sampling period of the processes (about)")
     ap.add_argument("--workdir", type=Path, help="keep the run directory here (default: temporary, kept on failure)")
+    ap.add_argument("--tracemalloc", action="store_true",
+                    help="leak finder: run `run` under tracemalloc (bench/soak_tracemalloc.py) and write the "
+                         "allocations grown between minute 1 and the end of the session to tracemalloc.txt")
     args = ap.parse_args(argv)
     period_s = load_config(None).trajectory.period_s
     minutes = 0.2 if args.quick else args.minutes
     cycles = max(1, math.ceil(minutes * 60.0 / period_s))
     base = args.workdir or Path(tempfile.mkdtemp(prefix="bench-soak-"))
     out = base / "soak"
-    cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--controller", "et", "--cycles", str(cycles), "--out", str(out)]
+    run_args = ["run", "--controller", "et", "--cycles", str(cycles), "--out", str(out)]
+    cmd = [sys.executable, "-m", "sea_hil.cli", *run_args]
+    if args.tracemalloc:
+        cmd = [sys.executable, str(Path(__file__).parent / "soak_tracemalloc.py"), str(out / "tracemalloc.txt"),
+               str(FIRST_MINUTE_S), str(minutes * 60.0), "--", *run_args]
     sampler = Sampler()
-    res = watch_run(cmd, out, cwd=REPO, stall_s=60.0, silent_s=1800.0, timeout_s=3 * 60 * minutes + 1800,
+    # the post-run phase prints nothing: the recorder child drains its backlog, then `run` reads the file back
+    post_s = 1800.0 + 240.0 * minutes
+    res = watch_run(cmd, out, cwd=REPO, stall_s=60.0, silent_s=post_s, timeout_s=3 * 60 * minutes + post_s,
                     on_tick=sampler.tick)
     print(f"session {res.status} in {res.wall_s:.0f} s (exit {res.returncode}); last progress {res.last_progress!r}",
           flush=True)

@@ -41,7 +41,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
 ]
 # opt-in (`--long`): the endurance figures take many minutes of one real-time session each
 LONG_STEPS: list[tuple[str, str, list[str], list[str], int]] = [
-    ("bench_soak", "10", ["--minutes", "10"], ["--quick"], 900),
+    ("bench_soak", "10", ["--minutes", "10"], ["--quick"], 4800),
 ]
 
 

@@ -36,7 +36,8 @@ from sea_hil.controller.edge_uplink import StatePublisher
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.protocol.can_codec import FEEDBACK_PARTS, Feedback, FeedbackAssembler, Heartbeat, SeaCodec, unwrap_us
+from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
+                                        unwrap_us)
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.epoch import new_epoch
 from sea_hil.protocol.link import LinkEmulator
@@ -46,6 +47,7 @@ from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.edge")
+SAFE_STATES = (DriverState.FAULT, DriverState.ESTOP)
 
 
 class EdgeNode(Node):
@@ -89,6 +91,7 @@ class EdgeNode(Node):
         self.sample_t_ns = 0
         self.last_fb_seq: int | None = None
         self.last_fb: Feedback | None = None
+        self._stopped = False          # commanded once, then stopped (stale setpoints): resume bumplessly
         downlink = self.sync.downlink_callback()
         self._subs = [session.declare_subscriber(self.keys.setpoint, downlink),
                       session.declare_subscriber(self.keys.voltage, downlink),
@@ -186,7 +189,22 @@ class EdgeNode(Node):
 
     def _answer(self, fb: Feedback, now: int) -> bool:
         command, clear = self.sync.gate(self.intake.fresh(now))
+        self._resume_if_stopped(fb, command, clear)
         return self.command_path.answer(fb, command, clear)
+
+    # ---- restart path ---------------------------------------------------------------------------------------------
+    def _resume_if_stopped(self, fb: Feedback, command: bool, clear: bool) -> None:
+        """Bumpless resume (`InnerLoop.resume`) when commanding starts again after a stop: the edge stopped commanding
+        (stale setpoints) after it had commanded, or the drive is in its safe state (FAULT/ESTOP, as its heartbeat
+        says) and may be cleared: after an edge restart, a controller restart or an outage. Never at a session's
+        first command, never in lockstep (its gate always commands and never clears)."""
+        if command and (self._stopped or (clear and self.command_path.driver_state in SAFE_STATES)):
+            self.inner.resume(fb.delta_m)
+            self.counters.resumes += 1
+            if self.counters.resumes <= 10 or self.counters.resumes % 100 == 0:
+                log.info("bumpless resume %d at sample seq %d (drive %s)", self.counters.resumes, fb.seq,
+                         self.command_path.driver_state.name)
+        self._stopped = not command and (self._stopped or self.counters.commands_sent > 0)
 
     # ---- Zenoh side -----------------------------------------------------------------------------------------------
     def on_arrival(self, data: bytes, rx_ns: int) -> None:

@@ -50,6 +50,7 @@ class EdgeEvents:
         heartbeat_ns = int(round(cfg.trigger.max_inter_event_s * 1e9))
         # re-anchor when the anchor is unanswered for a heartbeat period, or after the setpoint timeout (twice that)
         self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)),
+                                            cfg.trajectory.lead_in_max_velocity_rad_s,
                                             anchor_timeout_ns=heartbeat_ns, reanchor_after_ns=2 * heartbeat_ns)
         self.trajectory_id = trajectory_id(cfg.trajectory)
         self.inner, self.period_ns, self.outer_every = inner, period_ns, outer_every

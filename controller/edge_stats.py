@@ -33,6 +33,7 @@ class EdgeCounters:
     loop: LogHistogram = field(default_factory=LogHistogram)         # feedback received -> VOLTAGE_CMD sent
     loop_overruns: int = 0                                           # loop time > one feedback period
     uplink_out_of_order: int = 0                                     # lockstep: released after a newer state
+    resumes: int = 0                     # bumpless resumes after a stop / the drive's safe state (InnerLoop.resume)
 
 
 def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int, *,

@@ -24,7 +24,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 from sea_hil.controller.smc import JointState, tracking_errors
-from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn
+from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn, anchored_lead_in
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, _distance, epsilon
 
 
@@ -33,6 +33,7 @@ class EdgeEventGenerator:
     trigger: EventTrigger | TimeTrigger
     trajectory: GaitTrajectory | CsvTrajectory
     lead_in_ns: int
+    lead_in_max_velocity_rad_s: float = float("inf")   # the stretch of a far start (as the controller's)
     min_timeout_ns: int = 20_000_000
     t0_ns: int | None = None
     lead_in: LeadIn | None = None
@@ -103,9 +104,9 @@ class EdgeEventGenerator:
 
     def _anchor(self, sample_ns: int, js: JointState) -> None:
         """A new anchor at this sample: t = -lead_in here, the lead-in from this state, the trigger starts over."""
-        self.t0_ns, self.anchor_ns = sample_ns + self.lead_in_ns, sample_ns
-        self.lead_in = LeadIn(js.theta_rad, js.omega_rad_s, self.trajectory.sample(0.0),
-                              self.lead_in_ns * 1e-9) if self.lead_in_ns else None
+        lead_ns, self.lead_in = anchored_lead_in(js.theta_rad, js.omega_rad_s, self.trajectory.sample(0.0),
+                                                 self.lead_in_ns, self.lead_in_max_velocity_rad_s)
+        self.t0_ns, self.anchor_ns = sample_ns + lead_ns, sample_ns
         self.anchored, self._anchoring, self.awaiting_seq = False, True, None
         self.trigger.reset()
 

@@ -78,6 +78,19 @@ class InnerLoop:
         self.sliding: tuple[float, float] = (0.0, 0.0)
         self.observer: ObserverState = OBSERVER_UNSTARTED
         self.saturated_steps = 0
+        self.ramp_steps = max(0, int(round(cfg.safety.setpoint.resume_ramp_s / self.period_s)))
+        self._ramp_from: tuple[float, float] = (0.0, 0.0)
+        self._ramp_step = self.ramp_steps      # == ramp_steps: no ramp in progress
+
+    def resume(self, deflection_m: tuple[float, float]) -> None:
+        """Bumpless restart of the loop after the drive's safe state (docs/reliability.md, "Bumpless resume"): the
+        observer starts again from the next measurement (its momentum estimate and lumped torque are stale after a
+        stop; with d_hat = 0, like at the first sample) and the deflection command ramps linearly from the measured
+        `deflection_m` to the held setpoint over `safety.setpoint.resume_ramp_s`, instead of a step. No-op with
+        `resume_ramp_s = 0` (the step and the stale observer of before)."""
+        if self.ramp_steps:
+            self.observer = OBSERVER_UNSTARTED
+            self._ramp_from, self._ramp_step = deflection_m, 0
 
     def hold(self, deflection_m: tuple[float, float], sliding: tuple[float, float]) -> None:
         self.deflection_m = deflection_m
@@ -86,6 +99,10 @@ class InnerLoop:
     def voltage(self, m: Measurement) -> tuple[float, float]:
         """Saturated voltages; before the first setpoint, hold the measured deflection (no motion commanded)."""
         held = self.deflection_m
+        if held is not None and self._ramp_step < self.ramp_steps:
+            self._ramp_step += 1
+            f, (a1, a2) = self._ramp_step / self.ramp_steps, self._ramp_from
+            held = (a1 + f * (held[0] - a1), a2 + f * (held[1] - a2))
         s1, s2, saturated, self.observer = inner_step(m, held or (0.0, 0.0), self.sliding, held is None,
                                                       self.observer, self._p, self.gains, self._limit, self.period_s)
         if saturated:

@@ -23,7 +23,7 @@ from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController, Setpoint
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
-from sea_hil.controller.trajectory import LeadIn, make_trajectory, trajectory_id
+from sea_hil.controller.trajectory import LeadIn, anchored_lead_in, make_trajectory, trajectory_id
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
 
 
@@ -107,10 +107,12 @@ class ControllerCore:
         return Answer(messages, sp, record)
 
     def _anchor(self, p: StatePayload) -> None:
-        """t = -lead_in at state p, the lead-in from its measured state."""
-        self.t0_ns = p.sample_t_ns + self.lead_in_ns
-        self.lead_in = LeadIn(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns * 1e-9) \
-            if self.lead_in_ns else None
+        """t = -lead_in at state p, the lead-in from its measured state; stretched when the limb is far from the
+        trajectory's start (a restart after a safe-state stop: `trajectory.lead_in_max_velocity_rad_s`, issue 19)."""
+        tc = self.cfg.trajectory
+        lead_ns, self.lead_in = anchored_lead_in(p.theta_rad, p.omega_rad_s, self.traj.sample(0.0), self.lead_in_ns,
+                                                 tc.lead_in_max_velocity_rad_s)
+        self.t0_ns = p.sample_t_ns + lead_ns
 
     def desired(self, t_ns: int) -> Any:
         return self.lead_in.sample(t_ns * 1e-9) if t_ns < 0 and self.lead_in else self.traj.sample(t_ns * 1e-9)

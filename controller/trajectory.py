@@ -115,6 +115,29 @@ class LeadIn:
         return DesiredSample(*lead_in_sample(self._c[0], self._c[1], self.duration_s, t_s))
 
 
+def lead_in_duration_s(theta_rad: tuple[float, float], target: DesiredSample, min_s: float,
+                       max_velocity_rad_s: float) -> float:
+    """The lead-in's duration: `min_s` (`trajectory.lead_in_s`), or longer when the distance to cover needs it, so
+    that the rest-to-rest part of the quintic peaks (1.875 x distance / duration) at `max_velocity_rad_s`. A start
+    far from the trajectory (a controller started, or restarted, while the limb is elsewhere: after a safe-state stop)
+    then reaches it without tripping the drive's velocity limit; a start on the trajectory's first sample (the default
+    rest pose, whatever the gait's speed) keeps `min_s` exactly."""
+    distance = max(abs(target.theta_rad[j] - theta_rad[j]) for j in (0, 1))
+    return max(min_s, 1.875 * distance / max_velocity_rad_s) if min_s > 0 else min_s
+
+
+def anchored_lead_in(theta_rad: tuple[float, float], omega_rad_s: tuple[float, float], target: DesiredSample,
+                     min_ns: int, max_velocity_rad_s: float) -> tuple[int, LeadIn | None]:
+    """The lead-in from a measured state at an anchor (the controller's first state, or the edge's INITIAL state):
+    its duration in ns (`lead_in_duration_s`, at least `min_ns`) and the quintic, None when lead-ins are off
+    (`min_ns` = 0). Both ends of the edge-trigger placement build it from the same state, so they agree on t."""
+    if not min_ns:
+        return 0, None
+    lead_ns = int(round(lead_in_duration_s(theta_rad, target, min_ns * 1e-9, max_velocity_rad_s) * 1e9))
+    lead_ns = max(lead_ns, min_ns)          # never shorter than configured (float round trip of min_ns)
+    return lead_ns, LeadIn(theta_rad, omega_rad_s, target, lead_ns * 1e-9)
+
+
 def lead_in_sample(c_hip: tuple, c_knee: tuple, duration_s: float, t_s: float
                    ) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
     """(theta, omega, alpha) pairs of the lead-in quintics (coefficients `quintic`) at t_s in [-duration_s, 0]

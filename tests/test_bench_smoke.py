@@ -120,3 +120,15 @@ def test_run_all_parsers_and_render():
     assert md.count("\n| 1") == 2   # one table row per record of figure 1
     with pytest.raises(ValueError):
         run_all.parse_simulate("nothing useful", "cmd", 1)
+
+
+def test_secure_latency_record_pairs_each_secure_run_with_its_plain_one():
+    plain = [{"run": 1, "p50_us": 1000.0, "p99_us": 3000.0}, {"run": 2, "p50_us": 2000.0, "p99_us": 4000.0}]
+    secure = [{"run": 1, "p50_us": 1200.0, "p99_us": 3300.0}, {"run": 2, "p50_us": 2100.0, "p99_us": 6000.0}]
+    base = bench_closed_loop_latency.latency_record(plain, "et", "python bench/l.py")
+    rec = bench_closed_loop_latency.secure_record(secure, plain, base, "python bench/l.py --secure")
+    _check_shape([rec])
+    assert [d["pair_p50_ratio"] for d in rec["details"]] == pytest.approx([1.2, 1.05])
+    assert [d["pair_p99_ratio"] for d in rec["details"]] == pytest.approx([1.1, 1.5])
+    assert rec["baseline"] == 1500.0 and rec["ratio"] == pytest.approx(1650.0 / 1500.0)
+    assert "p50 x1.12, p99 x1.30" in rec["notes"]

@@ -75,6 +75,9 @@ class TrajectoryConfig(_Frozen):
     csv_path: str = ""
     lead_in_s: float = Field(0.5, ge=0, description="networked session: quintic from the measured start state onto "
                              "the trajectory before the measured cycles; 0 = start the cycles at once")
+    lead_in_max_velocity_rad_s: float = Field(1.0, gt=0, description="the lead-in is stretched (from lead_in_s) so that "
+                                              "its rest-to-rest part peaks at this: a (re)start far from the "
+                                              "trajectory stays inside the drive's velocity limit")
 
 
 class NominalModelConfig(_Frozen):

@@ -58,6 +58,9 @@ class SetpointEnvelopeConfig(_Frozen):
     """The edge rejects (and counts) a SETPOINT whose deflection v_x is not finite or exceeds deflection_max_m."""
     enabled: bool = True
     deflection_max_m: Pair = Field((0.002, 0.002))
+    resume_ramp_s: float = Field(0.05, ge=0, description="bumpless resume after the drive's safe state: the edge ramps "
+                                 "the deflection command from the measured deflection to the setpoint over this time "
+                                 "and restarts its observer; 0 = off (a step, the stale observer)")
 
     @model_validator(mode="after")
     def _check(self) -> "SetpointEnvelopeConfig":
