@@ -30,9 +30,10 @@ SCENARIOS = {"nominal": (None, None),
              "robust": ("hip=sine:0.03Nm@0.5Hz,knee=sine:0.03Nm@0.5Hz", "all=+10%")}
 NEW = {"trigger": {"placement": "edge", "edge_model": True}, "controller": {"compensation": "predict"}}
 PAPER = {"trigger": {"placement": "controller"}, "controller": {"compensation": "none"}}
+PREDICT = {"trigger": {"placement": "controller"}, "controller": {"compensation": "predict"}}   # TT + predictor
 METHODS: list[tuple[str, str, dict[str, Any], int]] = [
     *[(f"TT {p} ms", "tt", PAPER, p) for p in (10, 20, 30, 50)],
-    *[(f"TT {p} ms + predict", "tt", {"controller": {"compensation": "predict"}}, p) for p in (10, 20, 30, 50)],
+    *[(f"TT {p} ms + predict", "tt", PREDICT, p) for p in (10, 20, 30, 50)],
     ("ET paper", "et", PAPER, 10), ("ET new (edge + model + predict)", "et", NEW, 10)]
 
 
@@ -67,14 +68,14 @@ def main(scenarios: list[str]) -> None:
                 total, err = run(link, scenario, mode, extra, period_ms)
                 tt_total = tt_total or total
                 print(f"| {scenario} | {link} | {name} | {total} | {total / tt_total:.3f} | {err:.4f} |", flush=True)
-    total, err = run("ideal", "nominal", "tt", {"controller": {"compensation": "predict"}}, 10)
+    total, err = run("ideal", "nominal", "tt", PREDICT, 10)
     total5, err5 = run_fixed_delay()
     print(f"\nTT + predict, 10 ms: ideal {err:.4f} rad, 5 ms each way {err5:.4f} rad ({err5 / err:.2f}x)")
 
 
 def run_fixed_delay() -> tuple[int, float]:
     LINKS["5 ms fixed"] = "delay=5ms"
-    return run("5 ms fixed", "nominal", "tt", {"controller": {"compensation": "predict"}}, 10)
+    return run("5 ms fixed", "nominal", "tt", PREDICT, 10)
 
 
 if __name__ == "__main__":
