@@ -34,7 +34,8 @@ QUICK = {**GRID, "--delay-ms": "0,10", "--jitter-ms": "1", "--loss": "0.02"}
 
 WARM_UP = ("import logging; logging.disable(logging.CRITICAL); from sea_hil.config import load_config; "
            "from sea_hil.offline.session_engine import run_engine; "
-           "run_engine(load_config(None, {'trajectory': {'period_s': 0.05, 'lead_in_s': 0.01}}), 'et')")
+           "run_engine(load_config(None, {'trajectory': {'period_s': 0.05, 'lead_in_s': 0.01}, "
+           "'trigger': {'placement': 'controller'}, 'controller': {'compensation': 'none'}}), 'et')")
 
 
 def warm_up() -> float:
@@ -52,8 +53,9 @@ def _children_cpu_s() -> float:
 def run_once(grid: dict[str, str], jobs: int, out: Path) -> tuple[float, int, int, float, float]:
     """(wall s, points, ok points, mean point wall s inside the workers, CPU s of the command and its workers) of
     one sweep command."""
+    # the paper's scheme (the whole-session kernel's; issue 14's figure), not the default edge trigger + predictor
     cmd = [sys.executable, "-m", "sea_hil.cli", "sweep", "--out", str(out), "--engine", "offline", "--seed", "1",
-           "--jobs", str(jobs)]
+           "--jobs", str(jobs), "--trigger", "controller", "--compensation", "none"]
     for k, v in grid.items():
         cmd += [k, v]
     cpu0, t0 = _children_cpu_s(), time.monotonic()

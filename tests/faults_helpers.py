@@ -14,6 +14,8 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
 
+from paper_scheme import paper
+
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import DriverState
@@ -88,7 +90,9 @@ class Rig:
 
     @classmethod
     def start(cls, tmp: Path, overrides: dict | None = None) -> "Rig":
-        cfg = load_config(None, {"can": {"interface": f"virtual:faults-{uuid.uuid4().hex[:8]}"}, **(overrides or {})})
+        # the paper's scheme (a state every sample: the outage and kill counts of tests/test_faults.py are its)
+        cfg = load_config(None, paper({"can": {"interface": f"virtual:faults-{uuid.uuid4().hex[:8]}"},
+                                       **(overrides or {})}))
         cfg_path = tmp / "config.toml"
         cfg_path.write_text(config_to_toml(cfg), encoding="utf-8")
         endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"

@@ -8,6 +8,8 @@ import subprocess
 import sys
 import uuid
 
+from paper_scheme import paper
+
 from sea_hil.config import load_config
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.inner import InnerLoop
@@ -106,7 +108,7 @@ def test_the_controller_never_imports_the_plant():
 def test_controller_core_is_pure_state_in_messages_out():
     """The remote controller's core without any Zenoh: the paper's placement answers with a setpoint and a record."""
     from sea_hil.controller.remote_core import ControllerCore
-    core = ControllerCore(load_config(), "tt")
+    core = ControllerCore(load_config(overrides=paper()), "tt")
     th = tuple(load_config().plant.initial_theta_rad)
     ans = core.on_state(StatePayload(1, 0, 0, th, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), lambda p: 0, lambda: 7)
     assert ans is not None and [c for c, _ in ans.messages] == ["setpoint"] and ans.record is not None

@@ -12,6 +12,8 @@ import zenoh
 
 from faults_helpers import wait_for
 
+from paper_scheme import paper   # these nodes speak the paper's STATE protocol
+
 from sea_hil.config import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
@@ -59,7 +61,7 @@ def with_epoch(data: bytes, epoch: int) -> bytes:
 
 
 def test_replay_of_an_earlier_session_is_rejected_and_counted() -> None:
-    cfg = load_config()
+    cfg = load_config(overrides=paper())
     with SessionBuilder(cfg) as b:                       # session 1, captured on the wire
         session = b.zenoh()
         edge1 = b.edge(b.bus(f"virtual:epoch1-{uuid.uuid4().hex[:8]}"), session, 1)
@@ -115,7 +117,7 @@ def test_rejections_and_foreign_versions_are_logged_once_not_per_message(caplog)
     assert [r.getMessage().split(" rejected")[0] for r in caplog.records] == \
         ["peer: payload of foreign epoch 0000000000000002"] * 4          # at 1, 10, 100, 1000
     caplog.clear()
-    with SessionBuilder(load_config()) as b:
+    with SessionBuilder(load_config(overrides=paper())) as b:
         edge = b.edge(b.bus(f"virtual:epochv-{uuid.uuid4().hex[:8]}"), b.zenoh(), 1)
         old = struct.pack("<2sBBIQ", b"SH", 1, 2, 5, 0) + struct.pack("<I4dB", 5, 1e-3, 0.0, 0.0, 0.0, 1)  # version 1
         with caplog.at_level(logging.WARNING):

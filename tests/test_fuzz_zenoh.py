@@ -12,6 +12,8 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
+from paper_scheme import paper
+
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
 from sea_hil.plant_emulator.disturbance import make_disturbance
@@ -155,7 +157,8 @@ def test_edge_applies_only_valid_setpoints_on_arrival(session: object) -> None:
 
 
 def test_controller_state_handler_survives_and_counts(session: object) -> None:
-    ctrl = RemoteController(load_config(), session, "et", cycles=10**6)  # type: ignore[arg-type]  # never done
+    # the paper's STATE stream (the default edge trigger's EVENT_STATE needs an anchor first)
+    ctrl = RemoteController(load_config(overrides=paper()), session, "et", cycles=10**6)  # type: ignore[arg-type]
     calls = {"n": 0, "malformed": 0, "t": 0}
     try:
         @FUZZ

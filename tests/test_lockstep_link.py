@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from paper_scheme import paper
 
 from sea_hil.config import load_config
 from sea_hil.session.run import RunOptions, run_session
@@ -19,7 +20,9 @@ SHORT = {"trajectory": {"period_s": 2.0}, "safety": {"drive": {"enabled": False}
 
 
 def _run(tmp: Path, name: str, link: dict) -> dict:
-    cfg = load_config(overrides={**SHORT, "link": {"seed": 3, **link}})
+    # the paper's scheme: its answer depends only on the state's content (with `predict` it depends on the measured
+    # uplink delay, so D up and D down differ by design)
+    cfg = load_config(overrides=paper({**SHORT, "link": {"seed": 3, **link}}))
     return run_session(cfg, RunOptions(controller="et", out=tmp / name, lockstep=True, progress=False))
 
 

@@ -8,6 +8,8 @@ from collections.abc import Iterator
 
 import pytest
 
+from paper_scheme import paper   # these nodes speak the paper's STATE protocol
+
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
 from sea_hil.config import load_config
@@ -19,7 +21,7 @@ MS = 1_000_000
 
 @pytest.fixture
 def nodes() -> Iterator[tuple[EdgeNode, RemoteController]]:
-    with SessionBuilder(load_config()) as b:
+    with SessionBuilder(load_config(overrides=paper())) as b:
         session = b.zenoh()
         yield b.edge(b.bus(f"virtual:replay-{uuid.uuid4().hex[:8]}"), session, 1), b.controller(session, "tt")
 

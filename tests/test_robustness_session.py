@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from paper_scheme import paper
 
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.session.run import RunOptions, run_session
@@ -13,7 +14,8 @@ pytestmark = pytest.mark.slow
 
 
 def test_lockstep_session_rejects_disturbance_and_mismatch(tmp_path: Path) -> None:
-    cfg = scenario_config(None, {}, "hip=constant:0.5Nm,knee=constant:0.05Nm", "mass=+20%,stiffness=-20%")
+    # issue 15's bounds, measured with the paper's scheme (a state up every sample: the setpoint ratio below)
+    cfg = scenario_config(None, paper(), "hip=constant:0.5Nm,knee=constant:0.05Nm", "mass=+20%,stiffness=-20%")
     s = run_session(cfg, RunOptions(controller="et", out=tmp_path / "run", lockstep=True, progress=False, seed=1))
     assert max(s["tracking"]["max_abs_error_rad"]) <= 0.01, s["tracking"]
     tx = s["transmissions"]

@@ -19,6 +19,8 @@ from typing import Any, TypeVar
 import pytest
 import zenoh
 
+from paper_scheme import paper
+
 from sea_hil.protocol.can_codec import FeedbackAssembler, FEEDBACK_PARTS, SeaCodec, VoltageCmd
 from sea_hil.config import ZenohConfig, load_config
 from sea_hil.errors import ConfigError
@@ -250,8 +252,9 @@ def _start_limb(stack: ExitStack, cfg: Any) -> tuple[Any, zenoh.Session, _CanWat
 def test_intruder_cannot_move_driver(certs: CertSet, acl: bool) -> None:
     port = free_tcp_port()
     ep = f"tls/127.0.0.1:{port}"
-    cfg = load_config(overrides={"zenoh": {"listen": [ep], "tls": _tls(certs, "edge"), "acl": {"enabled": acl}},
-                                 "can": {"interface": f"virtual:secure-{port}"}})
+    # the remote inner loop (voltages tunnelled to CAN: what an intruder would forge) runs the paper's scheme
+    cfg = load_config(overrides=paper({"zenoh": {"listen": [ep], "tls": _tls(certs, "edge"), "acl": {"enabled": acl}},
+                                       "can": {"interface": f"virtual:secure-{port}"}}))
     with ExitStack() as stack:
         edge, session, watch = _start_limb(stack, cfg)
         barrier = session.declare_subscriber(KEYS.stats, zenoh.handlers.FifoChannel(64))

@@ -9,6 +9,8 @@ from pathlib import Path
 import pytest
 from mcap.reader import make_reader
 
+from paper_scheme import paper
+
 from sea_hil.config import load_config
 from sea_hil.recorder.writer import read_session
 from sea_hil.report.writer import run_report
@@ -23,7 +25,9 @@ SHORT = {"trajectory": {"period_s": 2.0}, "safety": {"drive": {"enabled": False}
 
 
 def _run(tmp: Path, name: str, controller: str = "et", overrides: dict | None = None, **kw) -> dict:
-    cfg = load_config(overrides=overrides if overrides is not None else SHORT)
+    """A lockstep session of the paper's scheme (trigger at the controller, no compensation: the counts below are
+    its); the default scheme's live session: tests/test_session_engine.py."""
+    cfg = load_config(overrides=paper(overrides if overrides is not None else SHORT))
     return run_session(cfg, RunOptions(controller=controller, out=tmp / name, lockstep=True, progress=False, **kw))
 
 
@@ -40,7 +44,7 @@ def test_lockstep_is_reproducible(et_runs):
     agree in every deterministic field, edge counters included, is tests/test_pre_refactor_equality.py."""
     _, a, _ = et_runs
     assert a["tracking"]["max_abs_error_rad"][0] > 0
-    replay = session_summary(run_engine(load_config(overrides={}), "et").data, "et")   # the run's config
+    replay = session_summary(run_engine(load_config(overrides=paper()), "et").data, "et")   # the run's config
     keys = ("transmissions", "tracking", "lead_in", "events_by_reason", "inter_event_s", "duration_s",
             "uplink_outside_msgs", "max_abs_voltage_v")
     assert {k: a[k] for k in keys} == {k: replay[k] for k in keys}
@@ -95,6 +99,7 @@ def test_recording_is_complete_and_report_reproduces_summary(et_runs, tmp_path):
 
 def test_link_emulation_delay_and_loss_statistics(tmp_path):
     delay_s, loss = 0.02, 0.1
+    # the paper's scheme: every state up, no delay compensation (the error band below is the uncompensated delay's)
     s = _run(tmp_path, "lossy", controller="tt",
              overrides={**SHORT, "link": {"seed": 7, "uplink": {"delay_s": delay_s, "loss": loss}}})
     edge = s["edge"]
@@ -113,7 +118,7 @@ def test_link_emulation_delay_and_loss_statistics(tmp_path):
 
 
 def test_remote_inner_loop_placement_runs(tmp_path):
-    s = _run(tmp_path, "remote", controller="et", inner="remote")
+    s = _run(tmp_path, "remote", controller="et", inner="remote")   # the paper's scheme: needs every state up
     # voltages every sample (100 Hz) tunnelled to CAN and held: tracking is far worse than the edge placement
     assert s["transmissions"]["downlink_msgs"] >= 190
     summary = json.loads((tmp_path / "remote" / "summary.json").read_text())

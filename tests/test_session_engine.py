@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from paper_scheme import PAPER_FLAGS, paper
 from test_pre_refactor_equality import as_payload_v2, with_totals
 
 from sea_hil.config import load_config
@@ -20,6 +21,7 @@ from sea_hil.protocol.link import parse_link_spec
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode
 from sea_hil.recorder.node import zenoh_record
 from sea_hil.report.session_summary import session_summary
+from sea_hil.report.writer import run_report
 
 ROOT = Path(__file__).resolve().parents[1]
 FIXTURES = ROOT / "tests" / "fixtures" / "pre_refactor"
@@ -49,17 +51,18 @@ def test_engine_equals_recorded_lockstep_sessions(mode, link):
 
 @pytest.mark.slow
 def test_engine_equals_a_live_lockstep_session_with_jitter_and_loss(tmp_path):
-    """The current default controller on a short trajectory, ET, 5 ms +- 2 ms (normal) and 2 % loss each way."""
+    """The paper's scheme (trigger at the controller, no compensation) on a short trajectory, ET, 5 ms +- 2 ms
+    (normal) and 2 % loss each way (the default scheme: the next test)."""
     cfg_file = tmp_path / "short.toml"
     cfg_file.write_text("[trajectory]\nperiod_s = 2.0\nlead_in_s = 0.3\n", encoding="utf-8")
     spec = "delay=5ms,jitter=2ms,dist=normal,loss=2%"
     proc = subprocess.run([sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet", "--controller", "et",
-                           "--cycles", "1", "--seed", "1", "--config", str(cfg_file), "--uplink", spec, "--downlink",
-                           spec, "--out", str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True,
-                          timeout=300, stdin=subprocess.DEVNULL)
+                           "--cycles", "1", "--seed", "1", "--config", str(cfg_file), *PAPER_FLAGS, "--uplink", spec,
+                           "--downlink", spec, "--out", str(tmp_path / "run")], cwd=ROOT, capture_output=True,
+                          text=True, timeout=300, stdin=subprocess.DEVNULL)
     assert proc.returncode == 0, proc.stderr
     live = json.loads((tmp_path / "run" / "summary.json").read_text())
-    got = session_summary(run_engine(_cfg(cfg_file, spec), "et").data, "et")
+    got = session_summary(run_engine(_cfg(cfg_file, spec, **paper()), "et").data, "et")
     assert live["edge"]["uplink_dropped"] > 0 and live["edge"]["downlink_dropped"] >= 0   # states were lost
     assert {k: got[k] for k in COMPARED} == {k: live[k] for k in COMPARED}
 
@@ -84,6 +87,8 @@ def test_engine_equals_a_live_edge_trigger_predict_session_on_a_delayed_lossy_li
     got = session_summary(run_engine(cfg, "et").data, "et")
     assert live["edge"]["uplink_dropped"] > 0 and live["edge"]["edge_events"] > 0
     assert {k: got[k] for k in COMPARED} == {k: live[k] for k in COMPARED}
+    rep = run_report(tmp_path / "run" / "session.mcap", tmp_path / "report")   # the recording reproduces the summary
+    assert {k: rep[k] for k in COMPARED} == {k: live[k] for k in COMPARED}
 
 
 def test_records_are_the_recorders_own():

@@ -12,6 +12,7 @@ from sea_hil.offline.session_engine import EngineOptions, driver_disturbance_tab
 from sea_hil.offline.session_fast import delivery_offsets, unsupported
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.link import LinkEmulator, parse_link_spec
+from paper_scheme import paper
 
 SHORT = {"trajectory": {"period_s": 1.5, "lead_in_s": 0.3}}
 CASES = {
@@ -33,7 +34,7 @@ def _cfg(case: str):
     ov = {**SHORT, "link": {"seed": 4}, **extra}
     if link:
         ov["link"] = {"seed": 4, "uplink": parse_link_spec(link), "downlink": parse_link_spec(link)}
-    return load_config(None, ov)
+    return load_config(None, paper(ov))     # the kernel covers the paper's scheme only
 
 
 @pytest.mark.parametrize("mode", ["et", "tt"])

@@ -69,6 +69,21 @@ def add_scheme_args(p: argparse.ArgumentParser) -> None:
                         "the instant the setpoint acts, 'none' = the paper's")
 
 
+def _paper_scheme_where_needed(args: argparse.Namespace, ov: dict[str, Any]) -> None:
+    """The paper's scheme where the default one cannot work: `--inner remote` needs a state every sample (the
+    voltage is computed per state) and the predictor models the edge's inner loop, so it runs the trigger at the
+    controller without compensation; `--controller external` speaks the documented STATE protocol (every state up,
+    docs/external-controller.md), so it runs the trigger at the controller. An explicit `--trigger edge` with
+    `--inner remote` is a ConfigError; with `external` it is the user's choice."""
+    remote, external = getattr(args, "inner", None) == "remote", getattr(args, "controller", None) == "external"
+    if remote and getattr(args, "trigger", None) == "edge":
+        raise ConfigError("--inner remote computes the voltage from every state: it needs --trigger controller")
+    if (remote or external) and not getattr(args, "trigger", None):
+        ov.setdefault("trigger", {})["placement"] = "controller"
+    if remote and not getattr(args, "compensation", None):
+        ov.setdefault("controller", {})["compensation"] = "none"
+
+
 def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
     ov: dict[str, Any] = dict(overrides or {})
     if getattr(args, "seed", None) is not None:
@@ -78,6 +93,7 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
         ov.setdefault("trigger", {})["placement"] = args.trigger
     if getattr(args, "compensation", None):
         ov.setdefault("controller", {})["compensation"] = args.compensation
+    _paper_scheme_where_needed(args, ov)
     if getattr(args, "trajectory", None):
         ov.setdefault("trajectory", {}).update({"kind": "csv", "csv_path": args.trajectory})
     for direction in ("uplink", "downlink"):

@@ -11,7 +11,9 @@ from sea_hil.commands.common import add_config_args, add_period_arg, add_scenari
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("simulate", help="offline closed-loop simulation (no network); paper Fig. 2-4",
                        description="Run the plant model with TT or ET SMC in one process and write "
-                                   "DIR/summary.json plus figures.")
+                                   "DIR/summary.json plus figures. No link: the paper's scheme (trigger at the "
+                                   "controller, a state every sample), whatever trigger.placement says; the default "
+                                   "scheme offline: `sea-hil run --lockstep` or `sea-hil sweep`.")
     p.add_argument("--controller", choices=("tt", "et"), default="et", help="time- or event-triggered SMC")
     p.add_argument("--compare", action="store_true", help="run both and write DIR/compare.md (TT vs ET vs paper)")
     p.add_argument("--trajectory", metavar="CSV", help="desired trajectory CSV with columns t, theta1, theta2 (rad)")

@@ -126,8 +126,8 @@ class ControllerConfig(_Frozen):
     observer_bandwidth_rad_s: float = Field(400.0, gt=0, description="triple pole of the momentum disturbance "
                                             "observer (third order: the torque and its rate)")
     compensation: Literal["none", "predict"] = Field(
-        "none", description="link-delay compensation: 'predict' = v_x for the state predicted at the instant the "
-        "setpoint acts (issue 16, docs/et-over-links.md); 'none' = the paper's (v_x for the received state)")
+        "predict", description="link-delay compensation: 'predict' (default) = v_x for the state predicted at the "
+        "instant the setpoint acts (issue 16, docs/et-over-links.md); 'none' = the paper's (v_x for the received state)")
     model: NominalModelConfig = NominalModelConfig()
 
 
@@ -137,11 +137,11 @@ class TriggerConfig(_Frozen):
     lipschitz_l: float = Field(gt=0)
     max_inter_event_s: float = Field(0.25, gt=0)
     placement: Literal["controller", "edge"] = Field(
-        "controller", description="where Eq. 16-19 are evaluated: 'controller' = the paper's (the edge publishes "
-        "every outer sample); 'edge' = the edge publishes a state only on an event (both directions event-triggered)")
+        "edge", description="where Eq. 16-19 are evaluated: 'edge' (default) = the edge publishes a state only on an "
+        "event (both directions event-triggered); 'controller' = the paper's (the edge publishes every outer sample)")
     edge_check: Literal["outer", "sample"] = Field(
         "outer", description="edge placement: evaluate the trigger every outer sample or every inner (1 kHz) sample")
-    edge_model: bool = Field(False, description="edge placement: the lookahead runs the nominal model (else: "
+    edge_model: bool = Field(True, description="edge placement: the lookahead runs the nominal model (else: "
                              "extrapolation of the sampled state over one round trip)")
 
 

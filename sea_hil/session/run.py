@@ -19,7 +19,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 from sea_hil.config import SeaHilConfig, config_to_toml
-from sea_hil.errors import SeaHilError
+from sea_hil.errors import ConfigError, SeaHilError
 from sea_hil.live.link import await_live
 from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.process import RecorderProcess
@@ -95,6 +95,9 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     limbs = session_limbs(cfg, opts.limbs, opts.node_id, opts.can)
     if opts.controller == "external" and len(limbs) > 1:
         raise SeaHilError(f"--controller external serves one limb, not {len(limbs)}")
+    if opts.inner == "remote" and cfg.trigger.placement == "edge":   # the CLI picks the paper's scheme for it
+        raise ConfigError("inner 'remote' computes the voltage from every state: it needs trigger.placement = "
+                          "'controller' (--trigger controller --compensation none)")
     t0 = time.monotonic()
     # SIGTERM/SIGHUP raise `Terminated` here: the builder's close path ends the controller and closes the recording
     with stop_on_signals(), SessionBuilder(cfg, lockstep=opts.lockstep) as b:

@@ -149,8 +149,10 @@ def point_overrides(point: GridPoint, direction: str = "both") -> dict[str, Any]
 
 def scheme_columns(cfg: Any) -> dict[str, Any]:
     """The CSV's SCHEME_COLUMNS of a point's effective config."""
+    edge = cfg.trigger.placement == "edge"     # edge_model is used by the trigger at the edge only
     return {"trigger": cfg.trigger.placement, "compensation": cfg.controller.compensation,
-            "edge_model": cfg.trigger.edge_model, "period_ms": round(cfg.controller.sample_period_s * 1000.0, 6)}
+            "edge_model": edge and cfg.trigger.edge_model,
+            "period_ms": round(cfg.controller.sample_period_s * 1000.0, 6)}
 
 
 def point_command(point: GridPoint, mode: str, cfg_path: Path, out: Path, cycles: int,

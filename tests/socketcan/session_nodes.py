@@ -30,8 +30,10 @@ def sea_hil_cmd(*args: str, netns: str | None = None) -> list[str]:
     return ["ip", "netns", "exec", netns, *cmd] if netns else cmd
 
 
-def write_gait_slice_config(directory: Path, duration_s: float) -> Path:
-    """Write ``gait-slice.csv`` (the default gait's first ``duration_s``) and ``session.toml`` using it; -> TOML."""
+def write_gait_slice_config(directory: Path, duration_s: float, paper: bool = True) -> Path:
+    """Write ``gait-slice.csv`` (the default gait's first ``duration_s``) and ``session.toml`` using it; -> TOML.
+    `paper`: the paper's scheme (trigger at the controller, no compensation; the counts these tests assert are its),
+    else the default one (no [trigger] / [controller] tables: the caller may append them)."""
     from sea_hil.controller.trajectory import GaitTrajectory
     from sea_hil.config import load_config
     gait = GaitTrajectory(load_config().trajectory.period_s)
@@ -44,7 +46,9 @@ def write_gait_slice_config(directory: Path, duration_s: float) -> Path:
     csv_path.write_text("\n".join(rows) + "\n", encoding="utf-8")
     toml_path = directory / "session.toml"
     # no lead-in: the slice is short and the guest slow; every handled state is in the measured cycle
-    toml_path.write_text(f'[trajectory]\nkind = "csv"\ncsv_path = "{csv_path}"\nlead_in_s = 0.0\n', encoding="utf-8")
+    scheme = '\n[trigger]\nplacement = "controller"\n\n[controller]\ncompensation = "none"\n' if paper else ""
+    toml_path.write_text(f'[trajectory]\nkind = "csv"\ncsv_path = "{csv_path}"\nlead_in_s = 0.0\n' + scheme,
+                         encoding="utf-8")
     return toml_path
 
 

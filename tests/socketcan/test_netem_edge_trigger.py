@@ -36,7 +36,7 @@ def test_edge_trigger_with_prediction_across_netem(tmp_path: Path, delayed_names
     from sea_hil.protocol.zsession import free_tcp_port
     from sea_hil.report.session_summary import session_summary
     bus_ns, ctl_ns = delayed_namespaces
-    cfg_path = write_gait_slice_config(tmp_path, DURATION_S)
+    cfg_path = write_gait_slice_config(tmp_path, DURATION_S, paper=False)
     link = '{ delay_s = 0.005, jitter_s = 0.001, jitter_dist = "normal", loss = 0.01 }'     # = LINK
     cfg_path.write_text(cfg_path.read_text(encoding="utf-8") + (
         '\n[trigger]\nplacement = "edge"\nedge_model = true\n\n[controller]\ncompensation = "predict"\n\n'
