@@ -99,7 +99,7 @@ class LatestSubscriber:
         self._cond = threading.Condition()
         # indirect=False: the callback runs in zenoh's receiving thread; the default (a plain callable) hands every
         # sample to one more Python thread first, an extra wake-up and GIL hand-off per sample (docs/timing.md)
-        self._sub = session.declare_subscriber(key, zenoh.handlers.Callback(self._on_sample, indirect=False))
+        self._sub = session.declare_subscriber(key, self._on_sample)
 
     def _on_sample(self, sample: zenoh.Sample) -> None:
         with self._cond:
