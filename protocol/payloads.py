@@ -216,8 +216,11 @@ def decode(b: bytes) -> Payload:
     if version not in SUPPORTED_VERSIONS:
         raise PayloadRejected(RejectReason.VERSION, f"version {version} not supported ({sorted(SUPPORTED_VERSIONS)})")
     mt = _MSG_TYPES.get(mtype)
-    if mt is None:
-        raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}")
+    if mt is None:                  # rare: the enum's own error is the cause (the fast lookup has none to keep)
+        try:
+            MsgType(mtype)
+        except ValueError as err:
+            raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from err
     if len(b) != PAYLOAD_SIZE[mt]:
         raise PayloadRejected(RejectReason.LENGTH, f"{mt.name} must be {PAYLOAD_SIZE[mt]} bytes, got {len(b)}")
     f = _BODY[mt].unpack_from(b, HEADER_SIZE)
