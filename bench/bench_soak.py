@@ -112,8 +112,8 @@ def recording_check(mcap: Path) -> dict[str, Any]:
 
     def on_message(topic: str, m: RecordedMessage) -> None:
         counts[topic] += 1
-        if topic in seqs:
-            seqs[topic].append(int(m.payload["seq"]))
+        if topic in seqs:   # an edge-trigger state (EVENT_STATE) numbers its events: its `seq` is the sample's
+            seqs[topic].append(int(m.payload.get("event_seq", m.payload["seq"])))
         elif topic == "/stats" and m.payload.get("final") is True:
             finals[str(m.payload.get("node"))] = m.payload
         elif topic == "/log/faults" and "_LIMIT" in str(m.payload.get("message", "")):
