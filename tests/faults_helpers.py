@@ -157,7 +157,7 @@ def _edge_kill_main(group: str) -> dict[str, float]:
     spec = f"udp_multicast:{group}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     codec, bus = SeaCodec([NODE]), open_bus(spec)
-    state = {"s": DriverState.INIT}
+    state = {"s": DriverState.INIT, "flags": ""}
 
     def pump_until(target: DriverState, timeout: float) -> int | None:
         deadline = time.monotonic() + timeout
@@ -170,7 +170,7 @@ def _edge_kill_main(group: str) -> dict[str, float]:
             except MalformedFrame:
                 continue
             if isinstance(f, Heartbeat):
-                state["s"] = f.state
+                state["s"], state["flags"] = f.state, repr(f.flags)
                 if f.state is target:
                     return time.monotonic_ns()
         return None
@@ -196,7 +196,7 @@ def _edge_kill_main(group: str) -> dict[str, float]:
         procs.append(edge())
         running = pump_until(DriverState.RUNNING, 60)
         if running is None:
-            raise SystemExit(f"no RUNNING after the edge restart (last {state['s'].name})")
+            raise SystemExit(f"no RUNNING after the edge restart (last {state['s'].name}, flags {state['flags']})")
         return {"safe_ms": (safe - killed) / 1e6, "resumed_ms": (running - restarted) / 1e6}
     finally:
         for proc in reversed(procs):

@@ -23,6 +23,7 @@ REPO = Path(__file__).resolve().parents[1]
 WITH_VCAN = REPO / "scripts" / "with-vcan"
 GUEST_TIMEOUT_S = 480   # the two multi-process session tests take ~40 s each in the guest (more on a busy host)
 HOST_TIMEOUT_S = GUEST_TIMEOUT_S + 60
+GUEST_NICE = 10        # the guest yields the CPU to the host's real-time tests it overlaps (CI: 2 cores)
 SUITE_TEST = "tests/test_uml_vcan.py::test_socketcan_suite_passes_on_real_vcan"
 SUITE_ARGS = ("--timeout", str(GUEST_TIMEOUT_S), "--", sys.executable, "-m", "pytest", "-q", "-rA", "-p",
               "no:cacheprovider", "tests/socketcan")
@@ -68,7 +69,8 @@ class BackgroundRun:
         self._lock = open(directory / "lock", "w")  # noqa: SIM115 - released and closed by the watcher
         fcntl.flock(self._lock, fcntl.LOCK_EX)
         self._log = open(directory / "output.txt", "w", encoding="utf-8")  # noqa: SIM115 - closed by the watcher
-        self.proc = subprocess.Popen([sys.executable, str(WITH_VCAN), *args], cwd=REPO, stdin=subprocess.DEVNULL,
+        self.proc = subprocess.Popen(["nice", "-n", str(GUEST_NICE), sys.executable, str(WITH_VCAN), *args], cwd=REPO,
+                                     stdin=subprocess.DEVNULL,
                                      stdout=self._log, stderr=subprocess.STDOUT, text=True, start_new_session=True)
         self._watcher = threading.Thread(target=self._watch, args=(timeout_s,), name="with-vcan watcher", daemon=True)
         self._watcher.start()

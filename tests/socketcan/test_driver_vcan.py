@@ -23,6 +23,7 @@ REPO = Path(__file__).resolve().parents[2]
 START_TIMEOUT_S = 60.0
 MOVE_TIMEOUT_S = 60.0
 SEND_EVERY_S = 0.02
+PLANT_DURATION_S = "600"   # outlives both deadlines (ended in `finally`): a slow guest must not end it first
 MOVED_RAD = 0.01  # 100 LSB of the DBC theta signal
 
 
@@ -52,7 +53,7 @@ def test_plant_answers_cansend_voltage_frames_seen_by_candump(tmp_path: Path, vc
     with log_path.open("w") as plant_log:
         try:
             plant = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "plant", "--can",
-                                      f"socketcan:{vcan_channel}", "--node", str(NODE), "--duration", "20",
+                                      f"socketcan:{vcan_channel}", "--node", str(NODE), "--duration", PLANT_DURATION_S,
                                       "--watchdog", "0.5"], cwd=REPO, stdout=plant_log, stderr=subprocess.STDOUT)
             angles: list[float] = []
             states: set[DriverState] = set()
