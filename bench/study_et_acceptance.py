@@ -34,8 +34,8 @@ BOUNDS = {"ideal": (0.32, 0.004), "5 ms, 1 ms normal, 1 %": (0.35, 0.005), "10 m
           "20 ms, 5 ms, GE 0.01/0.3/0.8": (0.45, 0.012)}
 SCENARIOS = {"nominal": (None, None, 0.0, 1.0),
              "robust": ("sine:0.03Nm@0.5Hz", "mass=+10%,stiffness=-10%", 0.10, 2.0)}
-PAPER_ET = {"placement": "controller", "compensation": "none", "edge_model": False}
-NEW_ET = {"placement": "edge", "compensation": "predict", "edge_model": True}
+PAPER_ET = {"placement": "controller", "compensation": "none", "edge_model": False, "edge_fallback": "hold"}
+NEW_ET = {"placement": "edge", "compensation": "predict", "edge_model": True, "edge_fallback": "local"}
 TT_PERIODS_MS = (10, 20, 25, 30, 35, 40, 50, 70, 100)
 
 
@@ -44,7 +44,8 @@ def run(link: str, scenario: str, mode: str, method: dict[str, Any], period_ms: 
     disturbance, mismatch, _, _ = SCENARIOS[scenario]
     ov: dict[str, Any] = {"link": {"seed": 1}, "disturbance": {"seed": 1},
                           "controller": {"sample_period_s": period_ms / 1000, "compensation": method["compensation"]},
-                          "trigger": {"placement": method["placement"], "edge_model": method["edge_model"]}}
+                          "trigger": {"placement": method["placement"], "edge_model": method["edge_model"],
+                                      "edge_fallback": method.get("edge_fallback", "local")}}
     if LINKS[link]:
         ov["link"].update(uplink=parse_link_spec(LINKS[link]), downlink=parse_link_spec(LINKS[link]))
     cfg = scenario_config(None, ov, disturbance, mismatch)
