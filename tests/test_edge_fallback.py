@@ -1,9 +1,16 @@
-"""The edge's local fallback on a silent or bursty downlink (issue 16, docs/deviations.md section 16): the pure core
+"""The edge's local fallback on a silent or bursty downlink (issue 16, docs/deviations.md section 17): the pure core
 (`EdgeEventGenerator.overdue`, `EdgeEvents` holding its own v_x while an answer is overdue, the zero-order hold
 selectable, the envelope), and the offline engine on the 20 ms Gilbert-Elliott link: the time the edge runs on a
 setpoint older than the state it waits an answer to is bounded by the answer timeout (plus one check period) with
 the fallback, and is not with the zero-order hold."""
 from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
 
 from sea_hil.config import load_config
 from sea_hil.controller.edge_events import EdgeEvents
@@ -15,8 +22,13 @@ from sea_hil.controller.trajectory import make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TriggerReason
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.protocol.link import parse_link_spec
+from sea_hil.report.session_summary import session_summary
 
+ROOT = Path(__file__).resolve().parents[1]
 MS = 1_000_000
+# every deterministic block of a session summary (as tests/test_session_engine.py compares)
+COMPARED = ("transmissions", "tracking", "lead_in", "events_by_reason", "inter_event_s", "duration_s",
+            "uplink_outside_msgs", "max_abs_voltage_v")
 EDGE = {"trigger": {"placement": "edge", "edge_model": True}, "controller": {"compensation": "predict"}}
 BURSTY = "delay=20ms,jitter=5ms,ge=0.01/0.3/0.8"
 
@@ -103,3 +115,28 @@ def test_stale_hold_is_bounded_by_the_answer_timeout_on_a_bursty_link():
     old, new = _bursty("hold"), _bursty("local")
     assert old.max_stale_excess_ns > period_ns      # the behaviour before: the bound does not hold
     assert new.fallback_samples > 0 and new.max_stale_excess_ns < period_ns
+
+
+@pytest.mark.slow
+def test_live_lockstep_edge_with_the_fallback_equals_the_engine(tmp_path):
+    """The live edge applies the fallback as the engine does: a lockstep session (trigger at the edge, prediction,
+    10 ms and GE bursts each way, short trajectory) in which the fallback fires equals the engine bit for bit."""
+    cfg_file = tmp_path / "short.toml"
+    cfg_file.write_text("[trajectory]\nperiod_s = 2.0\nlead_in_s = 0.3\n\n[trigger]\nedge_model = true\n",
+                        encoding="utf-8")
+    spec = "delay=10ms,ge=0.05/0.3/0.8"
+    proc = subprocess.run([sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet", "--controller", "et",
+                           "--cycles", "1", "--seed", "1", "--config", str(cfg_file), "--trigger", "edge",
+                           "--compensation", "predict", "--uplink", spec, "--downlink", spec,
+                           "--out", str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True,
+                          timeout=300, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stderr
+    live = json.loads((tmp_path / "run" / "summary.json").read_text())
+    link = parse_link_spec(spec)
+    cfg = load_config(cfg_file, {"link": {"seed": 1, "uplink": link, "downlink": link}, "disturbance": {"seed": 1},
+                                 **EDGE})
+    res = run_engine(cfg, "et")
+    got = session_summary(res.data, "et")
+    assert res.edge is not None and res.edge.fallback_samples > 0
+    assert live["edge"]["edge_fallback_samples"] == res.edge.fallback_samples
+    assert {k: got[k] for k in COMPARED} == {k: live[k] for k in COMPARED}
