@@ -35,7 +35,8 @@ def point(spec: str, seed: int, fallback: str, disturbance: str | None, mismatch
     res = run_engine(scenario_config(None, ov, disturbance, mismatch), "et")
     s = session_summary(res.data, "et")
     t = s["transmissions"]
-    return t["uplink_msgs"] + t["downlink_msgs"], max(s["tracking"]["max_abs_error_rad"]), res.edge.max_stale_ns // 10**6
+    stale_ms = res.edge.max_stale_ns // 10**6
+    return t["uplink_msgs"] + t["downlink_msgs"], max(s["tracking"]["max_abs_error_rad"]), stale_ms
 
 
 def main() -> None:
@@ -46,7 +47,8 @@ def main() -> None:
     args = ap.parse_args()
     logging.disable(logging.WARNING)
     scenarios = {"nominal": (None, None), "robust": ("sine:0.03Nm@0.5Hz", args.mismatch)}
-    print("| link, each way | scenario | edge_fallback | per seed: msgs / max err [rad] / stale [ms] | max err min-max |")
+    print("| link, each way | scenario | edge_fallback | per seed: msgs / max err [rad] / stale [ms] "
+          "| max err min-max |")
     print("|---|---|---|---|---|")
     for spec in args.links:
         for name, (dist, mism) in scenarios.items():

@@ -9,7 +9,7 @@ the lookahead on the nominal model (`trigger.edge_model`, with `controller.compe
 builds that model only then) with the setpoint the edge holds kept; the trajectory anchor (an INITIAL state) is
 re-published until the controller answers it (controller/edge_trigger.py).
 
-The local fallback (`trigger.edge_fallback = "local"`, docs/deviations.md section 16): while an answer is overdue
+The local fallback (`trigger.edge_fallback = "local"`, docs/deviations.md section 17): while an answer is overdue
 (`EdgeEventGenerator.overdue`: a silent or bursty downlink, a lost state) the edge computes v_x itself at every
 checked sample from the SMC law on its own fresh sample (the nominal model, x_d(t) of the trajectory it already has)
 and returns it as `EdgeDecision.hold`, which the caller holds in the inner loop until the controller's next setpoint;

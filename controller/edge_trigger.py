@@ -18,7 +18,7 @@ stopped commanding by then). Before this, the edge anchored on its own first sam
 received it, so a controller that started listening later ran the trajectory shifted by that time (issue 16's
 real-time failure, docs/et-over-links.md).
 
-Overdue answers (the local fallback of a silent downlink, docs/deviations.md section 16): `outstanding` holds the
+Overdue answers (the local fallback of a silent downlink, docs/deviations.md section 17): `outstanding` holds the
 states published since the newest answer; `overdue(sample_ns)` says the oldest of them has waited `answer_timeout_ns`
 (the same loss decision as the re-trigger) without any answer, i.e. the downlink (or uplink) is silent and the held
 setpoint is stale. The edge (controller/edge_events.py) then computes v_x itself until an answer comes.
