@@ -179,6 +179,8 @@ class EdgeNode(Node):
                                                          self.events.trajectory_id)  # type: ignore[union-attr]
             if at is not None:
                 self.sync.state_sent(at, seq, data)
+        if d.hold is not None:          # the local fallback of a silent downlink (controller/edge_events.py)
+            self.inner.hold(*d.hold)
         if d.record is not None:
             self.event_pub.put(json.dumps(d.record).encode())  # type: ignore[union-attr]
 

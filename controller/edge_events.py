@@ -8,6 +8,14 @@ checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"
 the lookahead on the nominal model (`trigger.edge_model`, with `controller.compensation = "predict"`: the engine
 builds that model only then) with the setpoint the edge holds kept; the trajectory anchor (an INITIAL state) is
 re-published until the controller answers it (controller/edge_trigger.py).
+
+The local fallback (`trigger.edge_fallback = "local"`, docs/deviations.md section 17): while an answer is overdue
+(`EdgeEventGenerator.overdue`: a silent or bursty downlink, a lost state) the edge computes v_x itself at every
+checked sample from the SMC law on its own fresh sample (the nominal model, x_d(t) of the trajectory it already has)
+and returns it as `EdgeDecision.hold`, which the caller holds in the inner loop until the controller's next setpoint;
+`"hold"` keeps the controller's last setpoint (zero-order hold, the behaviour before). Bounded in time by the edge's
+setpoint timeout, which only the controller's setpoints refresh. A local setpoint outside the setpoint envelope is
+not held (counted).
 """
 from __future__ import annotations
 
@@ -16,8 +24,10 @@ from typing import Any
 
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
+from sea_hil.controller.envelope import SetpointEnvelope, admissible
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.predictor import Predictor
-from sea_hil.controller.smc import JointState
+from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import make_trajectory, trajectory_id
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, error_threshold
 
@@ -28,6 +38,7 @@ class EdgeDecision:
     reason: TriggerReason | None          # publish this sample (None: not an event)
     event_seq: int                        # EVENT_STATE.event_seq if published
     record: dict[str, Any] | None         # the tracking record of an outer sample, else None
+    hold: tuple[tuple[float, float], tuple[float, float]] | None = None   # local fallback (v_x, s) to hold
 
 
 def make_trigger(cfg: SeaHilConfig, mode: str) -> EventTrigger | TimeTrigger:
@@ -63,6 +74,17 @@ class EdgeEvents:
             self.model.warm(tuple(cfg.plant.initial_theta_rad))
         self.events = 0
         self.sampled_at: dict[int, int] = {}
+        self.fallback = cfg.trigger.edge_fallback == "local"
+        cc = cfg.controller
+        self._smc = (nominal_params(cfg), cc.c, cc.rho, cc.boundary_layer)
+        self._envelope = SetpointEnvelope.from_config(cfg.safety.setpoint).deflection_max_m
+        self.fallback_samples = 0         # checked samples at which the edge held its own v_x
+        self.fallback_episodes = 0        # overdue periods (each one a run of fallback samples)
+        self.fallback_rejected = 0        # local setpoints outside the envelope (not held)
+        self._in_fallback = False
+        self.max_stale_ns = 0             # longest run on a setpoint older than the oldest unanswered state
+        self.max_stale_excess_ns = 0      # ... beyond the answer timeout at that sample
+        self._last_hold_ns: int | None = None   # the sample the held setpoint was computed for (answered or local)
 
     def on_sample(self, sample_ns: int, fb: tuple) -> EdgeDecision | None:
         """fb = (theta, omega, delta, nut velocity) pairs of the sample at `sample_ns`; None: not checked."""
@@ -75,22 +97,59 @@ class EdgeEvents:
             model, held = self.model, self.inner
             hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
             ahead = lambda h_ns: model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)  # noqa: E731
-        t_ns, ds, reason = self.generator.on_sample(sample_ns, JointState(fb[0], fb[1]), ahead)
+        js = JointState(fb[0], fb[1])
+        t_ns, ds, reason = self.generator.on_sample(sample_ns, js, ahead)
         seq = k + 1
+        self._stale(sample_ns)
+        hold = self._fallback(sample_ns, js, ds)
         if reason is not None:
             self.generator.sent(seq, sample_ns)
             self.events += 1
             self.sampled_at[seq] = sample_ns
             self.sampled_at.pop(seq - 100_000, None)
         record = tracking_record(t_ns, seq, fb[0], ds, reason, 0) if outer and t_ns <= self.duration_ns else None
-        return EdgeDecision(seq, reason, self.events, record)
+        return EdgeDecision(seq, reason, self.events, record, hold)
+
+    def _fallback(self, sample_ns: int, js: JointState, ds: Any
+                  ) -> tuple[tuple[float, float], tuple[float, float]] | None:
+        """The local (v_x, s) to hold at this sample while an answer is overdue (None: keep the held setpoint)."""
+        overdue = self.fallback and self.generator.overdue(sample_ns)
+        self.fallback_episodes += overdue and not self._in_fallback
+        self._in_fallback = overdue
+        if not overdue:
+            return None
+        params, c, rho, boundary_layer = self._smc
+        vx, s = smc_deflection(js, ds, params, c, rho, boundary_layer)
+        if not admissible(vx, self._envelope):
+            self.fallback_rejected += 1
+            return None
+        self.fallback_samples += 1
+        self._last_hold_ns = sample_ns
+        return vx, s
+
+    def _stale(self, sample_ns: int) -> None:
+        """How long the edge has held a setpoint computed for a sample before the oldest state it still waits an answer
+        to (with the zero-order hold: until an answer comes; with the local fallback: the answer timeout at most)."""
+        gen = self.generator
+        if not gen.outstanding or self._last_hold_ns is None or self._last_hold_ns >= gen.outstanding[0][1]:
+            return
+        stale = sample_ns - gen.outstanding[0][1]
+        self.max_stale_ns = max(self.max_stale_ns, stale)
+        self.max_stale_excess_ns = max(self.max_stale_excess_ns, stale - gen.answer_timeout_ns)
 
     def answered(self, state_seq: int, now_ns: int) -> None:
-        self.generator.answered(state_seq, now_ns, self.sampled_at.get(state_seq, now_ns))
+        sampled = self.sampled_at.get(state_seq, now_ns)
+        self._last_hold_ns = sampled        # the held setpoint is the answer to the state of that sample
+        self.generator.answered(state_seq, now_ns, sampled)
 
     def stats(self) -> dict[str, int]:
         return {"edge_events": self.events, "edge_retriggers": self.generator.retriggers,
                 "edge_reanchors": self.generator.reanchors}
+
+    def fallback_stats(self) -> dict[str, int]:
+        """The local fallback's counters and the longest stale hold (in the edge's /stats)."""
+        return {"edge_fallback_samples": self.fallback_samples, "edge_fallback_episodes": self.fallback_episodes,
+                "edge_fallback_rejected": self.fallback_rejected, "edge_max_stale_ms": self.max_stale_ns // 1_000_000}
 
 
 def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,

@@ -88,5 +88,5 @@ def edge_stats(edge: Any) -> dict[str, float]:
     if timing is not None:
         out.update(timing())
     if edge.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
-        out.update(edge.events.stats())
+        out.update(edge.events.stats(), **edge.events.fallback_stats())
     return out

@@ -17,11 +17,16 @@ current sample, and also when no answer at all came for `reanchor_after_ns` (a r
 stopped commanding by then). Before this, the edge anchored on its own first sample whether or not the controller
 received it, so a controller that started listening later ran the trajectory shifted by that time (issue 16's
 real-time failure, docs/et-over-links.md).
+
+Overdue answers (the local fallback of a silent downlink, docs/deviations.md section 17): `outstanding` holds the
+states published since the newest answer; `overdue(sample_ns)` says the oldest of them has waited `answer_timeout_ns`
+(the same loss decision as the re-trigger) without any answer, i.e. the downlink (or uplink) is silent and the held
+setpoint is stale. The edge (controller/edge_events.py) then computes v_x itself until an answer comes.
 """
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from sea_hil.controller.smc import JointState, tracking_errors
 from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn, anchored_lead_in
@@ -49,6 +54,7 @@ class EdgeEventGenerator:
     anchor_ns: int = 0                # sample time of the anchor
     last_answer_ns: int = 0
     reanchors: int = 0
+    outstanding: list[tuple[int, int]] = field(default_factory=list)   # (seq, sample ns) of unanswered states
     _anchoring: bool = False          # the sample just checked is a new anchor (its seq comes with `sent`)
     _prev: tuple[int, tuple[float, float]] | None = None
     _alpha: tuple[float, float] = (0.0, 0.0)
@@ -108,6 +114,7 @@ class EdgeEventGenerator:
                                                  self.lead_in_ns, self.lead_in_max_velocity_rad_s)
         self.t0_ns, self.anchor_ns = sample_ns + lead_ns, sample_ns
         self.anchored, self._anchoring, self.awaiting_seq = False, True, None
+        self.outstanding.clear()
         self.trigger.reset()
 
     def trigger_moved(self, eps: tuple[float, ...]) -> bool:
@@ -137,8 +144,17 @@ class EdgeEventGenerator:
         om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha))
         return JointState(th, om), t_eval, self.desired(t_eval)
 
+    def overdue(self, sample_ns: int) -> bool:
+        """The oldest state published since the newest answer has waited at least the answer timeout (anchored
+        only: before the controller has answered the anchor there is no agreed t to control on)."""
+        return self.anchored and bool(self.outstanding) \
+            and sample_ns - self.outstanding[0][1] >= self.answer_timeout_ns
+
     def sent(self, seq: int, sample_ns: int) -> None:
         self.awaiting_seq, self.awaiting_since_ns = seq, sample_ns
+        self.outstanding.append((seq, sample_ns))
+        if len(self.outstanding) > 64:      # a long outage: the setpoint timeout has stopped the edge by then
+            del self.outstanding[0]
         if self._anchoring:
             self.anchor_seq, self._anchoring = seq, False
 
@@ -151,3 +167,5 @@ class EdgeEventGenerator:
             self.anchored = True
         if self.awaiting_seq is not None and state_seq >= self.awaiting_seq:
             self.awaiting_seq = None
+        while self.outstanding and self.outstanding[0][0] <= state_seq:
+            del self.outstanding[0]

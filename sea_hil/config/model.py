@@ -141,6 +141,10 @@ class TriggerConfig(_Frozen):
         "event (both directions event-triggered); 'controller' = the paper's (the edge publishes every outer sample)")
     edge_check: Literal["outer", "sample"] = Field(
         "outer", description="edge placement: evaluate the trigger every outer sample or every inner (1 kHz) sample")
+    edge_fallback: Literal["local", "hold"] = Field(
+        "local", description="edge placement, a silent downlink: 'local' (default) = while an answer is overdue the "
+        "edge computes v_x itself from the SMC law on its own samples (docs/deviations.md section 17); 'hold' = it "
+        "keeps the controller's last setpoint (zero-order hold)")
     edge_model: bool = Field(True, description="edge placement: the lookahead runs the nominal model (else: "
                              "extrapolation of the sampled state over one round trip)")
 

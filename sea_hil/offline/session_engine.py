@@ -190,4 +190,4 @@ def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
         k = nxt
     env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
     return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated, faulted,
-                        env.envelope.rejected)
+                        env.envelope.rejected, loop.edge)

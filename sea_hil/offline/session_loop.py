@@ -73,6 +73,8 @@ class SessionLoop:
             return
         if d.reason is not None:
             self._publish(d.seq, now, fb, d.reason)
+        if d.hold is not None:                     # the local fallback of a silent downlink (as the live edge)
+            e.inner.hold(*d.hold)
         if d.record is not None:
             e.rec.tracking(d.record, now)
 

@@ -21,6 +21,7 @@ class EngineResult:
     saturated_steps: int
     drive_faulted: bool = False          # a drive soft limit faulted the drive (0 V from then on)
     setpoints_out_of_envelope: int = 0   # setpoints the edge's envelope rejected
+    edge: Any = None                     # trigger at the edge: its core (`EdgeEvents`: stats, stale holds)
 
 
 class SessionRecords:
