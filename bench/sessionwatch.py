@@ -127,9 +127,18 @@ def end_tree(proc: subprocess.Popen, grace_s: float = 20.0) -> None:
         try:
             k.wait(timeout=5.0)
         except psutil.TimeoutExpired:
-            k.kill()
+            _kill_and_reap(k)
         except psutil.Error:
             pass
+
+
+def _kill_and_reap(proc: psutil.Process) -> None:
+    """SIGKILL, then wait until it is gone: end_tree returns only when the tree no longer runs."""
+    try:
+        proc.kill()
+        proc.wait(timeout=5.0)
+    except (psutil.Error, psutil.TimeoutExpired):
+        pass   # gone already, or a zombie its (new) parent has not reaped yet
 
 
 def watch_run(cmd: Sequence[str], out: Path, *, cwd: Path, stall_s: float = 30.0, silent_s: float = 180.0,
