@@ -1,6 +1,7 @@
 """bench/bench_soak.py's pure parts: RSS growth after the first minute from sampled series, and its records."""
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
@@ -39,3 +40,35 @@ def test_too_short_a_session_has_no_growth_figure() -> None:
         s.samples["run"].append((float(k), 100.0, 0.0))
     g = s.growth()["run"]
     assert g["growth_mb"] != g["growth_mb"]   # NaN: no samples after the first minute
+
+
+def _event_recording(path: Path, event_seqs: list[int]) -> None:
+    """A synthetic session file through the recorder's own Zenoh tap: edge-trigger states (EVENT_STATE, header seq =
+    the sample number, so it has gaps by design) numbered `event_seqs`, and the edge's final stats counting them."""
+    from sea_hil.protocol.payloads import EventStatePayload, TriggerReason, encode
+    from sea_hil.recorder.writer import SessionRecorder
+    from sea_hil.recorder.zenoh_tap import ZenohTap
+
+    tap = ZenohTap()
+    with SessionRecorder(path, flush_period_s=None) as rec:
+        for k, ev in enumerate(event_seqs):
+            sample = 1 + 7 * ev   # every 7th sample published: header seq gaps that are not losses
+            data = encode(EventStatePayload(sample, 1000 + k, 10**6 * sample, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0),
+                                            (0.0, 0.0), ev, TriggerReason.TIME, 3))
+            for r in tap.records("sea/limb1/state", data, 10**18 + k):
+                rec.record(r.topic, r.log_time_ns, r.publish_time_ns, r.payload, r.sequence)
+        stats = {"node": "edge", "final": True, "t_ns": 1, "uplink_msgs": max(event_seqs)}
+        for r in tap.records("sea/limb1/stats", json.dumps(stats).encode(), 10**18 + len(event_seqs)):
+            rec.record(r.topic, r.log_time_ns, r.publish_time_ns, r.payload, r.sequence)
+
+
+def test_recording_check_counts_a_missing_event_state_and_none_when_complete(tmp_path: Path) -> None:
+    complete, holed = tmp_path / "complete.mcap", tmp_path / "holed.mcap"
+    _event_recording(complete, list(range(1, 51)))
+    _event_recording(holed, [e for e in range(1, 51) if e not in (17, 30, 31)])
+    ok = bench_soak.recording_check(complete)
+    assert (ok["states_recorded"], ok["states_published"], ok["state_seq_gaps_recorded"]) == (50, 50, 0)
+    assert ok["recorder_lost"] == 0 and ok["complete"] and ok["closed_by"] == "close"
+    bad = bench_soak.recording_check(holed)
+    assert (bad["states_recorded"], bad["state_seq_gaps_recorded"]) == (47, 3)
+    assert bad["recorder_lost"] == 3 + 3   # 3 published-vs-recorded + 3 sequence gaps
