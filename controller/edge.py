@@ -190,7 +190,11 @@ class EdgeNode(Node):
     def _answer(self, fb: Feedback, now: int) -> bool:
         command, clear = self.sync.gate(self.intake.fresh(now))
         self._resume_if_stopped(fb, command, clear)
-        return self.command_path.answer(fb, command, clear)
+        cleared = self.counters.clear_errors_sent
+        sent = self.command_path.answer(fb, command, clear)
+        if self.events is not None and self.counters.clear_errors_sent != cleared and self.events.drive_cleared(now):
+            log.info("drive cleared inside the lead-in at sample seq %d: re-anchoring the trajectory", fb.seq)
+        return sent
 
     # ---- restart path ---------------------------------------------------------------------------------------------
     def _resume_if_stopped(self, fb: Feedback, command: bool, clear: bool) -> None:

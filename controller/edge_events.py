@@ -62,6 +62,7 @@ class EdgeEvents:
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
             self.model.warm(tuple(cfg.plant.initial_theta_rad))
         self.events = 0
+        self.resume_anchors = 0
         self.sampled_at: dict[int, int] = {}
 
     def on_sample(self, sample_ns: int, fb: tuple) -> EdgeDecision | None:
@@ -88,9 +89,22 @@ class EdgeEvents:
     def answered(self, state_seq: int, now_ns: int) -> None:
         self.generator.answered(state_seq, now_ns, self.sampled_at.get(state_seq, now_ns))
 
+    def drive_cleared(self, sample_ns: int) -> bool:
+        """The edge has just cleared the drive's safe state (CLEAR_ERRORS sent). If that happened inside the current
+        anchor's lead-in, the lead-in's clock ran while the drive could not follow (its first commands met the
+        faulted drive: an edge restart, a controller restart after the watchdog), so the limb is behind a moving
+        x_d and the SMC catches up at once; re-anchor at the next checked sample instead, from the state the drive
+        is in when it runs again (both ends build the lead-in from that INITIAL state). True if it re-anchors."""
+        g = self.generator
+        if g.t0_ns is None or g.time_of(sample_ns) >= 0:
+            return False        # not anchored yet, or in the measured cycles: t continues
+        g.t0_ns = None          # `_needs_anchor`: anchor at the next checked sample
+        self.resume_anchors += 1
+        return True
+
     def stats(self) -> dict[str, int]:
         return {"edge_events": self.events, "edge_retriggers": self.generator.retriggers,
-                "edge_reanchors": self.generator.reanchors}
+                "edge_reanchors": self.generator.reanchors, "edge_resume_anchors": self.resume_anchors}
 
 
 def tracking_record(t_ns: int, seq: int, theta_rad: tuple[float, float], ds: Any, reason: Any,
