@@ -68,6 +68,7 @@ class EdgeNode(Node):
                                1.0 / cfg.can.feedback_rate_hz)
         self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
+        self.max_sample_age_ns = int(round(cfg.safety.setpoint.max_sample_age_s * 1e9))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()
         self.payloads = PayloadCounters()
@@ -91,6 +92,7 @@ class EdgeNode(Node):
         self.sample_t_ns = 0
         self.last_fb_seq: int | None = None
         self.last_fb: Feedback | None = None
+        self.last_rx_ns = 0            # monotonic receive time of last_fb (0: unknown)
         self._stopped = False          # commanded once, then stopped (stale setpoints): resume bumplessly
         downlink = self.sync.downlink_callback()
         self._subs = [session.declare_subscriber(self.keys.setpoint, downlink),
@@ -149,7 +151,7 @@ class EdgeNode(Node):
                       self.t_us_full)
             return
         self.last_fb_seq = fb.seq
-        self.last_fb = fb
+        self.last_fb, self.last_rx_ns = fb, rx_ns
         c.feedback += 1
         self.t_us_full = t_us_full
         now = self.sample_t_ns = self.t_us_full * 1000
@@ -162,7 +164,7 @@ class EdgeNode(Node):
         self.publisher.poll(now)
         self.sync.sync(now)
         self.take_downlink(now)
-        if not self._answer(fb, now):
+        if not self._answer(fb, now, rx_ns):
             return
         c.commands_sent += 1
         loop_ns = time.monotonic_ns() - rx_ns
@@ -189,10 +191,20 @@ class EdgeNode(Node):
         if self.events is not None:
             self.events.answered(p.state_seq, self.sample_t_ns)  # type: ignore[attr-defined]
 
-    def _answer(self, fb: Feedback, now: int) -> bool:
+    def _answer(self, fb: Feedback, now: int, rx_ns: int) -> bool:
         command, clear = self.sync.gate(self.intake.fresh(now))
         self._resume_if_stopped(fb, command, clear)
-        return self.command_path.answer(fb, command, clear)
+        if command and self.sync.late(rx_ns):
+            # a starved edge working through a backlog: this sample is too old to answer (its command would act
+            # 10-20 ms late, an unstable inner loop); the inner loop still sees it, nothing is sent
+            self.counters.late_samples += 1
+            self.command_path.step_only(fb)
+            return False
+        cleared = self.counters.clear_errors_sent
+        sent = self.command_path.answer(fb, command, clear)
+        if self.events is not None and self.counters.clear_errors_sent != cleared and self.events.drive_cleared(now):
+            log.info("drive cleared inside the lead-in at sample seq %d: re-anchoring the trajectory", fb.seq)
+        return sent
 
     # ---- restart path ---------------------------------------------------------------------------------------------
     def _resume_if_stopped(self, fb: Feedback, command: bool, clear: bool) -> None:
@@ -215,7 +227,8 @@ class EdgeNode(Node):
         with self.lock:
             if self.stop_event.is_set() or not self.on_downlink(data, rx_ns) or self.last_fb is None:
                 return
-            if self.take_downlink(self.sample_t_ns) and self._answer(self.last_fb, self.sample_t_ns):
+            now = self.sample_t_ns
+            if self.take_downlink(now) and self._answer(self.last_fb, now, self.last_rx_ns):
                 self.counters.arrival_commands += 1
 
     def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:

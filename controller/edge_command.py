@@ -47,6 +47,11 @@ class CommandPath:
             self.voltage = p.voltage_v   # type: ignore[attr-defined]
             self.counters.voltages += 1
 
+    def step_only(self, fb: Feedback) -> None:
+        """Run the inner loop on `fb` (observer, resume ramp) without sending: a sample too late to answer."""
+        if self.inner_mode != "remote":
+            self.inner.voltage((*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s))  # type: ignore[arg-type]
+
     def answer(self, fb: Feedback, command: bool, clear: bool) -> bool:
         """Compute and send the VOLTAGE_CMD answering `fb` (False: not commanding). `command`/`clear` come from the
         clock's gate on setpoint freshness."""

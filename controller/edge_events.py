@@ -73,6 +73,7 @@ class EdgeEvents:
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
             self.model.warm(tuple(cfg.plant.initial_theta_rad))
         self.events = 0
+        self.resume_anchors = 0
         self.sampled_at: dict[int, int] = {}
         self.fallback = cfg.trigger.edge_fallback == "local"
         cc = cfg.controller
@@ -142,9 +143,22 @@ class EdgeEvents:
         self._last_hold_ns = sampled        # the held setpoint is the answer to the state of that sample
         self.generator.answered(state_seq, now_ns, sampled)
 
+    def drive_cleared(self, sample_ns: int) -> bool:
+        """The edge has just cleared the drive's safe state (CLEAR_ERRORS sent). If that happened inside the current
+        anchor's lead-in, the lead-in's clock ran while the drive could not follow (its first commands met the
+        faulted drive: an edge restart, a controller restart after the watchdog), so the limb is behind a moving
+        x_d and the SMC catches up at once; re-anchor at the next checked sample instead, from the state the drive
+        is in when it runs again (both ends build the lead-in from that INITIAL state). True if it re-anchors."""
+        g = self.generator
+        if g.t0_ns is None or g.time_of(sample_ns) >= 0:
+            return False        # not anchored yet, or in the measured cycles: t continues
+        g.t0_ns = None          # `_needs_anchor`: anchor at the next checked sample
+        self.resume_anchors += 1
+        return True
+
     def stats(self) -> dict[str, int]:
         return {"edge_events": self.events, "edge_retriggers": self.generator.retriggers,
-                "edge_reanchors": self.generator.reanchors}
+                "edge_reanchors": self.generator.reanchors, "edge_resume_anchors": self.resume_anchors}
 
     def fallback_stats(self) -> dict[str, int]:
         """The local fallback's counters and the longest stale hold (in the edge's /stats)."""

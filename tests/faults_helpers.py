@@ -142,8 +142,10 @@ def run_edge_kill_in_netns(timeout_s: float = 120.0) -> dict[str, float]:
     import shlex
     script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
               f"{shlex.quote(str(Path(__file__).resolve()))} edge-kill {EDGE_GROUP}")
-    res = subprocess.run(["unshare", "--net", "sh", "-c", script], capture_output=True, text=True, cwd=REPO,
-                         timeout=timeout_s, check=False, stdin=subprocess.DEVNULL)
+    # its own PID namespace too: if the helper is killed (the timeout) its plant, controller and edge die with it
+    res = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c", script],
+                         capture_output=True, text=True, cwd=REPO, timeout=timeout_s, check=False,
+                         stdin=subprocess.DEVNULL)
     assert res.returncode == 0, res.stdout + res.stderr
     return json.loads(res.stdout.strip().splitlines()[-1])
 

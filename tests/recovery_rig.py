@@ -34,6 +34,7 @@ class Recovery:
     limit_trips: int = 0
     watchdog_trips: int = 0
     resumes: int = 0
+    resume_anchors: int = 0     # edge trigger: re-anchors because the drive was cleared inside the lead-in
     running_again: bool = False
     flags: list[str] = field(default_factory=list)
 
@@ -114,5 +115,6 @@ class RecoveryRig:
                 out.peak_voltage_v = max(out.peak_voltage_v, *map(abs, self.drv.voltage_v))
         c = self.drv.counters
         out.limit_trips, out.watchdog_trips, out.resumes = c.limit_trips, c.watchdog_trips, self.edge.counters.resumes
+        out.resume_anchors = self.edge.events.resume_anchors if self.edge.events is not None else 0
         out.running_again, out.flags = self.drv.state.name == "RUNNING", [str(self.drv.flags)]
         return out

@@ -44,7 +44,30 @@ def test_edge_core_checks_outer_samples_publishes_events_and_records_every_outer
     assert second.reason is None                 # the answer to state 1 is in flight: no duplicate event
     core.answered(1, 6 * MS)
     assert core.generator.awaiting_seq is None and core.generator.rtt_ns == 6 * MS
-    assert core.stats() == {"edge_events": 1, "edge_retriggers": 0, "edge_reanchors": 0}
+    assert core.stats() == {"edge_events": 1, "edge_retriggers": 0, "edge_reanchors": 0, "edge_resume_anchors": 0}
+
+
+def test_a_drive_cleared_inside_the_lead_in_re_anchors_from_the_state_it_runs_again_in():
+    """The edge cleared the drive's safe state (an edge or controller restart: the first commands met the faulted
+    drive) while the anchor's lead-in was running: the next checked sample is a new anchor (INITIAL), its lead-in
+    from that sample's state, so x_d has not run ahead of a limb that could not follow. Once in the measured cycles
+    a clear does not move t."""
+    core = _core()
+    theta0 = tuple(load_config().plant.initial_theta_rad)
+    assert core.on_sample(0, _rest(theta0)).reason is TriggerReason.INITIAL
+    core.answered(1, 2 * MS)
+    t0 = core.generator.t0_ns
+    moved = ((theta0[0] + 0.02, theta0[1]), (0.1, 0.0), (0.0, 0.0), (0.0, 0.0))
+    assert core.drive_cleared(95 * MS) is True
+    again = core.on_sample(100 * MS, moved)
+    assert again is not None and again.reason is TriggerReason.INITIAL and again.seq == 101
+    g = core.generator
+    assert g.t0_ns == 100 * MS + (t0 - 0) and not g.anchored and g.anchor_seq == 101
+    assert g.desired(g.time_of(100 * MS)).theta_rad == moved[0]        # the lead-in starts where the limb is
+    assert core.stats()["edge_resume_anchors"] == 1 and core.stats()["edge_reanchors"] == 0
+    core.answered(101, 102 * MS)
+    assert core.drive_cleared(g.t0_ns + 5 * MS) is False and g.t0_ns is not None   # measured cycles: t continues
+    assert core.stats()["edge_resume_anchors"] == 1
 
 
 def test_edge_core_retriggers_when_the_answer_is_lost():

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 
 from sea_hil.protocol.can_codec import Feedback, Heartbeat, SeaCodec, VoltageCmd
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags
-from sea_hil.protocol.payloads import SetpointPayload, StatePayload, encode
+from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, encode
 from sea_hil.controller.trigger import TriggerReason
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.schemas import schema_for
@@ -85,6 +85,17 @@ def test_zenoh_tap_records_nut_velocity_joint_states_and_answers_at_the_state_sa
     assert (rec.topic, rec.log_time_ns, rec.sequence) == ("/zenoh/setpoint", 7_000_000, 5)
     wall = ZenohTap().records("sea/limb1/state", state, 10**18)[0]
     assert wall.log_time_ns == wall.publish_time_ns == 10**18 and wall.payload["sent_t_ns"] == 123
+
+
+def test_an_edge_trigger_state_records_its_event_number_reason_and_trajectory():
+    data = encode(EventStatePayload(41, 123, 7_000_000, (0.1, 0.2), (0.3, 0.4), (1e-3, 2e-3), (0.05, -0.06), 9,
+                                    TriggerReason.ERROR_BOUND, 77))
+    st = _by_topic(ZenohTap().records("sea/limb1/state", data, 10**18))["/zenoh/state"][0]
+    assert (st.sequence, st.payload["seq"], st.payload["event_seq"]) == (41, 41, 9)   # MCAP sequence: the sample's
+    assert (st.payload["reason"], st.payload["trajectory_id"]) == ("ERROR_BOUND", 77)
+    jsonschema.validate(st.payload, schema_for("/zenoh/state"))
+    plain = encode(StatePayload(41, 123, 7_000_000, (0.1, 0.2), (0.3, 0.4), (1e-3, 2e-3), (0.05, -0.06)))
+    assert "event_seq" not in ZenohTap().records("sea/limb1/state", plain, 10**18)[0].payload
 
 
 def test_sequence_reaches_the_file_and_final_metadata_counts_every_chunk(tmp_path: Path):

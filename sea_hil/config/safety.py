@@ -61,6 +61,10 @@ class SetpointEnvelopeConfig(_Frozen):
     resume_ramp_s: float = Field(0.05, ge=0, description="bumpless resume after the drive's safe state: the edge ramps "
                                  "the deflection command from the measured deflection to the setpoint over this time "
                                  "and restarts its observer; 0 = off (a step, the stale observer)")
+    max_sample_age_s: float = Field(0.003, ge=0, description="real time: the edge sends a VOLTAGE_CMD only for a "
+                                    "feedback sample received at most this long ago (a starved edge working through "
+                                    "a backlog answers only the newest samples; the drive's watchdog acts if it "
+                                    "stays behind); 0 = off (every sample answered)")
 
     @model_validator(mode="after")
     def _check(self) -> "SetpointEnvelopeConfig":

@@ -40,9 +40,10 @@ _CHANNELS: dict[str, tuple[str, str, dict[str, Any], list[str]]] = {
     "/can/command": ("sea_hil.CanCommand", "Decoded voltage / deflection commands sent to a node.",
                      {"t_ns": _INT, "node_id": _INT, "seq": _INT, "kind": _STR, **_VOLTS, **_DEFLECTION_REF},
                      ["node_id"]),
-    "/zenoh/state": ("sea_hil.ZenohState", "Joint state published by the edge node over Zenoh.",
+    "/zenoh/state": ("sea_hil.ZenohState", "Joint state published by the edge node over Zenoh (with the trigger at "
+                     "the edge: its event number, reason and trajectory identity too).",
                      {"t_ns": _INT, "seq": _INT, "sent_t_ns": _INT, "sample_t_ns": _INT, **_JOINT_STATE,
-                      "latency_s": _NUM}, []),
+                      "latency_s": _NUM, "event_seq": _INT, "reason": _STR, "trajectory_id": _INT}, []),
     "/zenoh/setpoint": ("sea_hil.ZenohSetpoint", "Event-triggered setpoint from the remote controller.",
                         {"t_ns": _INT, "seq": _INT, "event_index": _INT, **_DEFLECTION_REF,
                          "tau1_nm": _NUM, "tau2_nm": _NUM, "theta1_d_rad": _NUM, "theta2_d_rad": _NUM,

@@ -11,7 +11,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from sea_hil.protocol.payloads import AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload
+from sea_hil.protocol.payloads import (AckPayload, EventStatePayload, PayloadCounters, SetpointPayload, StatePayload,
+                                      VoltagePayload)
 from sea_hil.recorder.can_tap import Record
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
@@ -40,10 +41,12 @@ def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str,
         return None
     base: dict[str, Any] = {"key": key, "seq": p.seq, "sent_t_ns": p.t_ns, "payload_bytes": len(data)}
     if isinstance(p, StatePayload):
-        return "/zenoh/state", {**base, "sample_t_ns": p.sample_t_ns, "theta1_rad": p.theta_rad[0],
-                                "theta2_rad": p.theta_rad[1], "omega1_rad_s": p.omega_rad_s[0],
-                                "omega2_rad_s": p.omega_rad_s[1], "delta1_m": p.delta_m[0], "delta2_m": p.delta_m[1],
-                                "nut_vel1_m_s": p.nut_vel_m_s[0], "nut_vel2_m_s": p.nut_vel_m_s[1]}
+        state = {**base, "sample_t_ns": p.sample_t_ns, "theta1_rad": p.theta_rad[0], "theta2_rad": p.theta_rad[1],
+                 "omega1_rad_s": p.omega_rad_s[0], "omega2_rad_s": p.omega_rad_s[1], "delta1_m": p.delta_m[0],
+                 "delta2_m": p.delta_m[1], "nut_vel1_m_s": p.nut_vel_m_s[0], "nut_vel2_m_s": p.nut_vel_m_s[1]}
+        if isinstance(p, EventStatePayload):   # the edge trigger's state: `seq` is the sample's, `event_seq` counts
+            state.update(event_seq=p.event_seq, reason=p.reason.name, trajectory_id=p.trajectory_id)   # the events
+        return "/zenoh/state", state
     if isinstance(p, SetpointPayload):
         return "/zenoh/setpoint", {**base, "state_seq": p.state_seq, "delta1_ref_m": p.deflection_m[0],
                                    "delta2_ref_m": p.deflection_m[1], "s1": p.sliding[0], "s2": p.sliding[1],

@@ -164,6 +164,12 @@ class RealTimeEdgeSync:
         """(command at all, clear a driver fault): only with a fresh setpoint; a stale one lets the watchdog act."""
         return fresh, fresh
 
+    def late(self, rx_ns: int) -> bool:
+        """Is a feedback sample received at monotonic `rx_ns` too old to answer (`edge.max_sample_age_ns`; 0 or an
+        unknown receive time: never)?"""
+        max_ns = self.edge.max_sample_age_ns
+        return max_ns > 0 and rx_ns > 0 and time.monotonic_ns() - rx_ns > max_ns
+
     def restart_possible(self, timed_out: bool) -> bool:
         return timed_out
 

@@ -155,6 +155,9 @@ class LockstepEdgeSync:
     def gate(self, fresh: bool) -> tuple[bool, bool]:
         return True, False
 
+    def late(self, rx_ns: int) -> bool:
+        return False      # every sample is answered: simulated time waits for the edge
+
     def restart_possible(self, timed_out: bool) -> bool:
         return False
 

@@ -40,7 +40,7 @@ from faults_helpers import wait_for  # noqa: E402
 from sea_hil.config import load_config  # noqa: E402
 from sea_hil.errors import MalformedFrame  # noqa: E402
 from sea_hil.protocol.can_codec import DriverState, Heartbeat, SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import FeedbackAngle  # noqa: E402
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, FeedbackAngle  # noqa: E402
 from sea_hil.protocol.canbus import open_bus  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.payloads import PayloadCounters  # noqa: E402
@@ -70,6 +70,7 @@ class Watch:
         self.codec, self.bus = SeaCodec([NODE]), bus
         self.state, self.state_since_ns = DriverState.INIT, time.monotonic_ns()
         self.faults_seen = 0
+        self.limit_faults: list[tuple[float, int]] = []   # (monotonic s, flags) of every FAULT with a soft-limit flag
         self.flags = 0
         self.samples = 0   # feedback samples the drive has sent (one FEEDBACK_ANGLE frame each): its own clock
         self.samples_at_change = 0   # `samples` when the newest state change was seen (in bus order)
@@ -101,6 +102,8 @@ class Watch:
                 self.samples_at_change = self.samples
                 self.history.append((round(time.monotonic(), 2), f.state.name, int(f.flags)))
                 self.faults_seen += f.state is DriverState.FAULT
+                if f.state is DriverState.FAULT and f.flags & LIMIT_FLAGS:
+                    self.limit_faults.append((round(time.monotonic(), 2), int(f.flags)))
 
     def describe(self) -> str:
         return f"drive {self.state.name}, flags {self.flags:#x}; last changes (t, state, flags) {self.history[-6:]}"
@@ -120,6 +123,14 @@ def _last_run(seqs: list[int]) -> list[int]:
 def _logged(path: Path) -> dict[str, list[tuple[int, int]]]:
     """What the file holds now: per topic, (log time, sequence) of every message in order."""
     return {t: [(m.log_time_ns, m.sequence) for m in ms] for t, ms in read_session(path).messages.items()}
+
+
+def _event_gaps(path: Path) -> int:
+    """States of the newest edge stream missing from the file: gaps in `event_seq` (the edge trigger publishes only
+    events: its header seq, the sample number, has gaps by design), in `seq` for the paper's every-sample stream."""
+    states = [m.payload for m in read_session(path).messages.get("/zenoh/state", [])]
+    seqs = _last_run([int(p.get("event_seq", p["seq"])) for p in states])
+    return sum(b - a - 1 for a, b in zip(seqs, seqs[1:]) if b > a)
 
 
 def _recorded_states(path: Path) -> list[int]:
@@ -214,7 +225,7 @@ class Chaos:
         assert self._subscribed(), "the restarted recorder never subscribed"
         assert self.running(w, RESUME_S), f"session not running after the recorder restart ({w.describe()})"
         return {"logged": sum(map(len, before.values())), "kept": sum(map(len, after.values())),
-                "recorded_states": len(seqs), "state_gaps": sum(b - a - 1 for a, b in zip(seqs, seqs[1:]) if b > a),
+                "recorded_states": len(seqs), "state_gaps": _event_gaps(path),
                 "resume_s": (time.monotonic_ns() - restarted) / 1e9}
 
     def _subscribed(self) -> bool:
@@ -258,7 +269,8 @@ class Chaos:
         # in its own PID namespace with its own /proc (`--mount-proc`): any other process is one left behind
         left = [pid for pid in psutil.pids() if pid != os.getpid()]
         return {"faults": log, "span_s": span_s, "safe_bound_s": self.safe_bound_s, "codes": codes,
-                "left": left, "started": len(self.started), "drive_faults_seen": w.faults_seen}
+                "left": left, "started": len(self.started), "drive_faults_seen": w.faults_seen,
+                "limit_faults": w.limit_faults}
 
 
 if __name__ == "__main__":
