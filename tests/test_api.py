@@ -73,6 +73,21 @@ def test_driver_snapshot_and_counters_and_bad_input():
         sea_hil.Session(controller="pid")
 
 
+@pytest.fixture(autouse=True, scope="module")
+def _numba_registries_loaded() -> None:
+    """Load numba's lazily imported typing registries before any `pytester` exists. pytester snapshots `sys.modules`
+    when it is set up and restores it at teardown: modules numba first imported in between (inside the in-process
+    run, e.g. numba.np.polynomial.polynomial_core, whose types register once per process) would be dropped while
+    their registrations stay, and the next numba cache load in this process fails with "duplicate registration".
+    The serial run had loaded them in an earlier file; under pytest-xdist this file can come first in a worker (41
+    failures after it). Autouse fixtures are set up before the test's other fixtures, so before pytester."""
+    try:
+        from numba.core.registry import cpu_target
+    except ImportError:      # numba is optional: without it nothing registers
+        return
+    cpu_target.target_context.refresh()
+
+
 def _docs_example() -> str:
     text = DOCS.read_text(encoding="utf-8")
     return re.search(r"```python\n(.*?)```", text, re.S).group(1)

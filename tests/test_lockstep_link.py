@@ -9,8 +9,10 @@ import pytest
 from paper_scheme import paper
 
 from sea_hil.config import load_config
-from sea_hil.session.run import RunOptions, run_session
+from sea_hil.offline.session_engine import run_engine
+from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic
+from sea_hil.session.run import RunOptions, run_session
 
 pytestmark = pytest.mark.slow
 DELAY_S = 0.02
@@ -19,19 +21,26 @@ DELAY_S = 0.02
 SHORT = {"trajectory": {"period_s": 2.0}, "safety": {"drive": {"enabled": False}, "setpoint": {"enabled": False}}}
 
 
-def _run(tmp: Path, name: str, link: dict) -> dict:
+# every block the offline session engine replays (tests/test_session_engine.py)
+REPLAYED = ("transmissions", "tracking", "lead_in", "events_by_reason", "inter_event_s", "duration_s",
+            "uplink_outside_msgs", "max_abs_voltage_v")
+
+
+def _cfg(link: dict):
     # the paper's scheme: its answer depends only on the state's content (with `predict` it depends on the measured
     # uplink delay, so D up and D down differ by design)
-    cfg = load_config(overrides=paper({**SHORT, "link": {"seed": 3, **link}}))
-    return run_session(cfg, RunOptions(controller="et", out=tmp / name, lockstep=True, progress=False))
+    return load_config(overrides=paper({**SHORT, "link": {"seed": 3, **link}}))
+
+
+def _run(tmp: Path, name: str, link: dict) -> dict:
+    return run_session(_cfg(link), RunOptions(controller="et", out=tmp / name, lockstep=True, progress=False))
 
 
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory) -> dict[str, dict]:
     tmp = tmp_path_factory.mktemp("lockstep_link")
     up = {"uplink": {"delay_s": DELAY_S}}
-    return {"up_a": _run(tmp, "up_a", up), "up_b": _run(tmp, "up_b", up),
-            "down": _run(tmp, "down", {"downlink": {"delay_s": DELAY_S}})}
+    return {"up_a": _run(tmp, "up_a", up), "down": _run(tmp, "down", {"downlink": {"delay_s": DELAY_S}})}
 
 
 def test_uplink_delay_is_simulated_latency_without_resends(runs):
@@ -48,10 +57,13 @@ def test_uplink_delay_is_simulated_latency_without_resends(runs):
 
 
 def test_uplink_delay_run_is_reproducible(runs):
-    a, b = runs["up_a"], runs["up_b"]
-    assert deterministic(a) == deterministic(b)
-    sim = ("sim_latency_us_min", "sim_latency_us_p50", "sim_latency_us_max", "uplink_msgs", "downlink_applied")
-    assert {k: a["edge"][k] for k in sim} == {k: b["edge"][k] for k in sim}
+    """Deterministic: the delayed session equals the offline session engine's replay of the same timeline (a second,
+    independent run) in every block the engine replays. That two live lockstep runs over a delayed link agree in every
+    deterministic field, edge counters included, is tests/test_pre_refactor_equality.py (5 ms each way, against the
+    run recorded with the old code); a second live run here cost a third of this file's time."""
+    a = runs["up_a"]
+    replay = session_summary(run_engine(_cfg({"uplink": {"delay_s": DELAY_S}}), "et").data, "et")
+    assert {k: a[k] for k in REPLAYED} == {k: replay[k] for k in REPLAYED}
 
 
 def test_delay_up_equals_the_same_delay_down(runs):

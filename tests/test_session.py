@@ -66,9 +66,11 @@ def test_lockstep_session_tracks_and_counts(et_runs):
     assert max(a["tracking"]["max_abs_error_rad"]) < 0.005
 
 
-def test_et_sends_at_most_a_third_of_tt(et_runs, tmp_path):
+def test_et_sends_at_most_a_third_of_tt(et_runs):
+    """TT from the offline session engine: it equals a lockstep TT session bit for bit in the blocks compared here
+    (tests/test_session_engine.py, tests/test_pre_refactor_equality.py); the live ET run is the shared fixture's."""
     _, et, _ = et_runs
-    tt = _run(tmp_path, "tt", controller="tt", overrides={})
+    tt = session_summary(run_engine(load_config(overrides=paper()), "tt").data, "tt")   # et_runs' config, TT
     assert tt["transmissions"]["downlink_msgs"] >= 1000
     assert et["transmissions"]["downlink_msgs"] <= tt["transmissions"]["downlink_msgs"] / 3
     # issue 4 asks for <= 1.2x; measured 1.4x (the knee between events; docs/deviations.md section 6): not met
