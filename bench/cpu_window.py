@@ -75,21 +75,25 @@ def snapshot(root: psutil.Process) -> dict[tuple[int, int], tuple[float, float]]
     return {(pid, tid): cpu for pid in pids for tid, cpu in _task_cpu_s(pid).items()}
 
 
-def thread_names(pid: int) -> dict[int, str]:
-    """tid -> Python thread name (`py-spy dump --nonblocking`), else the OS thread name."""
+def thread_names(pid: int, tries: int = 3) -> dict[int, str]:
+    """tid -> Python thread name (`py-spy dump --nonblocking`, retried: on a loaded machine a dump can fail), else
+    the OS thread name (`/proc/<pid>/task/<tid>/comm`; a Python thread keeps its process's name there)."""
     names: dict[int, str] = {}
     for task in Path(f"/proc/{pid}/task").glob("*"):
         try:
             names[int(task.name)] = (task / "comm").read_text().strip()
         except OSError:
             continue
-    try:
-        out = subprocess.run([str(Path(sys.executable).with_name("py-spy")), "dump", "--nonblocking", "--pid",
-                              str(pid)], capture_output=True, text=True, timeout=30)
-        names.update({int(tid): name for tid, name in PYSPY_TID.findall(out.stdout)})
-    except (OSError, subprocess.TimeoutExpired):
-        pass
-    return names
+    for _ in range(tries):
+        try:
+            out = subprocess.run([str(Path(sys.executable).with_name("py-spy")), "dump", "--nonblocking", "--pid",
+                                  str(pid)], capture_output=True, text=True, timeout=30)
+        except (OSError, subprocess.TimeoutExpired):
+            continue
+        found = {int(tid): name for tid, name in PYSPY_TID.findall(out.stdout)}
+        if found:
+            return {**names, **found}
+    return {tid: f"{name} (py-spy named no thread)" for tid, name in names.items()}
 
 
 def group_of(role: str, name: str) -> str:
@@ -101,7 +105,7 @@ def group_of(role: str, name: str) -> str:
             return "session: edge(s)"
         if low.startswith(("rec-", "recorder")):
             return f"session: {name} (recorder tap)"
-        if low in ("mainthread", "sea-hil", "python3.11", "python"):
+        if low == "mainthread":
             return "session: main thread"
         return "session: zenoh runtime" if re.match(r"(rx|tx|net|acc|app)-\d+$", low) else f"session: {name}"
     if re.match(r"(rx|tx|net|acc|app)-\d+$", low):
@@ -157,13 +161,15 @@ def measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profil
             prog.next_line(0.0, proc)   # the first setpoint
             sim_a = prog.next_line(prog.first_setpoint_t + warm_s, proc)
             a, t_a = snapshot(root), time.monotonic()
+            names = {pid: thread_names(pid) for pid in {pid for pid, _ in a}}   # threads that end in the window
             spy = None
             if profile:
                 from cpu_profile import start_record
                 spy = start_record(proc.pid, window_s, Path(tmp))
             sim_b = prog.next_line(t_a + window_s, proc)
             b = snapshot(root)
-            names = {pid: thread_names(pid) for pid in {pid for pid, _ in b}}
+            for pid in {pid for pid, _ in b}:
+                names[pid] = {**names.get(pid, {}), **thread_names(pid)}
             roles = {proc.pid: "session"}
             for p in root.children(recursive=True):
                 try:
