@@ -1,7 +1,9 @@
 """Steady-state CPU per limb-sample of a real-time `sea-hil run --limbs N`, per process and per thread (issue 17).
 
 Run: python bench/bench_cpu_per_sample.py [--limbs 1,2,4] [--runs 3] [--warm 2] [--window 6] [--profile]
-     [--json OUT] [-- EXTRA sea-hil run ARGS]
+     [--compare OTHER_SEA_HIL] [--json OUT] [-- EXTRA sea-hil run ARGS]
+`--compare PATH`: an A/B against another checkout's `sea-hil` executable (e.g. a worktree of the base commit with its
+own venv): its runs (A) and this checkout's (B) alternate, A B A B ..., so both see the same load.
 Each run starts `sea-hil run --limbs N --cycles 1` with its progress lines on and follows them (bench/cpu_window.py).
 Start-up (imports, numba, Zenoh, the controllers' start-up) and the end (report, figures) are excluded: the CPU
 times of every thread of the session process and of every child process (controllers, recorder) are read from /proc
@@ -33,9 +35,9 @@ def _span(values: list[float]) -> str:
     return f"{lo:7.1f}" if len(values) == 1 else f"{lo:7.1f}-{hi:<7.1f}"
 
 
-def report(limbs: int, runs: list[WindowResult]) -> dict[str, Any]:
+def report(limbs: int, runs: list[WindowResult], label: str = "") -> dict[str, Any]:
     groups = sorted({g for r in runs for g in r.cpu_s}, key=lambda g: -max(r.per_sample_us(g) for r in runs))
-    print(f"\n--limbs {limbs}: {len(runs)} run(s), load average at start "
+    print(f"\n{label}--limbs {limbs}: {len(runs)} run(s), load average at start "
           f"{', '.join(f'{r.load_avg:.1f}' for r in runs)}; window {', '.join(f'{r.samples}' for r in runs)} "
           f"limb-samples; CPU us per limb-sample (min-max):")
     table: dict[str, list[float]] = {}
@@ -48,7 +50,7 @@ def report(limbs: int, runs: list[WindowResult]) -> dict[str, Any]:
     print(f"  {'total':44s} {_span(table['total'])}  (system {_span(sys_total).strip()} %)")
     misses = [f"{r.misses}/{r.ticks}" for r in runs]
     print(f"  (driver tick misses in the window, loaded: {', '.join(misses)})")
-    return {"limbs": limbs, "us_per_limb_sample": table, "samples": [r.samples for r in runs],
+    return {"label": label, "limbs": limbs, "us_per_limb_sample": table, "samples": [r.samples for r in runs],
             "load_avg": [r.load_avg for r in runs], "misses": misses}
 
 
@@ -59,13 +61,19 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--warm", type=float, default=2.0, help="wall s after the first setpoint before snapshot A")
     ap.add_argument("--window", type=float, default=6.0, help="wall s between snapshots A and B")
     ap.add_argument("--profile", action="store_true", help="one more run per count under py-spy record")
+    ap.add_argument("--compare", default=None, help="A/B: another checkout's sea-hil executable (A)")
     ap.add_argument("--json", type=Path, default=None)
     ap.add_argument("extra", nargs="*", help="more `sea-hil run` arguments (after --)")
     args = ap.parse_args(argv)
     out = []
     for n in (int(x) for x in args.limbs.split(",")):
-        runs = [measure(n, args.warm, args.window, args.extra) for _ in range(args.runs)]
-        out.append(report(n, runs))
+        if args.compare:
+            pairs = [(measure(n, args.warm, args.window, args.extra, sea_hil=args.compare),
+                      measure(n, args.warm, args.window, args.extra)) for _ in range(args.runs)]
+            out.append(report(n, [a for a, _ in pairs], f"A ({args.compare}) "))
+            out.append(report(n, [b for _, b in pairs], "B (this checkout) "))
+        else:
+            out.append(report(n, [measure(n, args.warm, args.window, args.extra) for _ in range(args.runs)]))
         if args.profile:
             hot = measure(n, args.warm, args.window, args.extra, profile=True).hot
             print(f"  top own-GIL functions (py-spy, one more run):\n{hot}")

@@ -148,10 +148,12 @@ class _Progress:
                 self.cond.wait(timeout=0.2)
 
 
-def measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profile: bool = False) -> WindowResult:
+def measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profile: bool = False,
+            sea_hil: str | None = None) -> WindowResult:
+    """One session (`sea_hil`: the `sea-hil` executable, default this interpreter's) measured over its window."""
     with tempfile.TemporaryDirectory(prefix="sea-hil-cpu-") as tmp:
         out = Path(tmp) / "run"
-        cmd = [str(Path(sys.executable).with_name("sea-hil")), "run", "--limbs", str(limbs), "--cycles", "1",
+        cmd = [sea_hil or str(Path(sys.executable).with_name("sea-hil")), "run", "--limbs", str(limbs), "--cycles", "1",
                "--out", str(out), *extra]
         load = os.getloadavg()[0]
         proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
