@@ -170,3 +170,15 @@ def test_received_copy_equals_the_constructors_copy(fields: dict, is_rx: bool) -
     slots = [s for s in can.Message.__slots__ if s != "__weakref__"]
     assert {s: getattr(fast, s) for s in slots} == {s: getattr(slow, s) for s in slots}
     assert type(fast.data) is bytearray and fast.data is not msg.data
+
+
+@pytest.mark.parametrize("is_fd,brs", [(False, False), (True, True), (True, False)])
+def test_new_message_equals_the_constructors_message(is_fd: bool, brs: bool) -> None:
+    from sea_hil.protocol.can_codec import new_message
+    data = bytes(range(64 if is_fd else 8))
+    fast = new_message(0x123, data, is_fd, brs)
+    slow = can.Message(arbitration_id=0x123, data=data, is_extended_id=False, is_fd=is_fd, bitrate_switch=brs)
+    slow.data = data
+    slots = [s for s in can.Message.__slots__ if s != "__weakref__"]
+    assert {s: getattr(fast, s) for s in slots} == {s: getattr(slow, s) for s in slots}
+    assert fast.data is data
