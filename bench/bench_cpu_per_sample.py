@@ -25,7 +25,10 @@ from pathlib import Path
 from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
+from benchlib import emit, record  # noqa: E402
 from cpu_window import WindowResult, measure  # noqa: E402
+
+FIGURES = "cdefgh"   # BENCHMARKS.md figures 6c, 6d, ... in the order of --limbs
 
 
 def _span(values: list[float]) -> str:
@@ -54,6 +57,18 @@ def report(limbs: int, runs: list[WindowResult], label: str = "") -> dict[str, A
             "load_avg": [r.load_avg for r in runs], "misses": misses}
 
 
+def as_record(k: int, row: dict[str, Any], warm_s: float, window_s: float) -> dict[str, Any]:
+    """The BENCHMARKS.md row of one limb count (figure 6c, 6d, ...): total CPU us per limb-sample per run."""
+    groups = {g: v for g, v in row["us_per_limb_sample"].items() if g != "total" and max(v) >= 1.0}
+    return record(f"6{FIGURES[k]}", f"steady-state CPU per limb-sample of `sea-hil run --limbs {row['limbs']}`",
+                  runs=len(row["samples"]), unit="us/limb-sample", per_run=row["us_per_limb_sample"]["total"],
+                  p99=float("nan"), goal="(informative; the lever behind tick misses)",
+                  metric=f"CPU of every thread of the session and of its children over a {window_s:g} s window "
+                         f"from {warm_s:g} s after the first setpoint, per limb-sample integrated in it",
+                  details=[{"group": g, "min_us": min(v), "max_us": max(v)} for g, v in groups.items()],
+                  notes=f"load average at the starts {row['load_avg']}; window limb-samples {row['samples']}")
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--limbs", default="1,2,4")
@@ -62,9 +77,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--window", type=float, default=6.0, help="wall s between snapshots A and B")
     ap.add_argument("--profile", action="store_true", help="one more run per count under py-spy record")
     ap.add_argument("--compare", default=None, help="A/B: another checkout's sea-hil executable (A)")
-    ap.add_argument("--json", type=Path, default=None)
+    ap.add_argument("--json", type=Path, default=None, help="BENCHMARKS.md records (benchlib) to this file")
+    ap.add_argument("--quick", action="store_true", help="smoke mode: one 1-limb run, a 3 s window")
     ap.add_argument("extra", nargs="*", help="more `sea-hil run` arguments (after --)")
     args = ap.parse_args(argv)
+    if args.quick:
+        args.limbs, args.runs, args.window, args.profile = "1", 1, 3.0, False
     out = []
     for n in (int(x) for x in args.limbs.split(",")):
         if args.compare:
@@ -78,7 +96,9 @@ def main(argv: list[str] | None = None) -> int:
             hot = measure(n, args.warm, args.window, args.extra, profile=True).hot
             print(f"  top own-GIL functions (py-spy, one more run):\n{hot}")
             out[-1]["hot"] = hot
-    if args.json:
+    if args.json and not args.compare:
+        emit([as_record(k, row, args.warm, args.window) for k, row in enumerate(out)], args.json)
+    elif args.json:   # an A/B is not a BENCHMARKS.md row: both tables as they are
         args.json.write_text(json.dumps(out, indent=1))
     return 0
 
