@@ -81,6 +81,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="smoke mode: one 1-limb run, a 3 s window")
     ap.add_argument("extra", nargs="*", help="more `sea-hil run` arguments (after --)")
     args = ap.parse_args(argv)
+    sys.stdout.reconfigure(line_buffering=True)   # each table as soon as its count is done, also into a file
     if args.quick:
         args.limbs, args.runs, args.window, args.profile = "1", 1, 3.0, False
     out = []
