@@ -65,6 +65,22 @@ def _role(cmdline: list[str]) -> str:
     return "other child"
 
 
+def _roles(root: psutil.Process) -> dict[int, str]:
+    """pid -> role of the session process and of each child whose command line can be read now."""
+    roles = {root.pid: "session"}
+    try:
+        kids = root.children(recursive=True)
+    except psutil.Error:
+        return roles
+    for p in kids:
+        try:
+            if cmd := p.cmdline():
+                roles[p.pid] = _role(cmd)
+        except psutil.Error:
+            continue
+    return roles
+
+
 def snapshot(root: psutil.Process) -> dict[tuple[int, int], tuple[float, float]]:
     """(pid, tid) -> (user, system) CPU s of every thread of the tree under `root`."""
     pids = [root.pid]
@@ -75,9 +91,10 @@ def snapshot(root: psutil.Process) -> dict[tuple[int, int], tuple[float, float]]
     return {(pid, tid): cpu for pid in pids for tid, cpu in _task_cpu_s(pid).items()}
 
 
-def thread_names(pid: int, tries: int = 3) -> dict[int, str]:
-    """tid -> Python thread name (`py-spy dump --nonblocking`, retried: on a loaded machine a dump can fail), else
-    the OS thread name (`/proc/<pid>/task/<tid>/comm`; a Python thread keeps its process's name there)."""
+def thread_names(pid: int, tries: int = 3) -> tuple[dict[int, str], bool]:
+    """(tid -> Python thread name from `py-spy dump --nonblocking`, retried: on a loaded machine a dump can fail;
+    else the OS thread name `/proc/<pid>/task/<tid>/comm`, which a Python thread shares with its process; True if
+    py-spy named them)."""
     names: dict[int, str] = {}
     for task in Path(f"/proc/{pid}/task").glob("*"):
         try:
@@ -92,8 +109,16 @@ def thread_names(pid: int, tries: int = 3) -> dict[int, str]:
             continue
         found = {int(tid): name for tid, name in PYSPY_TID.findall(out.stdout)}
         if found:
-            return {**names, **found}
-    return {tid: f"{name} (py-spy named no thread)" for tid, name in names.items()}
+            return {**names, **found}, True
+    return {tid: f"{name} (py-spy named no thread)" for tid, name in names.items()}, False
+
+
+def merge_names(old: dict[int, str] | None, new: tuple[dict[int, str], bool]) -> dict[int, str]:
+    """Names of one process from two dumps: py-spy's names win over the OS names of a failed dump."""
+    names, named = new
+    if old is None:
+        return names
+    return {**names, **old} if not named else {**old, **names}
 
 
 def group_of(role: str, name: str) -> str:
@@ -180,7 +205,8 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             prog.next_line(0.0, proc)   # the first setpoint
             sim_a = prog.next_line(prog.first_setpoint_t + warm_s, proc)
             a, t_a = snapshot(root), time.monotonic()
-            names = {pid: thread_names(pid) for pid in {pid for pid, _ in a}}   # threads that end in the window
+            names = {pid: thread_names(pid)[0] for pid in {pid for pid, _ in a}}   # threads ending in the window
+            roles_a = _roles(root)
             spy = None
             if profile:
                 from cpu_profile import start_record
@@ -188,13 +214,8 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             sim_b = prog.next_line(t_a + window_s, proc)
             b = snapshot(root)
             for pid in {pid for pid, _ in b}:
-                names[pid] = {**names.get(pid, {}), **thread_names(pid)}
-            roles = {proc.pid: "session"}
-            for p in root.children(recursive=True):
-                try:
-                    roles[p.pid] = _role(p.cmdline())
-                except psutil.Error:
-                    continue
+                names[pid] = merge_names(names.get(pid), thread_names(pid))
+            roles = {**roles_a, **_roles(root)}
             hot = ""
             if spy is not None:
                 from cpu_profile import finish_record
