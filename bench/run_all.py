@@ -35,6 +35,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_session_timing", "4s", ["--runs", "3"], ["--quick"], 60),   # 1-limb session tick misses (median)
     ("bench_bandwidth", "5", ["--runs", "3"], ["--quick"], 55),
     ("bench_scale", "6", ["--duration", "10"], ["--quick"], 130),   # 5 counts x 2 layouts x 11 s
+    ("bench_cpu_per_sample", "6c", ["--limbs", "1,2,4", "--runs", "3"], ["--quick"], 900),   # 9 sessions
     ("bench_mcap", "7", ["--runs", "3"], ["--quick"], 30),
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),

@@ -19,6 +19,7 @@ from sea_hil.dynamics import deflections, rk4_core
 from sea_hil.jit import compiled, loaded
 from sea_hil.mechanics import LimbParams
 from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.plant_emulator.integrator import entry_point
 from sea_hil.protocol.can_frames import Feedback
 
 
@@ -60,6 +61,17 @@ def prepare_batch(p: LimbParams, jit: bool = True) -> bool:
     return kernel is not None
 
 
+def _entry(kernel: Callable[..., None], p: LimbParams) -> Callable[..., None]:
+    return entry_point(kernel, p, _batch_signature)
+
+
+def _batch_signature(p_type: object) -> tuple[object, ...]:
+    from numba import types
+
+    f64, arr = types.float64, types.Array
+    return (arr(f64, 2, "C"), arr(f64, 2, "C"), arr(types.int64, 2, "C"), arr(f64, 1, "C"), p_type, arr(f64, 2, "C"))
+
+
 def step_all(drivers: Sequence[DriverCore], *, jit: bool = True) -> list[Feedback]:
     """Integrate one period of every driver (all with the same `params`) and return their new samples' feedback,
     in order: one batch-kernel call when it is loaded, else `DriverCore.step` per driver."""
@@ -81,7 +93,9 @@ def step_all(drivers: Sequence[DriverCore], *, jit: bool = True) -> list[Feedbac
                 dist += (*d(tk), *d(tk + hh), *d(tk + h))
     xs = np.array([drv.x for drv in drivers], dtype=np.float64)
     delta = np.empty((len(drivers), 2))
-    kernel(xs, np.array(segf), np.array(segi, np.int64), np.array(dist), drivers[0].params, delta)
+    # every array is built here, so its type is known: the overload's entry point, without the dispatcher's typing
+    _entry(kernel, drivers[0].params)(xs, np.array(segf), np.array(segi, np.int64), np.array(dist),
+                                      drivers[0].params, delta)
     return [drv.finish_period(tuple(row), (d1, d2))
             for drv, row, (d1, d2) in zip(drivers, xs.tolist(), delta.tolist())]
 

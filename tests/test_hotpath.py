@@ -149,3 +149,36 @@ def test_fast_virtual_bus_keeps_the_order_and_the_own_message_option() -> None:
     finally:
         a.shutdown()
         b.shutdown()
+
+
+@pytest.mark.parametrize("fields", [
+    {"arbitration_id": 0x25, "data": bytes(range(8)), "is_extended_id": False},
+    {"arbitration_id": 0x1ABCDE, "data": bytearray(b"\x01\x02"), "is_extended_id": True, "dlc": 2},
+    {"arbitration_id": 0x31, "is_remote_frame": True, "dlc": 4, "is_extended_id": False},
+    {"arbitration_id": 0x32, "is_error_frame": True, "is_extended_id": False, "data": b"\x00"},
+    {"arbitration_id": 0x33, "data": bytes(64), "is_fd": True, "bitrate_switch": True,
+     "error_state_indicator": True, "is_extended_id": False}])
+@pytest.mark.parametrize("is_rx", [True, False])
+def test_received_copy_equals_the_constructors_copy(fields: dict, is_rx: bool) -> None:
+    from sea_hil.protocol.canbus import received_copy
+    msg = can.Message(timestamp=3.0, channel="sender", **fields)
+    fast = received_copy(msg, 7.5, "chan", is_rx)
+    slow = can.Message(timestamp=7.5, arbitration_id=msg.arbitration_id, is_extended_id=msg.is_extended_id,
+                       is_remote_frame=msg.is_remote_frame, is_error_frame=msg.is_error_frame, channel="chan",
+                       dlc=msg.dlc, data=bytearray(msg.data), is_fd=msg.is_fd, is_rx=is_rx,
+                       bitrate_switch=msg.bitrate_switch, error_state_indicator=msg.error_state_indicator)
+    slots = [s for s in can.Message.__slots__ if s != "__weakref__"]
+    assert {s: getattr(fast, s) for s in slots} == {s: getattr(slow, s) for s in slots}
+    assert type(fast.data) is bytearray and fast.data is not msg.data
+
+
+@pytest.mark.parametrize("is_fd,brs", [(False, False), (True, True), (True, False)])
+def test_new_message_equals_the_constructors_message(is_fd: bool, brs: bool) -> None:
+    from sea_hil.protocol.can_codec import new_message
+    data = bytes(range(64 if is_fd else 8))
+    fast = new_message(0x123, data, is_fd, brs)
+    slow = can.Message(arbitration_id=0x123, data=data, is_extended_id=False, is_fd=is_fd, bitrate_switch=brs)
+    slow.data = data
+    slots = [s for s in can.Message.__slots__ if s != "__weakref__"]
+    assert {s: getattr(fast, s) for s in slots} == {s: getattr(slow, s) for s in slots}
+    assert fast.data is data

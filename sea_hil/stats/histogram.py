@@ -44,14 +44,16 @@ class LogHistogram:
 
     def record(self, value: float, count: int = 1) -> bool:
         """Add `count` samples of `value`; returns False (and counts `rejected`) for NaN/inf/negative values."""
-        if not math.isfinite(value) or value < 0 or count <= 0:
+        if not 0 <= value < math.inf or count <= 0:   # NaN, inf and negative values fail the comparison
             self.rejected += 1
             return False
         self._counts[self._index(value)] += count
         self.count += count
         self.sum += value * count
-        self.min = min(self.min, value)
-        self.max = max(self.max, value)
+        if value < self.min:   # = min(self.min, value) / max(...) without two builtin calls per sample
+            self.min = value
+        if value > self.max:
+            self.max = value
         return True
 
     def merge(self, other: LogHistogram) -> None:
