@@ -66,22 +66,28 @@ class CanDump:
             return None
         return parse_candump_line(line)
 
-    def newest_frames(self, timeout_s: float) -> dict[str, CandumpFrame]:
+    def newest_frames(self, timeout_s: float, every: frozenset[str] = frozenset()) -> list[CandumpFrame]:
         """Every line queued so far (waiting up to ``timeout_s`` for the first), of which only the newest per CAN id
-        is parsed: {hex id: frame}. For a reader slower than the bus (a slow guest): it never falls behind the dump.
-        Empty if nothing arrived or candump ended."""
+        is parsed, and every one of the ids in ``every`` (hex, as candump prints them), in the order printed. For a
+        reader slower than the bus (a slow guest): it never falls behind the dump. Empty if nothing arrived or
+        candump ended."""
         newest: dict[str, str] = {}
+        kept: list[str] = []
         line: str | None = ""
         try:
             line = self._lines.get(timeout=timeout_s)
             while line is not None:
-                newest[line.rsplit(" ", 1)[-1].split("#", 1)[0]] = line
+                can_id = line.rsplit(" ", 1)[-1].split("#", 1)[0]
+                if can_id in every:
+                    kept.append(line)
+                newest[can_id] = line
                 line = self._lines.get_nowait()
         except queue.Empty:
             pass
         if line is None:
             self._lines.put(None)  # keep signalling end-of-output to later callers
-        return {can_id: parse_candump_line(text) for can_id, text in newest.items()}
+        lines = kept + [text for can_id, text in newest.items() if can_id not in every]
+        return [parse_candump_line(text) for text in lines]
 
     def wait(self, timeout_s: float = PROCESS_TIMEOUT_S) -> int:
         """Wait for candump to exit (e.g. after ``-n N`` frames) and return its exit status."""
