@@ -5,13 +5,11 @@ setpoint older than the state it waits an answer to is bounded by the answer tim
 the fallback, and is not with the zero-order hold."""
 from __future__ import annotations
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from edge_lockstep_run import run_live_edge_lockstep
 from sea_hil.config import load_config
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
@@ -121,17 +119,8 @@ def test_stale_hold_is_bounded_by_the_answer_timeout_on_a_bursty_link():
 def test_live_lockstep_edge_with_the_fallback_equals_the_engine(tmp_path):
     """The live edge applies the fallback as the engine does: a lockstep session (trigger at the edge, prediction,
     10 ms and GE bursts each way, short trajectory) in which the fallback fires equals the engine bit for bit."""
-    cfg_file = tmp_path / "short.toml"
-    cfg_file.write_text("[trajectory]\nperiod_s = 2.0\nlead_in_s = 0.3\n\n[trigger]\nedge_model = true\n",
-                        encoding="utf-8")
     spec = "delay=10ms,ge=0.05/0.3/0.8"
-    proc = subprocess.run([sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet", "--controller", "et",
-                           "--cycles", "1", "--seed", "1", "--config", str(cfg_file), "--trigger", "edge",
-                           "--compensation", "predict", "--uplink", spec, "--downlink", spec,
-                           "--out", str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True,
-                          timeout=300, stdin=subprocess.DEVNULL)
-    assert proc.returncode == 0, proc.stderr
-    live = json.loads((tmp_path / "run" / "summary.json").read_text())
+    cfg_file, live = run_live_edge_lockstep(tmp_path, spec)
     link = parse_link_spec(spec)
     cfg = load_config(cfg_file, {"link": {"seed": 1, "uplink": link, "downlink": link}, "disturbance": {"seed": 1},
                                  **EDGE})

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import pytest
 
+from edge_lockstep_run import run_live_edge_lockstep
 from paper_scheme import PAPER_FLAGS, paper
 from test_pre_refactor_equality import as_payload_v2, with_totals
 
@@ -72,17 +73,8 @@ def test_engine_equals_a_live_edge_trigger_predict_session_on_a_delayed_lossy_li
     """Issue 16: the trigger at the edge with the model lookahead and prediction at the controller, live (EVENT_STATE
     up, the edge's tracking records, the controller's predictor on the stamped arrival times) equals the engine with
     the same config bit for bit; short trajectory, 5 ms +- 2 ms (normal) and 2 % loss each way."""
-    cfg_file = tmp_path / "short.toml"
-    cfg_file.write_text("[trajectory]\nperiod_s = 2.0\nlead_in_s = 0.3\n\n[trigger]\nedge_model = true\n",
-                        encoding="utf-8")
     spec = "delay=5ms,jitter=2ms,dist=normal,loss=2%"
-    proc = subprocess.run([sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet", "--controller", "et",
-                           "--cycles", "1", "--seed", "1", "--config", str(cfg_file), "--trigger", "edge",
-                           "--compensation", "predict", "--uplink", spec, "--downlink", spec,
-                           "--out", str(tmp_path / "run")], cwd=ROOT, capture_output=True, text=True,
-                          timeout=300, stdin=subprocess.DEVNULL)
-    assert proc.returncode == 0, proc.stderr
-    live = json.loads((tmp_path / "run" / "summary.json").read_text())
+    cfg_file, live = run_live_edge_lockstep(tmp_path, spec)
     cfg = _cfg(cfg_file, spec, trigger={"placement": "edge"}, controller={"compensation": "predict"})
     got = session_summary(run_engine(cfg, "et").data, "et")
     assert live["edge"]["uplink_dropped"] > 0 and live["edge"]["edge_events"] > 0
