@@ -3,8 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from sea_hil.commands.common import add_config_args, add_scheme_args, add_zenoh_args, config_from_args
-from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.commands.node_cli import add_node_args, node_session
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -13,23 +12,13 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "events (TT: every sample). Exits after --cycles walking cycles.")
     p.add_argument("--controller", choices=("tt", "et"), default="et")
     p.add_argument("--cycles", type=int, default=1)
-    p.add_argument("--inner", choices=("edge", "remote"), default="edge")
-    p.add_argument("--lockstep", action="store_true")
     p.add_argument("--timeout", type=float, default=None, help="give up after this many seconds without finishing")
-    add_zenoh_args(p)
-    add_live_args(p, node=True)
-    add_config_args(p)
-    add_scheme_args(p)
+    add_node_args(p)
     p.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.live.child import attach_live_child
-    from sea_hil.session.builder import SessionBuilder
-    cfg = config_from_args(args, live_overrides(args))
-    with SessionBuilder(cfg, lockstep=args.lockstep) as b:
-        session = b.zenoh()
-        attach_live_child(b, args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view
+    with node_session(args, can_interface=False) as (b, _cfg, session):
         node = b.controller(session, args.controller, inner=args.inner, cycles=args.cycles)
         done = b.serve(node, args.timeout)
     return 0 if done else 3

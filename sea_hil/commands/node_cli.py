@@ -1,0 +1,40 @@
+"""What `sea-hil edge` and `sea-hil controller` share: the options of a Zenoh node of a session (inner-loop
+placement, lockstep, Zenoh endpoints, live view, config, scheme) and the session it runs in (the builder, its Zenoh
+session and, with `--foxglove`, the `sea-hil record` child serving the live view)."""
+from __future__ import annotations
+
+import argparse
+from collections.abc import Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from sea_hil.commands.common import (add_config_args, add_link_args, add_scheme_args, add_zenoh_args,
+                                     config_from_args)
+from sea_hil.live.cli import add_live_args, live_overrides
+
+
+def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
+    """The options after the node's own; `link`: also `--uplink` / `--downlink` emulation."""
+    p.add_argument("--inner", choices=("edge", "remote"), default="edge",
+                   help="where the voltage loop runs: edge (next to the CAN bus, default) or remote (the controller)")
+    p.add_argument("--lockstep", action="store_true",
+                   help="advance in simulated time, one sample per answered message (deterministic)")
+    add_zenoh_args(p)
+    if link:
+        add_link_args(p)
+    add_live_args(p, node=True)
+    add_config_args(p)
+    add_scheme_args(p)
+
+
+@contextmanager
+def node_session(args: argparse.Namespace, *, can_interface: bool) -> Iterator[tuple[Any, Any, Any]]:
+    """(builder, config, Zenoh session) of one node process, closed on exit; `can_interface`: the live view's
+    recorder child also records the node's CAN bus (the edge's)."""
+    from sea_hil.live.child import attach_live_child
+    from sea_hil.session.builder import SessionBuilder
+    cfg = config_from_args(args, live_overrides(args))
+    with SessionBuilder(cfg, lockstep=args.lockstep) as b:
+        session = b.zenoh()
+        attach_live_child(b, args, cfg, cfg.can.interface if can_interface else None)
+        yield b, cfg, session
