@@ -31,7 +31,7 @@ from sea_hil.config import SeaHilConfig
 from sea_hil.controller.edge_command import CommandPath
 from sea_hil.controller.edge_downlink import SetpointIntake
 from sea_hil.controller.edge_events import EdgeEvents
-from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, rx_monotonic_ns
+from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, receive_stamped
 from sea_hil.controller.edge_uplink import StatePublisher
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
@@ -101,17 +101,15 @@ class EdgeNode(Node):
 
     # ---- the node hooks -------------------------------------------------------------------------------------------
     def _step(self) -> bool:
-        try:
-            msg = self.bus.recv(timeout=0.05)
-        except (can.CanError, OSError) as err:   # e.g. interface down: count, log, keep running
-            self.counters.bus_errors += 1
-            log.warning("CAN receive failed: %s", err)
-            self.stop_event.wait(0.05)
+        got = receive_stamped(self.bus, self.stop_event, self._bus_error)
+        if got is None:
             return False
-        if msg is None:
-            return False
-        self.on_can(msg, rx_monotonic_ns(msg.timestamp, time.monotonic_ns(), time.time_ns()))
+        self.on_can(*got)
         return True
+
+    def _bus_error(self, err: Exception) -> None:
+        self.counters.bus_errors += 1
+        log.warning("CAN receive failed: %s", err)
 
     def _close(self) -> None:
         for sub in self._subs:

@@ -16,14 +16,13 @@ from __future__ import annotations
 import logging
 import queue
 import threading
-import time
 from collections.abc import Sequence
 from typing import Any
 
 import can
 
 from sea_hil.controller.edge import EdgeNode
-from sea_hil.controller.edge_stats import rx_monotonic_ns
+from sea_hil.controller.edge_stats import receive_stamped
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import CMD_BITS
@@ -69,17 +68,15 @@ class EdgeMux(Node):
             edge.on_can(msg, rx_ns)
 
     def _step(self) -> bool:
-        try:
-            msg = self.bus.recv(timeout=0.05)
-        except (can.CanError, OSError) as err:   # e.g. interface down: count, log, keep running
-            self.bus_errors += 1
-            log.warning("CAN receive failed: %s", err)
-            self.stop_event.wait(0.05)
+        got = receive_stamped(self.bus, self.stop_event, self._bus_error)
+        if got is None:
             return False
-        if msg is None:
-            return False
-        self.dispatch(msg, rx_monotonic_ns(msg.timestamp, time.monotonic_ns(), time.time_ns()))
+        self.dispatch(*got)
         return True
+
+    def _bus_error(self, err: Exception) -> None:
+        self.bus_errors += 1
+        log.warning("CAN receive failed: %s", err)
 
     def dispatch(self, msg: can.Message, rx_ns: int) -> None:
         """Hand one frame (received at monotonic `rx_ns`) to the core of its node id."""

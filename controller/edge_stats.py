@@ -2,8 +2,12 @@
 (`controller/edge.py`)."""
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+import can
 
 from sea_hil.stats.histogram import LogHistogram
 
@@ -91,3 +95,19 @@ def edge_stats(edge: Any) -> dict[str, float]:
     if edge.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
         out.update(edge.events.stats(), **edge.events.fallback_stats())
     return out
+
+
+def receive_stamped(bus: Any, stop_event: Any, on_error: Callable[[Exception], None],
+                    timeout_s: float = 0.05) -> tuple[Any, int] | None:
+    """One frame from `bus` and its monotonic arrival time (`rx_monotonic_ns`), or None after `timeout_s` without
+    one. A receive error (e.g. the interface went down) goes to `on_error` (count, log), then waits `timeout_s` on
+    `stop_event` and returns None: the node keeps running."""
+    try:
+        msg = bus.recv(timeout=timeout_s)
+    except (can.CanError, OSError) as err:
+        on_error(err)
+        stop_event.wait(timeout_s)
+        return None
+    if msg is None:
+        return None
+    return msg, rx_monotonic_ns(msg.timestamp, time.monotonic_ns(), time.time_ns())
