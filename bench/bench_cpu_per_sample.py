@@ -1,7 +1,7 @@
 """Steady-state CPU per limb-sample of a real-time `sea-hil run --limbs N`, per process and per thread (issue 17).
 
 Run: python bench/bench_cpu_per_sample.py [--limbs 1,2,4] [--runs 3] [--warm 2] [--window 6] [--profile]
-     [--compare OTHER_SEA_HIL] [--json OUT] [-- EXTRA sea-hil run ARGS]
+     [--compare OTHER_SEA_HIL] [--json OUT] [--end-after-window] [-- EXTRA sea-hil run ARGS]
 `--compare PATH`: an A/B against another checkout's `sea-hil` executable (e.g. a worktree of the base commit with its
 own venv): its runs (A) and this checkout's (B) alternate, A B A B ..., so both see the same load.
 Each run starts `sea-hil run --limbs N --cycles 1` with its progress lines on and follows them (bench/cpu_window.py).
@@ -12,6 +12,8 @@ simulated time the progress lines report at A and B gives the limb-samples integ
 driver tick is one sample of each limb; a skipped deadline is no sample). Printed per thread group: CPU us per
 limb-sample (min-max over the runs). CPU time is far less load-sensitive than the real-time figures, but a loaded
 machine still inflates it somewhat (cache, migrations); the load average is printed.
+`--end-after-window`: kill each session (its whole process tree) once its window is read instead of waiting for
+its end: on a loaded machine its SCHED_IDLE recorder catches up for minutes; the tick counts are then not known.
 `--profile`: one more run per count, not in the table (py-spy's sampling inflates the target's CPU), with a
 `py-spy record --nonblocking --gil` of the session process over its window, printing the top functions by own
 samples per thread group (bench/cpu_profile.py).
@@ -51,7 +53,7 @@ def report(limbs: int, runs: list[WindowResult], label: str = "") -> dict[str, A
     table["total"] = [r.total_us() for r in runs]
     sys_total = [100 * sum(r.sys_s.values()) / max(sum(r.cpu_s.values()), 1e-9) for r in runs]
     print(f"  {'total':44s} {_span(table['total'])}  (system {_span(sys_total).strip()} %)")
-    misses = [f"{r.misses}/{r.ticks}" for r in runs]
+    misses = [f"{r.misses}/{r.ticks}" if r.ticks else "-" for r in runs]   # "-": session ended early, not known
     print(f"  (driver tick misses in the window, loaded: {', '.join(misses)})")
     return {"label": label, "limbs": limbs, "us_per_limb_sample": table, "samples": [r.samples for r in runs],
             "load_avg": [r.load_avg for r in runs], "misses": misses}
@@ -79,6 +81,9 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--compare", default=None, help="A/B: another checkout's sea-hil executable (A)")
     ap.add_argument("--json", type=Path, default=None, help="BENCHMARKS.md records (benchlib) to this file")
     ap.add_argument("--quick", action="store_true", help="smoke mode: one 1-limb run, a 3 s window")
+    ap.add_argument("--end-after-window", action="store_true",
+                    help="kill each session right after its window (no waiting for its recorder on a loaded "
+                         "machine; no tick counts then)")
     ap.add_argument("extra", nargs="*", help="more `sea-hil run` arguments (after --)")
     args = ap.parse_args(argv)
     sys.stdout.reconfigure(line_buffering=True)   # each table as soon as its count is done, also into a file
@@ -87,12 +92,15 @@ def main(argv: list[str] | None = None) -> int:
     out = []
     for n in (int(x) for x in args.limbs.split(",")):
         if args.compare:
-            pairs = [(measure(n, args.warm, args.window, args.extra, sea_hil=args.compare),
-                      measure(n, args.warm, args.window, args.extra)) for _ in range(args.runs)]
+            end = args.end_after_window
+            pairs = [(measure(n, args.warm, args.window, args.extra, sea_hil=args.compare, end_after=end),
+                      measure(n, args.warm, args.window, args.extra, end_after=end))
+                     for _ in range(args.runs)]
             out.append(report(n, [a for a, _ in pairs], f"A ({args.compare}) "))
             out.append(report(n, [b for _, b in pairs], "B (this checkout) "))
         else:
-            out.append(report(n, [measure(n, args.warm, args.window, args.extra) for _ in range(args.runs)]))
+            out.append(report(n, [measure(n, args.warm, args.window, args.extra, end_after=args.end_after_window)
+                                   for _ in range(args.runs)]))
         if args.profile:
             hot = measure(n, args.warm, args.window, args.extra, profile=True).hot
             print(f"  top own-GIL functions (py-spy, one more run):\n{hot}")

@@ -14,7 +14,7 @@ import pytest
 import sea_hil
 
 DOCS = Path(__file__).resolve().parents[1] / "docs" / "api.md"
-NODE_THREADS = {"plant", "edge", "controller", "recorder", "rec-zenoh", "rec-can", "sea-hil-session"}
+NODE_THREADS = {"plant", "edge", "controller", "recorder", "rec-zenoh", "rec-can", "rec-taps", "sea-hil-session"}
 SHORT = '''
 import pytest
 import sea_hil

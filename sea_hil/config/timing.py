@@ -29,3 +29,6 @@ class TimingConfig(_Frozen):
                                                                  "it in its children's config (realtime_scope session)")
     driver_cpu: int = Field(-1, ge=-1, description="pin the driver thread to this CPU and the session's child "
                                                    "processes to the others; -1 = no pinning")
+    merge_buses: bool = Field(True, description="`sea-hil run` with several CAN buses: one driver thread, one edge "
+                                                "thread and one recorder tap for all buses (one MergedBus each) "
+                                                "instead of one of each per bus; false = one of each per bus")

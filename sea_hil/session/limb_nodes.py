@@ -44,11 +44,14 @@ class LimbNodes:
 
 def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], inner: str,
                      mode: str = "et") -> LimbNodes:
-    """Open every bus's handles and build its plant and edge (owned by `b`); nothing is started."""
+    """Open every bus's handles and build its plant and edge (owned by `b`); nothing is started. Real time with
+    several buses (and `[timing] merge_buses`): one driver, one edge and one tap for all buses (`_merged`)."""
     from sea_hil.controller.edge_mux import EdgeMux
     nodes = LimbNodes(limbs)
     groups = buses_of(limbs)
     handles = {spec: (b.bus(spec), b.bus(spec), b.bus(spec)) for spec in groups}   # plant, edge, recorder tap
+    if _merged(b, nodes, handles, session, inner, mode):
+        return nodes
     for spec, group in groups.items():
         plant_bus, edge_bus, tap = handles[spec]
         nodes.taps.append(tap)
@@ -58,6 +61,29 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
         nodes.edges += edges
         nodes.runners += edges if len(edges) == 1 else [b.add(EdgeMux(edge_bus, edges, workers=b.lockstep))]
     return nodes
+
+
+def _merged(b: SessionBuilder, nodes: LimbNodes, handles: dict[str, tuple[Any, Any, Any]], session: Any,
+            inner: str, mode: str) -> bool:
+    """Compose one `PlantNode` serving every limb of every bus, one `EdgeMux` serving every edge core and one
+    recorder tap, each over a `MergedBus` of the buses' handles (`sea_hil.protocol.merged_bus`): the threads of the
+    session no longer grow with the buses (docs/timing.md "Where the CPU goes"). Only in real time, with several
+    buses, distinct node ids and buses that can be merged; False (nothing built) otherwise. Lockstep keeps one node
+    per bus, so no lockstep result can change."""
+    from sea_hil.controller.edge_mux import EdgeMux
+    from sea_hil.protocol.merged_bus import MergedBus, can_merge
+    limbs = nodes.limbs
+    ids = [limb.node_id for limb in limbs]
+    if (b.lockstep or len(handles) < 2 or not b.cfg.timing.merge_buses or len(set(ids)) != len(ids)
+            or not all(can_merge([h[k] for h in handles.values()]) for k in range(3))):
+        return False
+    plant_bus, edge_bus, tap = (MergedBus({limb.node_id: handles[limb.bus][k] for limb in limbs}) for k in range(3))
+    nodes.taps.append(tap)
+    nodes.plants.append(b.plant(plant_bus, tuple(ids)))
+    nodes.edges += [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
+                    for limb in limbs]
+    nodes.runners.append(b.add(EdgeMux(edge_bus, nodes.edges)))
+    return True
 
 
 def start(nodes: LimbNodes) -> None:
