@@ -25,8 +25,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     from sea_hil.live.child import attach_live_child
+    from sea_hil.runtime.realtime import node_priority
     from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
+    priority = node_priority(cfg.timing, "controller")
+    if not args.lockstep and not cfg.timing.controller_priority and priority:
+        # a process of its own (the compose topology; `sea-hil run` sets it for its children): SCHED_FIFO two below
+        # the driver, taken after the start-up (`RealTimeControllerSync.state_source`)
+        cfg = cfg.model_copy(update={"timing": cfg.timing.model_copy(update={"controller_priority": priority})})
     with SessionBuilder(cfg, lockstep=args.lockstep) as b:
         session = b.zenoh()
         attach_live_child(b, args, cfg, None)   # --foxglove: a `sea-hil record` child serves the live view

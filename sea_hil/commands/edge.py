@@ -26,10 +26,14 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 def _main(args: argparse.Namespace) -> int:
     from sea_hil.live.child import attach_live_child
+    from sea_hil.runtime.realtime import raise_node_process
     from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
     with SessionBuilder(cfg, lockstep=args.lockstep) as b:
         session = b.zenoh()
         attach_live_child(b, args, cfg, cfg.can.interface)   # --foxglove: a `sea-hil record` child serves the live view
-        b.serve(b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller))
+        node = b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller)
+        if not args.lockstep:   # a process of its own (the compose topology): [timing] SCHED_FIFO, one below the driver
+            raise_node_process(node, cfg.timing, "edge")
+        b.serve(node)
     return 0
