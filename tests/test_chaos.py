@@ -41,7 +41,7 @@ LIMITS_OFF = """
 enabled = false
 """
 LIMITS_OFF_OPT_IN = pytest.mark.skipif(not os.environ.get("SEA_HIL_CHAOS_LIMITS_OFF"), reason=(
-    "covered by the limits-on variant (the same invariants and no soft-limit trip); SEA_HIL_CHAOS_LIMITS_OFF=1 runs it"))
+    "covered by the limits-on variant (the same invariants, no soft-limit trip); SEA_HIL_CHAOS_LIMITS_OFF=1 runs it"))
 NO_BUMPLESS = {"safety": {"setpoint": {"resume_ramp_s": 0.0}}, "trajectory": {"lead_in_max_velocity_rad_s": 100.0}}
 
 
