@@ -18,7 +18,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    with node_session(args, can_interface=False) as (b, _cfg, session):
+    with node_session(args, "controller") as (b, _cfg, session):
         node = b.controller(session, args.controller, inner=args.inner, cycles=args.cycles)
         done = b.serve(node, args.timeout)
     return 0 if done else 3

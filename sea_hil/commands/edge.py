@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from sea_hil.commands.node_cli import add_node_args, node_session
+from sea_hil.commands.node_cli import add_node_args, node_session, raise_node
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -17,6 +17,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    with node_session(args, can_interface=True) as (b, _cfg, session):
-        b.serve(b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller))
+    with node_session(args, "edge") as (b, cfg, session):
+        node = b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller)
+        raise_node(args, node, cfg, "edge")
+        b.serve(node)
     return 0

@@ -28,13 +28,27 @@ def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
 
 
 @contextmanager
-def node_session(args: argparse.Namespace, *, can_interface: bool) -> Iterator[tuple[Any, Any, Any]]:
-    """(builder, config, Zenoh session) of one node process, closed on exit; `can_interface`: the live view's
-    recorder child also records the node's CAN bus (the edge's)."""
+def node_session(args: argparse.Namespace, role: str) -> Iterator[tuple[Any, Any, Any]]:
+    """(builder, config, Zenoh session) of one node process (`role`: edge or controller), closed on exit. The edge's
+    live-view recorder child also records its CAN bus. A real-time controller of its own (the compose topology;
+    `sea-hil run` sets it for its children) takes SCHED_FIFO two below the driver after its start-up
+    (`node_priority`, `RealTimeControllerSync.state_source`); the edge raises its loop once built (`raise_node`)."""
     from sea_hil.live.child import attach_live_child
+    from sea_hil.runtime.realtime import node_priority
     from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
+    priority = node_priority(cfg.timing, role)
+    if role == "controller" and not args.lockstep and not cfg.timing.controller_priority and priority:
+        cfg = cfg.model_copy(update={"timing": cfg.timing.model_copy(update={"controller_priority": priority})})
     with SessionBuilder(cfg, lockstep=args.lockstep) as b:
         session = b.zenoh()
-        attach_live_child(b, args, cfg, cfg.can.interface if can_interface else None)
+        attach_live_child(b, args, cfg, cfg.can.interface if role == "edge" else None)
         yield b, cfg, session
+
+
+def raise_node(args: argparse.Namespace, node: Any, cfg: Any, role: str) -> None:
+    """A real-time node process of its own (the compose topology): [timing] SCHED_FIFO for its loop, one below the
+    driver for the edge (`raise_node_process`)."""
+    if not args.lockstep:
+        from sea_hil.runtime.realtime import raise_node_process
+        raise_node_process(node, cfg.timing, role)

@@ -6,6 +6,7 @@ node's logic, and never in lockstep (simulated time: nothing here can change a l
   refuses (EPERM without CAP_SYS_NICE, a CPU outside the allowed set, no such call on this OS) is logged once and
   skipped: the loop runs on, unprivileged.
 - `child_cpus(timing)`: the CPUs the session's child processes are pinned to (every allowed CPU but the driver's).
+- `node_priority(timing, role)`: the SCHED_FIFO priority an edge or controller started as a process of its own takes.
 - `SlackCollector`: `gc.freeze()` after start-up and automatic collection off while the loop runs; the loop calls
   `tick(remaining_ns)` after its work and a due collection runs only when at least `gc_slack_us` remain to the next
   deadline (postponed at most until 8x the generation-0 threshold has accumulated). `stop()` restores the GC.
@@ -19,6 +20,7 @@ import sys
 import threading
 import time
 from dataclasses import dataclass, field
+from typing import Any
 
 from sea_hil.config.timing import TimingConfig
 
@@ -46,6 +48,15 @@ def child_priority(timing: TimingConfig) -> int | None:
     if timing.realtime_priority <= 0 or timing.realtime_scope != "session":
         return None
     return max(1, timing.realtime_priority - 2)
+
+
+def node_priority(timing: TimingConfig, role: str) -> int | None:
+    """The SCHED_FIFO priority of a node process started on its own (`sea-hil edge | controller`: the compose
+    topology, one process per node) with `realtime_scope = "session"`: the edge one below the driver (as its thread in
+    `sea-hil run`'s process), the controller two below (`child_priority`); None: not raised."""
+    if timing.realtime_priority <= 0 or timing.realtime_scope != "session":
+        return None
+    return max(1, timing.realtime_priority - (1 if role == "edge" else 2))
 
 
 def pin_process(pid: int, cpus: set[int] | None) -> bool:
@@ -148,6 +159,19 @@ class ThreadPolicy:
         if self._switch_s is not None:
             sys.setswitchinterval(self._switch_s)
             self._switch_s = None
+
+
+def raise_node_process(node: Any, timing: TimingConfig, role: str) -> dict[str, object]:
+    """A node process of its own (`node_priority`), in the thread that runs its loop, after its start-up: SCHED_FIFO
+    for that thread and (one lower) the process's other threads (Zenoh's), undone when the loop ends; what took
+    effect (a refusal is logged once, never raised)."""
+    priority = node_priority(timing, role)
+    if priority is None:
+        return {}
+    policy = ThreadPolicy(TimingConfig(realtime_priority=priority, realtime_scope="process"), role)
+    applied = policy.apply()
+    node.on_loop_exit(policy.undo)
+    return applied
 
 
 @dataclass

@@ -54,9 +54,17 @@ START_S = 90.0     # four interpreters + zenoh on a loaded 2-core machine
 RESUME_S = 45.0    # a restarted process: interpreter, imports, zenoh, then the restart path
 MARGIN_S = 0.1     # on the safe-state bound, in the drive's own time (its feedback periods)
 WALL_MARGIN_S = 5.0   # the same in wall time on a loaded 2-core host (only catches a drive that never gets safe)
+# the router carries every state and setpoint between the edge and the controller: on the session's real-time tier
+# (`[timing]`: SCHED_FIFO as a standalone controller takes it, `node_priority`), as a zenohd on this host would be run
 ROUTER = """import sys, threading
+from sea_hil.config import load_config
 from sea_hil.protocol.zsession import make_config, open_session
+from sea_hil.runtime.realtime import ThreadPolicy, node_priority
+from sea_hil.config.timing import TimingConfig
 s = open_session(make_config(mode="router", listen=[sys.argv[1]]))
+priority = node_priority(load_config(sys.argv[2]).timing, "controller")
+if priority:
+    ThreadPolicy(TimingConfig(realtime_priority=priority, realtime_scope="process"), "router").apply()
 print("ready", flush=True)
 sys.stdin.read()   # until the orchestrator ends (SIGTERM) or closes the pipe
 s.close()
@@ -236,7 +244,7 @@ class Chaos:
         # the router is a process of its own, as zenohd is: routing must not wait for this process's GIL (a Python
         # subscriber in the router's own session stalled it while this process read the recordings, and the edge's
         # states were dropped on congestion)
-        self.router = subprocess.Popen([sys.executable, "-c", ROUTER, self.endpoint], cwd=REPO,
+        self.router = subprocess.Popen([sys.executable, "-c", ROUTER, self.endpoint, str(self.config)], cwd=REPO,
                                        stdin=subprocess.PIPE, stdout=subprocess.PIPE)
         assert self.router.stdout is not None and self.router.stdout.readline().strip() == b"ready", "no router"
         zs = open_session(make_config(mode="client", connect=[self.endpoint]))   # this process: a client
@@ -244,6 +252,7 @@ class Chaos:
         self.probe = zs.declare_publisher(f"{keys.state}/probe")   # matches the recorder's <prefix>/**
         w = Watch(bus, zs, keys)
         log: list[dict[str, object]] = []
+        started, start_s, span_s = time.monotonic(), None, None
         try:
             self.start("recorder")
             assert self._subscribed(), "recorder never subscribed"
@@ -251,14 +260,20 @@ class Chaos:
                 self.start(name)
             assert self.running(w, START_S), f"session never RUNNING ({w.describe()})"
             t0 = time.monotonic()
+            start_s = t0 - started
+            print(f"chaos: RUNNING {start_s:.1f} s after the start", file=sys.stderr, flush=True)
             for at_s, kind in self.plan():
                 threading.Event().wait(max(0.0, at_s - (time.monotonic() - t0)))   # the seeded fault time
                 t = time.monotonic() - t0
                 res = self.kill_recorder(w) if kind == "recorder" else self.kill_node(w, kind)
                 log.append({"at_s": round(t, 2), "kind": kind, **{k: round(v, 3) for k, v in res.items()}})
+                print(f"chaos: fault {len(log)} at {t:.1f} s: {log[-1]}", file=sys.stderr, flush=True)
             span_s = time.monotonic() - t0
         finally:
-            codes = {n: end_process(p) for n, p in self.procs.items()}
+            # the producers first, the recorder last (as tests/multicast/topology.py does): its SIGTERM close then
+            # finalises a file nothing is still streaming into
+            codes = {n: end_process(self.procs[n]) for n in ("controller", "edge", "plant", "recorder")
+                     if n in self.procs}
             for p in self.started:
                 end_process(p)
             w.close()
@@ -268,7 +283,7 @@ class Chaos:
             end_process(self.router)
         # in its own PID namespace with its own /proc (`--mount-proc`): any other process is one left behind
         left = [pid for pid in psutil.pids() if pid != os.getpid()]
-        return {"faults": log, "span_s": span_s, "safe_bound_s": self.safe_bound_s, "codes": codes,
+        return {"faults": log, "start_s": start_s, "span_s": span_s, "safe_bound_s": self.safe_bound_s, "codes": codes,
                 "left": left, "started": len(self.started), "drive_faults_seen": w.faults_seen,
                 "limit_faults": w.limit_faults}
 
