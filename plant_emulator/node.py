@@ -110,12 +110,16 @@ class PlantNode(Node):
             self.stats.send_retries += send_with_retry(self.bus, msg, self.cfg.can.send_retries, 0.0002)
         except BusError as err:
             self.stats.send_failures += 1
-            self._bus_error(str(err))
+            self._bus_error(str(err), msg.arbitration_id >> CMD_BITS)
 
-    def _bus_error(self, what: str) -> None:
-        """Flag BUS_ERROR on every driver and count; log the first error and every 1000th (no log flood)."""
-        for drv in self.drivers.values():
-            drv.flags |= ErrorFlags.BUS_ERROR
+    def _bus_error(self, what: str, node_id: int | None = None) -> None:
+        """Flag BUS_ERROR on every driver on the failed bus (a `MergedBus` serves several: with `node_id`, only
+        those on that node's bus; else all) and count; log the first error and every 1000th (no log flood)."""
+        routes = getattr(self.bus, "routes", None)
+        bus = routes.get(node_id) if routes is not None and node_id is not None else None
+        for n, drv in self.drivers.items():
+            if bus is None or routes.get(n) is bus:
+                drv.flags |= ErrorFlags.BUS_ERROR
         self.stats.bus_errors += 1
         if self.stats.bus_errors == 1 or self.stats.bus_errors % 1000 == 0:
             log.warning("%s (%d bus errors so far)", what, self.stats.bus_errors)

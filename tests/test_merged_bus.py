@@ -63,3 +63,56 @@ def test_what_cannot_be_merged_is_refused() -> None:
         MergedBus({1: mine[names[0]], 2: timed})
     with pytest.raises(BusError, match="at least one route"):
         MergedBus({})
+
+
+def _compose(lockstep: bool = False, merge: bool = True):  # type: ignore[no-untyped-def]
+    from sea_hil.config import load_config
+    from sea_hil.session.builder import SessionBuilder
+    from sea_hil.session.limb_nodes import build_limb_nodes
+    from sea_hil.session.limbs import expand_limbs
+    cfg = load_config(overrides={"can": {"interface": f"virtual:mb-{uuid.uuid4().hex[:8]}"},
+                                 "timing": {"merge_buses": merge}})
+    b = SessionBuilder(cfg, lockstep=lockstep)
+    session = b.zenoh(listen=(), connect=())
+    return b, build_limb_nodes(b, session, expand_limbs(cfg, 2), "edge")
+
+
+def test_real_time_limbs_on_two_buses_share_one_driver_edge_and_tap() -> None:
+    from sea_hil.controller.edge_mux import EdgeMux
+    b, nodes = _compose()
+    with b:
+        assert len(nodes.buses) == 2 and len(nodes.plants) == len(nodes.runners) == len(nodes.taps) == 1
+        plant, mux, tap = nodes.plants[0], nodes.runners[0], nodes.taps[0]
+        assert tuple(plant.drivers) == (1, 2) and isinstance(mux, EdgeMux) and isinstance(tap, MergedBus)
+        for drv, fb in plant.step_drivers():   # each limb's feedback on its own bus
+            plant.publish(drv, fb)
+        while (msg := mux.bus.recv(0.1)) is not None:
+            mux.dispatch(msg, 1)
+        assert [e.counters.feedback for e in nodes.edges] == [1, 1]
+        ids = []
+        while (msg := tap.recv(0)) is not None:
+            ids.append(msg.arbitration_id >> CMD_BITS)
+        assert sorted(set(ids)) == [1, 2] and len(ids) == 2 * len(ids) // 2 > 2
+
+
+def test_lockstep_and_merge_off_keep_one_driver_per_bus() -> None:
+    for lockstep, merge in ((True, True), (False, False)):
+        b, nodes = _compose(lockstep, merge)
+        with b:
+            assert len(nodes.plants) == len(nodes.taps) == 2
+            assert [tuple(p.drivers) for p in nodes.plants] == [(1,), (2,)]
+
+
+def test_a_failed_send_flags_only_the_drivers_on_that_bus() -> None:
+    from sea_hil.config import load_config
+    from sea_hil.plant_emulator.node import PlantNode
+    from sea_hil.protocol.can_frames import ErrorFlags
+    names, mine, peers = _two_buses()
+    plant = PlantNode(load_config(), MergedBus({1: mine[names[0]], 2: mine[names[1]]}), (1, 2))
+    mine[names[1]].shutdown()   # node 2's bus fails
+    for drv, fb in plant.step_drivers():
+        plant.publish(drv, fb)
+    assert {n: bool(d.flags & ErrorFlags.BUS_ERROR) for n, d in plant.drivers.items()} == {1: False, 2: True}
+    assert plant.stats.send_failures == 3 and plant.stats.bus_errors == 3   # node 2's three feedback frames
+    for b in (mine[names[0]], *peers.values()):
+        b.shutdown()
