@@ -37,9 +37,10 @@ def node_session(args: argparse.Namespace, role: str) -> Iterator[tuple[Any, Any
     from sea_hil.runtime.realtime import node_priority
     from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
-    priority = node_priority(cfg.timing, role)
-    if role == "controller" and not args.lockstep and not cfg.timing.controller_priority and priority:
-        cfg = cfg.model_copy(update={"timing": cfg.timing.model_copy(update={"controller_priority": priority})})
+    if role == "controller" and not args.lockstep and not cfg.timing.controller_priority:
+        priority = node_priority(cfg.timing, role)
+        if priority:
+            cfg = cfg.model_copy(update={"timing": cfg.timing.model_copy(update={"controller_priority": priority})})
     with SessionBuilder(cfg, lockstep=args.lockstep) as b:
         session = b.zenoh()
         attach_live_child(b, args, cfg, cfg.can.interface if role == "edge" else None)
