@@ -135,19 +135,42 @@ def test_lockstep_timeline_is_simulated_and_arbitrates_reactions() -> None:
 
 
 def test_real_time_timeline_never_delivers_early_and_orders_by_id() -> None:
-    a, b = _pair(lockstep=False)
+    """Real time: the ready stamps are the host's clock at `send`, so which frames contend depends on how fast the
+    sender ran (on a loaded host the first frame may end before the last is sent; CI once saw 0x25 win alone). The
+    test records the arbiter's decisions and checks the invariants on them: every frame arrives no earlier than its
+    transmission's end, in the order of the wire, one frame at a time, and each winner has the lowest id of the
+    frames ready when the bus took it. At 125 kbit/s a frame takes 1.08 ms, so the usual run has all four contend."""
+    spec = f"virtual:timing-{uuid.uuid4().hex[:8]}"
+    tl = make_timeline(load_config(None, {"can": {"bitrate_bps": 125_000}}).can, spec, lockstep=False)
+    a, b = TimedBus(open_bus(spec), tl), TimedBus(open_bus(spec), tl)
+    decided: list = []
+    take = tl.arbiter.next_transmission
+
+    def record(*args: object, **kwargs: object):
+        tx = take(*args, **kwargs)
+        if tx is not None:
+            decided.append(tx)
+        return tx
+    tl.arbiter.next_transmission = record      # type: ignore[method-assign]
     try:
-        t0 = time.monotonic_ns()
-        for can_id in (0x27, 0x25, 0x21, 0x23):
-            a.send(_m(can_id))
+        with tl.cond:                           # the bus thread waits until all four are queued
+            for can_id in (0x27, 0x25, 0x21, 0x23):
+                a.send(_m(can_id))
         arrivals = []
         for _ in range(4):
             msg = b.recv(timeout=10.0)
             assert msg is not None
-            arrivals.append((msg.arbitration_id, time.monotonic_ns() - t0))
-        assert [i for i, _ in arrivals][1:] == [0x21, 0x23, 0x25]     # the first went out on the idle bus
-        assert arrivals[0][0] == 0x27
-        assert arrivals[-1][1] >= 3 * 135_000 + 105_000          # four frames' worth of bus time, at least
+            arrivals.append((msg.arbitration_id, time.monotonic_ns()))
+        assert [i for i, _ in arrivals] == [tx.msg.arbitration_id for tx in decided]
+        assert all(t_ns >= tx.end_ns for (_, t_ns), tx in zip(arrivals, decided))          # never early
+        assert all(tx.end_ns - tx.start_ns == 1_080_000 for tx in decided)
+        assert all(nxt.start_ns >= prev.end_ns for prev, nxt in zip(decided, decided[1:]))  # one at a time
+        for i, tx in enumerate(decided):        # the winner: lowest id of the frames ready at its start
+            ready = [t.msg.arbitration_id for t in decided[i:] if t.ready_ns <= tx.start_ns]
+            assert tx.msg.arbitration_id == min(ready) and tx.start_ns >= tx.ready_ns
+        assert decided[0].msg.arbitration_id == 0x27                # the first went out on the idle bus
+        if max(t.ready_ns for t in decided) <= decided[0].end_ns:   # the usual run: the other three contended
+            assert [i for i, _ in arrivals][1:] == [0x21, 0x23, 0x25]
     finally:
         a.shutdown()
         b.shutdown()
