@@ -84,7 +84,7 @@ class EdgeNode(Node):
                                    congestion_control=zenoh.CongestionControl.BLOCK) if self.events else None
         self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
                                      int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync,
-                                     self.envelope)
+                                     self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)))
         self.command_path = CommandPath(bus, self.codec, node_id, self.inner, inner, cfg.can.send_retries,
                                         self.counters)
         self.stats_pub = publisher(session, self.keys.stats, express=False)

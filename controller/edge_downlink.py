@@ -1,6 +1,9 @@
 """The edge's setpoint intake: setpoint/voltage payloads from Zenoh are checked (malformed, wrong type, an old or
 foreign session epoch, stale or duplicated seqs are counted and dropped; a controller restart -- a new epoch -- is
-accepted when the clock allows it), pass the downlink link emulator, and are applied when it releases them (`take`)."""
+accepted when the clock allows it), pass the downlink link emulator, and are applied when it releases them (`take`),
+unless the state they answer was sampled more than `max_answer_age_ns` before (`late_setpoints`: a controller path
+starved or congested for longer would steer the limb on an old state; the setpoint timeout then makes the drive
+safe if no fresh answer comes)."""
 from __future__ import annotations
 
 import logging
@@ -18,13 +21,14 @@ SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]
 
 class SetpointIntake:
     def __init__(self, downlink: LinkEmulator, counters: Any, payloads: PayloadCounters, timeout_ns: int,
-                 sync: Any, envelope: Any = None) -> None:
+                 sync: Any, envelope: Any = None, max_answer_age_ns: int = 0) -> None:
         self.downlink = downlink
         self.counters = counters
         self.payloads = payloads
         self.timeout_ns = timeout_ns
         self.sync = sync
         self.envelope = envelope                  # `EnvelopeGate` (controller/envelope.py) or None: admit all
+        self.max_answer_age_ns = max_answer_age_ns  # 0: off
         self.sp_seq = SequenceTracker()
         self.epoch = PeerEpoch("controller", log)
         self.pending: DelayQueue[object] = DelayQueue()
@@ -82,14 +86,27 @@ class SetpointIntake:
         """Apply (`apply(payload)`) what the downlink emulator releases by sample time `now_ns`; True if any."""
         applied = False
         for p in self.pending.pop_due(now_ns):
+            sampled = sampled_at.get(p.state_seq)   # type: ignore[attr-defined]
+            if self._late(p, now_ns, sampled):
+                continue
             applied = True
             t = time.monotonic_ns()
             sent = sent_at.get(p.state_seq)   # type: ignore[attr-defined]
             if sent is not None:
                 self.counters.apply_latency.record(max(t - sent, 1000) * 1e-9)
-            sampled = sampled_at.get(p.state_seq)   # type: ignore[attr-defined]
             if sampled is not None:
                 self.counters.sim_latency.record((now_ns - sampled) * 1e-9)
             self.last_setpoint_ns = now_ns
             apply(p)
         return applied
+
+    def _late(self, p: Any, now_ns: int, sampled_ns: int | None) -> bool:
+        """The answer to a state sampled more than `max_answer_age_ns` before `now_ns`: counted, logged, dropped."""
+        if not self.max_answer_age_ns or sampled_ns is None or now_ns - sampled_ns <= self.max_answer_age_ns:
+            return False
+        self.counters.late_setpoints += 1
+        n = self.counters.late_setpoints
+        if n <= 10 or n % 100 == 0:
+            log.warning("late setpoint %d dropped: it answers state seq %d sampled %.0f ms ago (max_answer_age_s "
+                        "%.3f)", n, p.state_seq, (now_ns - sampled_ns) * 1e-6, self.max_answer_age_ns * 1e-9)
+        return True

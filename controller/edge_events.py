@@ -62,7 +62,8 @@ class EdgeEvents:
         # re-anchor when the anchor is unanswered for a heartbeat period, or after the setpoint timeout (twice that)
         self.generator = EdgeEventGenerator(make_trigger(cfg, mode), traj, int(round(cfg.trajectory.lead_in_s * 1e9)),
                                             cfg.trajectory.lead_in_max_velocity_rad_s,
-                                            anchor_timeout_ns=heartbeat_ns, reanchor_after_ns=2 * heartbeat_ns)
+                                            anchor_timeout_ns=heartbeat_ns, reanchor_after_ns=2 * heartbeat_ns,
+                                            max_timeout_ns=int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)))
         self.trajectory_id = trajectory_id(cfg.trajectory)
         self.inner, self.period_ns, self.outer_every = inner, period_ns, outer_every
         self.every_sample = cfg.trigger.edge_check == "sample" if every_sample is None else every_sample

@@ -39,6 +39,7 @@ class EdgeCounters:
     uplink_out_of_order: int = 0                                     # lockstep: released after a newer state
     resumes: int = 0                     # bumpless resumes after a stop / the drive's safe state (InnerLoop.resume)
     late_samples: int = 0                # real time: samples not answered, received > max_sample_age_s before
+    late_setpoints: int = 0              # answers to states sampled > max_answer_age_s before: dropped
 
 
 def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int, *,
@@ -73,7 +74,7 @@ def edge_stats(edge: Any) -> dict[str, float]:
         "payload_rejected": edge.payloads.as_dict()["rejected_total"],
         "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
         "setpoints_out_of_envelope": edge.envelope.rejected,
-        "bus_errors": c.bus_errors, "late_samples": c.late_samples,
+        "bus_errors": c.bus_errors, "late_samples": c.late_samples, "late_setpoints": c.late_setpoints,
         "uplink_dropped": up.dropped, "downlink_dropped": down.dropped, "saturated_steps": edge.inner.saturated_steps,
         "seq_lost": sp_seq.lost, "seq_reordered": sp_seq.reordered, "seq_duplicates": sp_seq.duplicates,
         **intake.epoch.as_dict(),

@@ -7,7 +7,8 @@ Pure core (no clock, no I/O): `on_sample` takes a measured sample and says wheth
 and the same lead-in from the first measured state (t = 0 is that sample + `lead_in_s`). While a published state has
 no answer yet the trigger is not evaluated (no burst of duplicate events while the answer is in flight), until
 `answer_timeout_ns` has passed — a lost state or a lost setpoint then lets the next event through (re-trigger). The
-timeout follows the measured round trip: max(`min_timeout_ns`, 3 x the smoothed round trip).
+timeout follows the measured round trip: max(`min_timeout_ns`, 3 x the smoothed round trip), capped at
+`max_timeout_ns` (the edge's `max_answer_age_s`: an answer later than that is dropped anyway).
 
 The trajectory anchor: the edge's t (and the lead-in) count from an anchor, a state published with reason INITIAL;
 the controller counts its t from the same state (controller/remote_core.py), so both ends evaluate x_d(t) at the
@@ -40,6 +41,7 @@ class EdgeEventGenerator:
     lead_in_ns: int
     lead_in_max_velocity_rad_s: float = float("inf")   # the stretch of a far start (as the controller's)
     min_timeout_ns: int = 20_000_000
+    max_timeout_ns: int = 0           # 0: no cap
     t0_ns: int | None = None
     lead_in: LeadIn | None = None
     awaiting_seq: int | None = None
@@ -71,7 +73,8 @@ class EdgeEventGenerator:
 
     @property
     def answer_timeout_ns(self) -> int:
-        return self.min_timeout_ns if self.rtt_ns is None else max(self.min_timeout_ns, int(3.0 * self.rtt_ns))
+        timeout = self.min_timeout_ns if self.rtt_ns is None else max(self.min_timeout_ns, int(3.0 * self.rtt_ns))
+        return min(timeout, self.max_timeout_ns) if self.max_timeout_ns else timeout
 
     def on_sample(self, sample_ns: int, js: JointState, ahead: Callable[[int], JointState] | None = None
                   ) -> tuple[int, DesiredSample, TriggerReason | None]:

@@ -53,7 +53,8 @@ EDGE_RENAMED: dict[str, str] = {}
 # edge counters added since the fixtures were recorded, with the value the paper's path must give (never drop one)
 EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0,   # issue 19: the edge's setpoint envelope
                                  "epoch_old": 0, "epoch_foreign": 0,  # issue 19: session epochs (no replays here)
-                                 "late_samples": 0}   # issue 19: real time only, lockstep answers every sample
+                                 "late_samples": 0,   # issue 19: real time only, lockstep answers every sample
+                                 "late_setpoints": 0}  # issue 19: no answer older than max_answer_age_s here
 # The one documented difference: payload version 2 (issue 19) added the 8-byte session epoch to every payload header,
 # so every payload byte count is 8 bytes per message larger (docs/deviations.md, "Session epoch"). Only these byte
 # fields are rewritten, each checked to be exactly its message count times the old size first; message counts and

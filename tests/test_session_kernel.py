@@ -26,6 +26,7 @@ CASES = {
     "knee-sine": ({"disturbance": {"knee": {"kind": "sine", "amplitude_nm": 0.05, "frequency_hz": 2.0}}}, None),
     "envelope": ({"safety": {"setpoint": {"deflection_max_m": [0.0012, 0.0012]}}}, "delay=10ms,jitter=2ms"),
     "drive-fault": ({"safety": {"drive": {"velocity_max_rad_s": [0.4, 0.4]}}}, None),
+    "late-answers": ({"safety": {"setpoint": {"max_answer_age_s": 0.03}}}, "delay=12ms,jitter=6ms,dist=normal"),
 }
 
 
@@ -55,6 +56,10 @@ def test_whole_session_kernel_equals_the_sample_loop(case, mode, caplog):
         assert whole.setpoints_out_of_envelope > 0
     if case == "drive-fault":
         assert whole.drive_faulted
+    if case == "late-answers":      # answers to states older than 30 ms were dropped: another session than without
+        off = load_config(None, paper({**SHORT, "link": cfg.link.model_dump(),
+                                       "safety": {"setpoint": {"max_answer_age_s": 0.0}}}))
+        assert run_engine(off, mode).data.messages != whole.data.messages
 
 
 def test_delivery_offsets_are_the_emulators_own():

@@ -65,6 +65,11 @@ class SetpointEnvelopeConfig(_Frozen):
                                     "feedback sample received at most this long ago (a starved edge working through "
                                     "a backlog answers only the newest samples; the drive's watchdog acts if it "
                                     "stays behind); 0 = off (every sample answered)")
+    max_answer_age_s: float = Field(0.2, ge=0, description="the edge applies a setpoint/voltage only if the state it "
+                                    "answers was sampled at most this long before (sample time, so lockstep too); a "
+                                    "later one is counted (late_setpoints), logged and dropped, and the edge's answer "
+                                    "timeout (the local fallback) is capped at it: a starved or congested controller "
+                                    "path cannot steer the limb on old states; 0 = off")
 
     @model_validator(mode="after")
     def _check(self) -> "SetpointEnvelopeConfig":

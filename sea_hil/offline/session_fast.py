@@ -53,7 +53,7 @@ def kernel_inputs(env: Any, cfg: SeaHilConfig, x0: tuple, p: Any, lsb: tuple, di
     n = env.n_max // env.outer_every + 1          # states the edge can publish
     drive = Drive(x0, p, lsb, env.drive_limits, env.period_ns, cfg.sim.substeps, dist_tab, env.n_max, env.outer_every)
     edge = Edge(env.nominal, env.inner.gains, env.inner.observer, env.inner.period_s, env.nominal.voltage_limit,
-                env.envelope.envelope.deflection_max_m)
+                env.envelope.envelope.deflection_max_m, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)))
     trig = env.make_trigger()
     et = isinstance(trig, EventTrigger)
     ctl = Controller(et, float(trig.threshold) if et else 0.0, float(trig.r) if et else 0.0,

@@ -54,6 +54,7 @@ class Edge(NamedTuple):
     dt_s: float
     limit_v: float
     envelope_m: tuple        # the setpoint envelope (deflection_max_m)
+    max_answer_age_ns: int   # a setpoint answering a state sampled longer ago is dropped (0: off)
 
 
 class Controller(NamedTuple):
@@ -218,6 +219,8 @@ def make_session_kernel(fingerprint: str = "") -> Callable[..., tuple]:
                     break
                 rec.down_done[j] = True
                 down_lo = _first_open(rec.down_done, down_lo, n_sp)
+                if ed.max_answer_age_ns and now - rec.pub_ns[rec.sp_i[j, 1] - 1] > ed.max_answer_age_ns:
+                    continue                        # a late answer: dropped, as the live edge does
                 vx, s, hold_measured = (rec.sp_f[j, 0], rec.sp_f[j, 1]), (rec.sp_f[j, 2], rec.sp_f[j, 3]), False
             x, m, saturated, u1, u2, obs, faulted, ok = edge_drive_sample(
                 x, m, k, dr.period_ns, dr.substeps, vx, s, hold_measured, dr.p, ed.pn, ed.gains, obs, ed.dt_s,

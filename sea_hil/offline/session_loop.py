@@ -50,6 +50,8 @@ class SessionLoop:
         self.in_flight: DelayQueue[tuple[int, int, tuple, Any]] = DelayQueue()
         self.pending_down: DelayQueue[SetpointPayload] = DelayQueue()
         self.state_seq = self.setpoint_seq = self.newest = 0
+        self.sampled_at: dict[int, int] = {}    # state seq -> sample time (the edge's late-answer check)
+        self.max_answer_age_ns = int(round(env.cfg.safety.setpoint.max_answer_age_s * 1e9))
         self.t0_ns: int | None = None
         self.lead: Any = None
         self.edge: EdgeEvents | None = None     # the live edge's core (controller/edge_events.py)
@@ -79,12 +81,17 @@ class SessionLoop:
             e.rec.tracking(d.record, now)
 
     def _publish(self, seq: int, now: int, fb: tuple, reason: Any) -> None:
+        self.sampled_at[seq] = now
+        self.sampled_at.pop(seq - 100_000, None)
         at = self.e.uplink.submit(now, self.e.state_bytes)
         if at is not None:
             self.in_flight.push(at, (seq, now, fb, reason))
 
     def take_downlink(self, now: int) -> None:
         for payload in self.e.downlink_due(self.pending_down, now):
+            sampled = self.sampled_at.get(payload.state_seq)
+            if self.max_answer_age_ns and sampled is not None and now - sampled > self.max_answer_age_ns:
+                continue                               # a late answer: the live edge drops it (edge_downlink.py)
             self.e.inner.hold(payload.deflection_m, payload.sliding)
             if self.edge is not None:
                 self.edge.answered(payload.state_seq, now)
