@@ -71,7 +71,7 @@ done
 modprobe -d "$modroot" ipv6 2>/dev/null || echo "uml-init: ipv6 module not loaded (continuing)" >&2
 
 ip link set lo up || die "ip link set lo up failed"
-ip link add "$CAN_CHANNEL" type vcan || die "ip link add $CAN_CHANNEL type vcan failed"
+ip link add "$CAN_CHANNEL" mtu 72 type vcan || die "ip link add $CAN_CHANNEL mtu 72 type vcan failed"
 ip link set "$CAN_CHANNEL" up || die "ip link set $CAN_CHANNEL up failed"
 hostname sea-hil-uml 2>/dev/null
 

@@ -89,8 +89,10 @@ def sessions(builtin, tmp_path_factory) -> tuple[dict, dict]:
     finally:
         end_process(ctrl)
         end_process(session)
-    assert ctrl.returncode == 0, ctrl_err
-    assert session.returncode == 0, err
+    # each side's stderr tail with either failure: a controller that saw no state is explained by the session's log
+    both = f"controller:\n{ctrl_err[-3000:]}\nsession (exit {session.returncode}):\n{err[-3000:]}"
+    assert ctrl.returncode == 0, both
+    assert session.returncode == 0, both
     assert "connect to Zenoh endpoint " + endpoint in err
     counts = json.loads(ctrl_err.strip().splitlines()[-1])
     assert counts["done"] and counts["rejected"] == 0

@@ -100,3 +100,35 @@ def test_timeout_kills_the_guest() -> None:
     result = run_with_vcan("--uml", "--timeout", "3", "--", "sleep", "120")
     assert result.returncode == 124, result.stderr
     assert "timeout after 3 s" in result.stderr
+
+
+def test_a_fetched_kernel_comes_first_with_its_own_modules(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """scripts/install-uml puts a kernel that boots on this CPU in SEA_HIL_UML_PREFIX only where the system's cannot:
+    with-vcan takes it, and the module tree beside it (never the system's tree of another release); without it, the
+    system's kernel and /usr/lib/uml/modules; SEA_HIL_UML_KERNEL / _MODULES override both."""
+    module = load_with_vcan()
+    prefix = tmp_path / "uml"
+    (prefix / "modules" / "7.2.7").mkdir(parents=True)
+    (prefix / "modules" / "7.2.7" / "modules.dep").write_text("")
+    monkeypatch.setenv("SEA_HIL_UML_PREFIX", str(prefix))
+    monkeypatch.delenv("SEA_HIL_UML_KERNEL", raising=False)
+    monkeypatch.delenv("SEA_HIL_UML_MODULES", raising=False)
+    kernel = prefix / "linux.uml"
+    kernel.write_text("#!/bin/sh\n")
+    kernel.chmod(0o755)
+    assert module.find_uml_kernel() == kernel
+    assert module.find_module_dir(kernel) == prefix / "modules" / "7.2.7"
+    other = tmp_path / "bin" / "linux.uml"
+    other.parent.mkdir()
+    other.write_text("#!/bin/sh\n")
+    other.chmod(0o755)
+    monkeypatch.setenv("SEA_HIL_UML_KERNEL", str(other))
+    assert module.find_uml_kernel() == other
+    monkeypatch.setattr(module, "UML_MODULE_GLOB", str(tmp_path / "none" / "*"))
+    with pytest.raises(module.WithVcanError, match="no UML module tree"):
+        module.find_module_dir(other)      # not the fetched tree: another kernel's modules would not load
+    kernel.unlink()
+    monkeypatch.delenv("SEA_HIL_UML_KERNEL")
+    monkeypatch.setattr(module.shutil, "which", lambda name: None)
+    monkeypatch.setattr(module.os, "access", lambda path, mode: str(path) == "/usr/bin/linux.uml")
+    assert module.find_uml_kernel() == Path("/usr/bin/linux.uml")    # the system's, once nothing was fetched
