@@ -92,14 +92,11 @@ def test_a_restarted_controllers_lead_in_is_stretched_to_the_velocity_bound() ->
     assert peak(tc.lead_in_s) > 2.0 > 1.5 > peak(duration_s)      # the drive's limit is 2 rad/s
 
 
-# Not in the default run yet (issue 19 open): in the fresh-clone CI at cd78161, with the standalone nodes and the
-# router at SCHED_FIFO, the limits-on run still tripped FORCE_LIMIT|OVERRUN (0x108) after two recorder restarts,
-# before the first edge kill (820 other tests passed; docs/reliability.md "Chaos"). SEA_HIL_CHAOS=1 runs it.
-CHAOS_OPEN = pytest.mark.skipif(not os.environ.get("SEA_HIL_CHAOS"), reason=(
-    "issue 19 open: FORCE_LIMIT|OVERRUN after recorder restarts in fresh-clone CI at cd78161; SEA_HIL_CHAOS=1 runs it"))
-
-
-@CHAOS_OPEN
+# In the default run again (issue 19). It was taken out after the fresh-clone CI at cd78161 (the limits-on run tripped
+# FORCE_LIMIT|OVERRUN, 0x108, after two recorder restarts: setpoints answering states 75-630 ms old applied as if
+# fresh). Since the edge drops late answers (34b5453, docs/reliability.md "Chaos"): 13 of 13 passed, alone, beside the
+# UML guest suite and beside two CPU hogs, on an AMD EPYC host and an Intel Xeon host (66-74 s each).
+@pytest.mark.slow
 @pytest.mark.parametrize("limits", ["on", pytest.param("off", marks=LIMITS_OFF_OPT_IN)])
 def test_chaos_kills_and_restarts_keep_the_invariants(tmp_path: Path, limits: str) -> None:
     require_netns("chaos")
