@@ -12,6 +12,9 @@ from sea_hil.errors import ConfigError
 # CPU, memory and disk I/O with psutil every 0.5 s and each nanny its worker's memory every 0.1 s, in the client
 # process and the workers, which share the machine's cores with the points (a dashboard would show these samples;
 # the embedded cluster has none). The memory limit still holds, checked every second.
+# no dashboard, and the scheduler's remaining HTTP server (health, metrics) on an ephemeral port: with
+# `dashboard_address=None` alone it still tries the fixed 8787 first (distributed 2026.8), so two sweeps at once warn
+NO_DASHBOARD = {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 QUIET_MONITORS = {"distributed.admin.system-monitor.interval": "5s", "distributed.admin.system-monitor.disk": False,
                   "distributed.worker.memory.monitor-interval": "1s"}
 
@@ -27,10 +30,10 @@ def open_client(scheduler: str | None, jobs: int, engine: str = "offline") -> It
         with dask.config.set(QUIET_MONITORS):
             if engine == "offline":
                 cluster = LocalCluster(n_workers=jobs, threads_per_worker=1, processes=True, dashboard_address=None,
-                                       silence_logs=logging.WARNING)
+                                       scheduler_kwargs=NO_DASHBOARD, silence_logs=logging.WARNING)
             else:
                 cluster = LocalCluster(n_workers=1, threads_per_worker=jobs, processes=False, dashboard_address=None,
-                                       silence_logs=logging.WARNING)
+                                       scheduler_kwargs=NO_DASHBOARD, silence_logs=logging.WARNING)
             try:
                 with Client(cluster) as client:
                     yield client
