@@ -79,12 +79,12 @@ def detail_table(rows: list[dict[str, Any]]) -> list[str]:
     return out
 
 
-def figure_notes(r: dict[str, Any]) -> list[str]:
+def figure_notes(r: dict[str, Any], machine: str = "") -> list[str]:
     out = [f"### Figure {r['figure']}: {r['title']}", ""]
     if r.get("error"):
         return out + [f"Failed: {r['error']}", ""]
-    out.append(f"Metric: {r['metric']}. Unit: {r.get('unit', '')}. Runs: {r['runs']}. Measured {r['date']} "
-               f"(load average {r['host'].get('loadavg_1m')} at the start).")
+    out.append(f"Metric: {r['metric']}. Unit: {r.get('unit', '')}. Runs: {r['runs']}. Measured {r['date']}"
+               f"{' on ' + machine if machine else ''} (load average {r['host'].get('loadavg_1m')} at the start).")
     if r.get("baseline_label"):
         out.append(f"Baseline: {r['baseline_label']}.")
     if r.get("notes"):
@@ -97,22 +97,30 @@ def figure_notes(r: dict[str, Any]) -> list[str]:
     return out + table + ([""] if table else [])
 
 
+def _host_line(host: dict[str, Any]) -> str:
+    return f"{host.get('hostname')} ({host.get('cpu')}, {host.get('cores')} cores, kernel {host.get('kernel')})"
+
+
 def render(records: list[dict[str, Any]], *, preliminary: bool, total_s: float, header: str) -> str:
-    host = next((r["host"] for r in records if r.get("host")), {})
+    """The markdown. A file re-rendered after `--only` holds figures of other runs, maybe of another machine: the
+    header names every machine, and each figure's notes name its own when there is more than one."""
+    hosts = [r["host"] for r in sorted(records, key=lambda r: str(r.get("date", "")), reverse=True) if r.get("host")]
+    host = hosts[0] if hosts else {}
+    machines = list(dict.fromkeys(_host_line(h) for h in hosts))
     lines = ["# Benchmarks", ""]
     if preliminary:
         lines += ["> **PRELIMINARY** — produced by `python bench/run_all.py --quick` (tiny sizes, one run, a machine "
                   "busy with other work). The numbers only show that every script runs; the figures are the ones "
                   "of a full `python bench/run_all.py` in a quiet window.", ""]
     lines += [header, "",
-              f"Host: {host.get('hostname')} ({host.get('cpu')}, {host.get('cores')} cores, kernel "
-              f"{host.get('kernel')}), Python {host.get('python')}, eclipse-zenoh {host.get('eclipse-zenoh')}, "
-              f"python-can {host.get('python-can')}, mcap {host.get('mcap')}. All scripts together took "
-              f"{total_s:.0f} s.", "",
+              f"Host{'s' if len(machines) > 1 else ''}: {'; '.join(machines) or _host_line(host)} (newest first; "
+              f"each figure's notes name its machine when there are several), Python {host.get('python')}, "
+              f"eclipse-zenoh {host.get('eclipse-zenoh')}, python-can {host.get('python-can')}, mcap "
+              f"{host.get('mcap')}. The scripts of this run took {total_s:.0f} s.", "",
               "median / min–max are over the per-run values of each figure's metric; p99 is defined per figure "
               "(notes below). Every row is reproducible with the command beside it; `python bench/run_all.py` "
               "re-runs all of them and rewrites this file (`--quick` for a smoke run).", ""]
     lines += summary_table(records) + ["", "## Notes per figure", ""]
     for r in records:
-        lines += figure_notes(r)
+        lines += figure_notes(r, _host_line(r["host"]) if len(machines) > 1 and r.get("host") else "")
     return "\n".join(lines).rstrip() + "\n"

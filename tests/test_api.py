@@ -4,8 +4,10 @@ fixtures end everything they started even when the user's test fails."""
 from __future__ import annotations
 
 import dataclasses
+import importlib
 import os
 import re
+import sys
 import threading
 from pathlib import Path
 
@@ -80,12 +82,32 @@ def _numba_registries_loaded() -> None:
     run, e.g. numba.np.polynomial.polynomial_core, whose types register once per process) would be dropped while
     their registrations stay, and the next numba cache load in this process fails with "duplicate registration".
     The serial run had loaded them in an earlier file; under pytest-xdist this file can come first in a worker (41
-    failures after it). Autouse fixtures are set up before the test's other fixtures, so before pytester."""
+    failures after it). Autouse fixtures are set up before the test's other fixtures, so before pytester.
+    Lowering imports three more modules on a process's first compile (not on a cache load): `numba.core.boxing`
+    registers the box/unbox functions, so a compile inside the window (a fresh clone's first compile of a kernel the
+    other xdist worker had already cached) dropped it and the next compile failed with "duplicate registration for
+    Boolean" (3 failures in a fresh-clone CI run, 2026-12-02). They are imported here too."""
     try:
         from numba.core.registry import cpu_target
     except ImportError:      # numba is optional: without it nothing registers
         return
     cpu_target.target_context.refresh()
+    for name in LOWERING_MODULES:
+        importlib.import_module(name)
+
+
+# imported by numba's lowering on the first compile in a process (numba/core/pythonapi.py, lowering.py, base.py)
+LOWERING_MODULES = ("numba.core.boxing", "numba.core.unsafe.eh", "numba.core.runtime.context")
+
+
+def test_a_compile_after_the_warm_up_imports_no_numba_module() -> None:
+    """What pytester's sys.modules restore would drop: after the warm-up fixture a first compile (bool, float, int
+    and array arguments, a tuple back; no cache) imports no numba module."""
+    numba = pytest.importorskip("numba")
+    import numpy as np
+    before = set(sys.modules)
+    numba.njit(cache=False)(lambda b, x, n, a: (not b, x + a[n]))(True, 1.0, 0, np.zeros(2))
+    assert [m for m in sys.modules if m not in before and m.startswith("numba")] == []
 
 
 def _docs_example() -> str:

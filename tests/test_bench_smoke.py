@@ -122,6 +122,22 @@ def test_run_all_parsers_and_render():
         run_all.parse_simulate("nothing useful", "cmd", 1)
 
 
+def test_a_file_of_figures_from_two_machines_names_each_figures_machine():
+    """After `run_all.py --only`, BENCHMARKS.md holds figures of earlier runs, maybe of another host: the header lists
+    both (newest first) and each figure's notes say where it was measured; one machine: no per-figure host."""
+    amd = {"hostname": "vm", "cpu": "AMD EPYC", "cores": 2, "kernel": "k1", "loadavg_1m": 1.0}
+    intel = {**amd, "cpu": "Intel(R) Xeon(R) Processor", "kernel": "k2"}
+    base = {"title": "t", "command": "c", "runs": 1, "metric": "m", "unit": "us", "median": 1.0, "p99": 1.0,
+            "min": 1.0, "max": 1.0, "goal": "", "goal_met": None}
+    old = {**base, "figure": "1", "date": "2026-12-01T18:00:00Z", "host": amd}
+    new = {**base, "figure": "2", "date": "2026-12-02T02:00:00Z", "host": intel}
+    md = render([old, new], preliminary=False, total_s=1.0, header="hdr")
+    assert "Hosts: vm (Intel(R) Xeon(R) Processor, 2 cores, kernel k2); vm (AMD EPYC, 2 cores, kernel k1)" in md
+    assert "Measured 2026-12-01T18:00:00Z on vm (AMD EPYC" in md and "Measured 2026-12-02T02:00:00Z on vm (Intel" in md
+    one = render([old], preliminary=False, total_s=1.0, header="hdr")
+    assert "Host: vm (AMD EPYC" in one and " on vm (" not in one
+
+
 def test_secure_latency_record_pairs_each_secure_run_with_its_plain_one():
     plain = [{"run": 1, "p50_us": 1000.0, "p99_us": 3000.0}, {"run": 2, "p50_us": 2000.0, "p99_us": 4000.0}]
     secure = [{"run": 1, "p50_us": 1200.0, "p99_us": 3300.0}, {"run": 2, "p50_us": 2100.0, "p99_us": 6000.0}]
