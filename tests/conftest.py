@@ -1,7 +1,7 @@
 """Test-suite set-up: pytest's own `pytester` (tests/test_api.py runs a user's test with the sea-hil plugin), and
 the with-vcan guest's socketcan suite started in the background as soon as its host test is collected
 (tests/uml_suite.py), so it overlaps the rest of the run; it is ended when pytest ends. Under pytest-xdist
-(`scripts/test` runs `-n 2 --dist loadgroup` on 2 or more CPUs) the controller process starts and ends it,
+(`SEA_HIL_TEST_WORKERS=2 scripts/test` runs `-n 2 --dist loadgroup`) the controller process starts and ends it,
 once, and the tests that run sessions share one xdist group (`SERIAL_GROUP`), so no two of them run at a time."""
 from __future__ import annotations
 

@@ -80,10 +80,13 @@ def run(config: Path, out: Path, group: str) -> dict[str, object]:
         for name in ("plant", "edge", "controller"):
             procs[name] = _node(cmds[name])
         codes["controller"] = procs["controller"].wait(timeout=SESSION_TIMEOUT_S)
-        codes["edge"] = end_process(procs["edge"])        # SIGTERM: publishes its final statistics, then exits
-        _wait(edge_final, "the edge's final statistics")
-        codes["plant"] = end_process(procs["plant"])
-        codes["recorder"] = end_process(procs["recorder"])
+        # SIGTERM: the edge publishes its final statistics, then exits. Each node gets STEP_TIMEOUT_S for it (not
+        # end_process's 5 s): in a fresh-clone CI run beside another xdist worker's numba compiles, the edge was
+        # SIGKILLed at 5 s before it had published them and the wait below timed out
+        codes["edge"] = end_process(procs["edge"], timeout_s=STEP_TIMEOUT_S)
+        _wait(edge_final, f"the edge's final statistics (edge exit {codes['edge']})")
+        codes["plant"] = end_process(procs["plant"], timeout_s=STEP_TIMEOUT_S)
+        codes["recorder"] = end_process(procs["recorder"], timeout_s=STEP_TIMEOUT_S)
     finally:
         for proc in procs.values():
             end_process(proc)
