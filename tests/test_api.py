@@ -75,6 +75,10 @@ def test_driver_snapshot_and_counters_and_bad_input():
         sea_hil.Session(controller="pid")
 
 
+# imported by numba's lowering on the first compile in a process (numba/core/pythonapi.py, lowering.py, base.py)
+LOWERING_MODULES = ("numba.core.boxing", "numba.core.unsafe.eh", "numba.core.runtime.context")
+
+
 @pytest.fixture(autouse=True, scope="module")
 def _numba_registries_loaded() -> None:
     """Load numba's lazily imported typing registries before any `pytester` exists. pytester snapshots `sys.modules`
@@ -94,10 +98,6 @@ def _numba_registries_loaded() -> None:
     cpu_target.target_context.refresh()
     for name in LOWERING_MODULES:
         importlib.import_module(name)
-
-
-# imported by numba's lowering on the first compile in a process (numba/core/pythonapi.py, lowering.py, base.py)
-LOWERING_MODULES = ("numba.core.boxing", "numba.core.unsafe.eh", "numba.core.runtime.context")
 
 
 def test_a_compile_after_the_warm_up_imports_no_numba_module() -> None:

@@ -8,13 +8,13 @@ from collections.abc import Iterator
 
 from sea_hil.errors import ConfigError
 
+# no dashboard, and the scheduler's remaining HTTP server (health, metrics) on an ephemeral port: with
+# `dashboard_address=None` alone it still tries the fixed 8787 first (distributed 2026.8), so two sweeps at once warn
+NO_DASHBOARD = {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 # the embedded cluster's own bookkeeping, slowed down: by default the scheduler, each nanny and each worker sample
 # CPU, memory and disk I/O with psutil every 0.5 s and each nanny its worker's memory every 0.1 s, in the client
 # process and the workers, which share the machine's cores with the points (a dashboard would show these samples;
 # the embedded cluster has none). The memory limit still holds, checked every second.
-# no dashboard, and the scheduler's remaining HTTP server (health, metrics) on an ephemeral port: with
-# `dashboard_address=None` alone it still tries the fixed 8787 first (distributed 2026.8), so two sweeps at once warn
-NO_DASHBOARD = {"dashboard": False, "dashboard_address": "127.0.0.1:0"}
 QUIET_MONITORS = {"distributed.admin.system-monitor.interval": "5s", "distributed.admin.system-monitor.disk": False,
                   "distributed.worker.memory.monitor-interval": "1s"}
 
