@@ -1,6 +1,7 @@
 """Test-suite set-up: pytest's own `pytester` (tests/test_api.py runs a user's test with the sea-hil plugin), and
-the with-vcan guest's socketcan suite started in the background as soon as its host test is collected
-(tests/uml_suite.py), so it overlaps the rest of the run; it is ended when pytest ends. Under pytest-xdist
+two long runs started in the background as soon as their test is collected, so they overlap the rest of the run
+(tests/background.py): the with-vcan guest's socketcan suite (tests/uml_suite.py) and the chaos session
+(tests/chaos_run.py, not under xdist: a worker runs it in its test); both are ended when pytest ends. Under pytest-xdist
 (`SEA_HIL_TEST_WORKERS=2 scripts/test` runs `-n 2 --dist loadgroup`) the controller process starts and ends it,
 once, and the tests that run sessions share one xdist group (`SERIAL_GROUP`), so no two of them run at a time."""
 from __future__ import annotations
@@ -11,7 +12,8 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from uml_suite import BACKGROUND_KEY, RUN_DIR_KEY, SUITE_ARGS, SUITE_TEST, WORKER_RUN_DIR, BackgroundRun, can_boot
+from chaos_run import CHAOS_DIR_KEY, CHAOS_RUN_KEY, CHAOS_TEST, can_run, chaos_run
+from uml_suite import BACKGROUND_KEY, RUN_DIR_KEY, SUITE_ARGS, SUITE_TEST, WORKER_RUN_DIR, can_boot, guest_run
 
 pytest_plugins = ["pytester"]
 
@@ -49,7 +51,7 @@ def pytest_configure_node(node: Any) -> None:
 
 def _start_background(config: pytest.Config) -> None:
     if BACKGROUND_KEY not in config.stash and can_boot():
-        config.stash[BACKGROUND_KEY] = BackgroundRun(config.stash[RUN_DIR_KEY], *SUITE_ARGS)
+        config.stash[BACKGROUND_KEY] = guest_run(config.stash[RUN_DIR_KEY], *SUITE_ARGS)
 
 
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
@@ -64,6 +66,10 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         return
     if any(item.nodeid == SUITE_TEST for item in session.items):
         _start_background(session.config)
+    if any(item.nodeid == CHAOS_TEST for item in session.items) and can_run():
+        directory = Path(tempfile.mkdtemp(prefix="sea-hil-chaos-"))
+        session.config.stash[CHAOS_DIR_KEY] = directory
+        session.config.stash[CHAOS_RUN_KEY] = chaos_run(directory, "on")
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -74,8 +80,11 @@ def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    background = config.stash.get(BACKGROUND_KEY, None)
-    if background is not None:
-        background.stop()
+    for key in (BACKGROUND_KEY, CHAOS_RUN_KEY):
+        background = config.stash.get(key, None)
+        if background is not None:
+            background.stop()
+    if CHAOS_DIR_KEY in config.stash:
+        shutil.rmtree(config.stash[CHAOS_DIR_KEY], ignore_errors=True)
     if not _is_worker(config):
         shutil.rmtree(config.stash[RUN_DIR_KEY], ignore_errors=True)

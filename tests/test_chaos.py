@@ -5,15 +5,13 @@ watchdog, resumption, every state recorded before a recorder kill); here its rep
 injected, the bound met by each, every node ended and no process left."""
 from __future__ import annotations
 
-import json
 import os
-import shlex
-import subprocess
-import sys
 from pathlib import Path
 
 import pytest
 
+from background import started, wait_result
+from chaos_run import CHAOS_DIR_KEY, SEED, chaos_run, config_path, report_of
 from paper_scheme import paper
 from recovery_rig import RecoveryRig
 from sea_hil.config import load_config
@@ -21,25 +19,6 @@ from sea_hil.controller.trajectory import LeadIn, lead_in_duration_s, make_traje
 from sea_hil.session.builder import SessionBuilder
 from test_udp_multicast import require_netns
 
-CHAOS = Path(__file__).resolve().parent / "multicast" / "chaos.py"
-REPO = Path(__file__).resolve().parents[1]
-GROUP = "239.74.163.23"
-SEED = 19
-# the compose services' config (client mode, through the router) with a short flush period: a SIGKILLed recorder
-# loses at most its open chunk, and a state is in the file within ~0.1 s. The drive's safety envelope is the default
-# one (soft limits on position, velocity and spring force): a soft-limit fault is left to the operator, so one trip
-# ends the session and fails the test
-OVERLAY = """
-[record]
-flush_period_s = 0.1
-"""
-# the drive's soft limits off: the same fault-recovery invariants without the envelope; the default variant (limits
-# on) asserts all of them and no limit trip besides, so this one is opt-in (SEA_HIL_CHAOS_LIMITS_OFF=1): a failure of
-# the default one that is a limit trip can be told from a recovery failure with it, at no cost to the default run
-LIMITS_OFF = """
-[safety.drive]
-enabled = false
-"""
 LIMITS_OFF_OPT_IN = pytest.mark.skipif(not os.environ.get("SEA_HIL_CHAOS_LIMITS_OFF"), reason=(
     "covered by the limits-on variant (the same invariants, no soft-limit trip); SEA_HIL_CHAOS_LIMITS_OFF=1 runs it"))
 NO_BUMPLESS = {"safety": {"setpoint": {"resume_ramp_s": 0.0}}, "trajectory": {"lead_in_max_velocity_rad_s": 100.0}}
@@ -98,27 +77,22 @@ def test_a_restarted_controllers_lead_in_is_stretched_to_the_velocity_bound() ->
 # UML guest suite and beside two CPU hogs, on an AMD EPYC host and an Intel Xeon host (66-74 s each).
 @pytest.mark.slow
 @pytest.mark.parametrize("limits", ["on", pytest.param("off", marks=LIMITS_OFF_OPT_IN)])
-def test_chaos_kills_and_restarts_keep_the_invariants(tmp_path: Path, limits: str) -> None:
+def test_chaos_kills_and_restarts_keep_the_invariants(request: pytest.FixtureRequest, tmp_path: Path,
+                                                     limits: str) -> None:
+    """Run in the background from collection on (tests/chaos_run.py) when the whole default run has it; else here."""
     require_netns("chaos")
-    config = tmp_path / "chaos.toml"
-    overlay = OVERLAY + (LIMITS_OFF if limits == "off" else "")
-    config.write_text((REPO / "configs" / "session.toml").read_text() + overlay, encoding="utf-8")
-    assert load_config(config).safety.drive.enabled is (limits == "on")
-    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(CHAOS))} {shlex.quote(str(config))} {shlex.quote(str(tmp_path))} {GROUP} {SEED}")
-    # its own PID namespace (and /proc, so the helper sees exactly the session's processes): if the helper dies (even
-    # SIGKILLed on the timeout) every node process dies with it
-    try:
-        result = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
-                                 script], capture_output=True, text=True, timeout=240, check=False,
-                                stdin=subprocess.DEVNULL)
-    except subprocess.TimeoutExpired as err:   # how far it got: the helper's progress lines
-        progress = (err.stderr or b"").decode(errors="replace") if isinstance(err.stderr, bytes) else err.stderr or ""
-        pytest.fail("chaos session over 240 s; progress:\n" + "\n".join(
-            ln for ln in progress.splitlines() if ln.startswith("chaos:"))[-4000:])
-    # the nodes' warnings (restarts seen, out-of-envelope setpoints rejected) are expected; show the helper's error
-    assert result.returncode == 0, "\n".join(ln for ln in result.stderr.splitlines() if " WARNING: " not in ln)[-4000:]
-    report = json.loads(result.stdout.strip().splitlines()[-1])
+    directory = request.config.stash.get(CHAOS_DIR_KEY, None)
+    if limits == "on" and directory is not None and started(directory):
+        outcome = wait_result(directory)
+    else:
+        directory = tmp_path
+        run = chaos_run(directory, limits)
+        try:
+            outcome = run.result()
+        finally:
+            run.stop()
+    assert load_config(config_path(directory)).safety.drive.enabled is (limits == "on")
+    report = report_of(*outcome)
     faults = report["faults"]
     print(f"\nchaos seed {SEED}: RUNNING after {report['start_s']:.0f} s, {len(faults)} faults in "
           f"{report['span_s']:.0f} s; " + "; ".join(

@@ -15,7 +15,7 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from uml_suite import (HOST_TIMEOUT_S, REPO, RUN_DIR_KEY, SUITE_ARGS, WITH_VCAN, BackgroundRun, load_with_vcan, started,
+from uml_suite import (HOST_TIMEOUT_S, REPO, RUN_DIR_KEY, SUITE_ARGS, WITH_VCAN, guest_run, load_with_vcan, started,
                        wait_result)
 
 pytestmark = pytest.mark.uml
@@ -67,7 +67,7 @@ def test_socketcan_suite_passes_on_real_vcan(with_vcan_runner: Runner, request: 
     if started(run_dir):
         returncode, output = wait_result(run_dir)
     else:
-        background = BackgroundRun(tmp_path, *SUITE_ARGS)
+        background = guest_run(tmp_path, *SUITE_ARGS)
         try:
             returncode, output = background.result()
         finally:

@@ -1,0 +1,85 @@
+"""A test's long run started in the background when pytest has collected it (tests/conftest.py), so it overlaps
+the rest of the run instead of following it; the test then waits for it and asserts its result. Used for the
+with-vcan guest's socketcan suite (tests/uml_suite.py) and the chaos session (tests/chaos_run.py). The process is
+ended at the latest when pytest ends (`stop`). Under pytest-xdist the controller starts it and a worker's test waits
+through the files of the run directory (`wait_result`)."""
+from __future__ import annotations
+
+import fcntl
+import os
+import signal
+import subprocess
+import threading
+from pathlib import Path
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+class BackgroundRun:
+    """The command `argv` running in its own process group. Its output goes to `DIR/output.txt`, its exit
+    status to `DIR/status` when it has ended; until then this process holds an exclusive `flock` on `DIR/lock`, so
+    any process (an xdist worker whose test waits for a run the controller started) waits with `wait_result(DIR)`
+    without polling. A watcher thread enforces `timeout_s` (then stops the run) and releases the lock."""
+
+    def __init__(self, directory: Path, argv: list[str], timeout_s: float) -> None:
+        self.directory = directory
+        self._lock = open(directory / "lock", "w")  # noqa: SIM115 - released and closed by the watcher
+        fcntl.flock(self._lock, fcntl.LOCK_EX)
+        self._log = open(directory / "output.txt", "w", encoding="utf-8")  # noqa: SIM115 - closed by the watcher
+        self.proc = subprocess.Popen(argv, cwd=REPO, stdin=subprocess.DEVNULL,
+                                     stdout=self._log, stderr=subprocess.STDOUT, text=True, start_new_session=True)
+        self._watcher = threading.Thread(target=self._watch, args=(timeout_s,), name=f"{Path(argv[0]).name} watcher",
+                                         daemon=True)
+        self._watcher.start()
+
+    def _watch(self, timeout_s: float) -> None:
+        try:
+            status = str(self.proc.wait(timeout=timeout_s))
+        except subprocess.TimeoutExpired:
+            self._end()
+            status = "timeout"
+        finally:
+            self._log.close()
+        tmp = self.directory / "status.tmp"
+        tmp.write_text(status, encoding="utf-8")
+        tmp.replace(self.directory / "status")
+        fcntl.flock(self._lock, fcntl.LOCK_UN)
+        self._lock.close()
+
+    def _end(self) -> None:
+        """SIGTERM (with-vcan then kills its guest; `unshare --kill-child` its namespace), SIGKILL of the group
+        after 60 s."""
+        if self.proc.poll() is not None:
+            return
+        self.proc.send_signal(signal.SIGTERM)
+        try:
+            self.proc.wait(timeout=60)
+        except subprocess.TimeoutExpired:
+            os.killpg(self.proc.pid, signal.SIGKILL)
+            self.proc.wait()
+
+    def result(self) -> tuple[int | None, str]:
+        """(exit status or None on timeout, output), once the run has ended."""
+        return wait_result(self.directory)
+
+    def stop(self) -> None:
+        """End the run if it is still going and wait for the watcher; idempotent."""
+        self._end()
+        self._watcher.join()
+
+
+def started(directory: Path) -> bool:
+    """True when a background run was started in `directory` (by this process or the xdist controller)."""
+    return (directory / "lock").exists()
+
+
+def wait_result(directory: Path) -> tuple[int | None, str]:
+    """Block until the run in `directory` has ended (its owner releases the lock), then (status or None, output)."""
+    with open(directory / "lock") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)
+    output = (directory / "output.txt").read_text(encoding="utf-8", errors="replace")
+    status_file = directory / "status"
+    if not status_file.exists():
+        raise AssertionError(f"the process that started the background run ended before the run did:\n{output}")
+    status = status_file.read_text(encoding="utf-8")
+    return (None if status == "timeout" else int(status)), output
