@@ -72,6 +72,6 @@ def test_compose_topology_through_a_router_equals_peer_to_peer(tmp_path: Path) -
     assert load_config(config).zenoh.mode == "client"
 
     peer = run_session(load_config(config), RunOptions(controller="et", cycles=1, out=tmp_path / "peer",
-                                                       lockstep=True, progress=False))
+                                                       lockstep=True, progress=False, figures=False))
     assert compose["transmissions"]["downlink_msgs"] > 10 and compose["edge"]["feedback_samples"] > 1000
     assert deterministic(compose) == deterministic(json.loads(json.dumps(peer)))

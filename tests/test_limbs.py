@@ -115,10 +115,11 @@ def test_edge_mux_dispatches_by_node_id() -> None:
 @pytest.mark.slow
 def test_two_limbs_in_lockstep_match_one_limb(tmp_path: Path) -> None:
     two_buses = run_session(load_config(overrides=SHORT),
-                            RunOptions(out=tmp_path / "two_buses", lockstep=True, progress=False, limbs=2))
+                            RunOptions(out=tmp_path / "two_buses", lockstep=True, progress=False, figures=False,
+                                       limbs=2))
     shared = {**SHORT, "limbs": [{"name": "limb1", "node_id": 1}, {"name": "limb2", "node_id": 2}]}
     one_bus = run_session(load_config(overrides=shared),
-                          RunOptions(out=tmp_path / "one_bus", lockstep=True, progress=False))
+                          RunOptions(out=tmp_path / "one_bus", lockstep=True, progress=False, figures=False))
     assert [e["bus"] for e in two_buses["limbs"]] == ["virtual:sea-hil0", "virtual:sea-hil1"]
     assert [e["bus"] for e in one_bus["limbs"]] == ["virtual:sea-hil"] * 2
     a, b = copy.deepcopy(deterministic(two_buses)), copy.deepcopy(deterministic(one_bus))

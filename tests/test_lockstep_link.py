@@ -33,7 +33,8 @@ def _cfg(link: dict):
 
 
 def _run(tmp: Path, name: str, link: dict) -> dict:
-    return run_session(_cfg(link), RunOptions(controller="et", out=tmp / name, lockstep=True, progress=False))
+    return run_session(_cfg(link), RunOptions(controller="et", out=tmp / name, lockstep=True, progress=False,
+                                              figures=False))
 
 
 @pytest.fixture(scope="module")

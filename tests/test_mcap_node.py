@@ -27,7 +27,7 @@ pytestmark = [pytest.mark.skipif(NODE is None, reason="node is not installed (th
 def checked(tmp_path_factory):
     out = tmp_path_factory.mktemp("node") / "run"
     cfg = load_config(overrides={"trajectory": {"period_s": PERIOD_S}})
-    summary = run_session(cfg, RunOptions(controller="et", out=out, lockstep=True, progress=False))
+    summary = run_session(cfg, RunOptions(controller="et", out=out, lockstep=True, progress=False, figures=False))
     res = subprocess.run([NODE, str(JS / "check_mcap.mjs"), str(out / "session.mcap")], capture_output=True,
                          text=True, timeout=120)
     assert res.returncode == 0, res.stderr

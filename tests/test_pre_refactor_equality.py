@@ -85,7 +85,7 @@ def _load(path: Path) -> dict[str, Any]:
 
 def _session_run(out: Path, controller: str, link: str) -> dict[str, Any]:
     cmd = [sys.executable, "-m", "sea_hil.cli", "run", "--lockstep", "--controller", controller, "--cycles", "1",
-           "--seed", "1", "--quiet", "--config", str(PAPER_PATH), *LINKS[link], "--out", str(out)]
+           "--seed", "1", "--quiet", "--no-figures", "--config", str(PAPER_PATH), *LINKS[link], "--out", str(out)]
     out.mkdir(parents=True)
     with (out / "run.log").open("w", encoding="utf-8") as log:
         proc = subprocess.Popen(cmd, stdin=subprocess.DEVNULL, stdout=log, stderr=subprocess.STDOUT,
@@ -97,6 +97,7 @@ def _session_run(out: Path, controller: str, link: str) -> dict[str, Any]:
                 os.killpg(proc.pid, signal.SIGKILL)   # the run and its controller child: its own process group
                 proc.wait()
     assert rc == 0, (out / "run.log").read_text(encoding="utf-8")[-2000:]
+    assert not list(out.glob("*.png"))   # --no-figures (the figures are not compared; tests/test_session.py draws them)
     return _load(out / "summary.json")
 
 

@@ -99,8 +99,8 @@ def test_secure_session_refuses_an_intruder_and_a_plain_peer_and_matches_the_rep
     endpoint = f"tls/127.0.0.1:{free_tcp_port()}"
     intruder = Intruder(out, endpoint)
     try:
-        summary = run_session(cfg, RunOptions(controller="et", out=out, lockstep=True, progress=False, secure=True,
-                                              listen=(endpoint,), on_nodes=intruder.start))
+        summary = run_session(cfg, RunOptions(controller="et", out=out, lockstep=True, progress=False, figures=False,
+                                              secure=True, listen=(endpoint,), on_nodes=intruder.start))
     finally:
         intruder.stop.set()
         intruder.thread.join(30)

@@ -19,23 +19,26 @@ from sea_hil.offline.session_engine import run_engine
 from sea_hil.report.session_summary import session_summary
 
 pytestmark = pytest.mark.slow
+FIGURES = ("tracking.png", "inter_event.png", "latency.png", "bandwidth.png", "bus_load.png")
 # a 2 s gait (5x the default's speed, 25x its accelerations): the safety envelope's defaults are derived for the
 # default 10 s gait (docs/can-protocol.md, "Safety envelope") and would fault the drive here, so it is off
 SHORT = {"trajectory": {"period_s": 2.0}, "safety": {"drive": {"enabled": False}, "setpoint": {"enabled": False}}}
 
 
-def _run(tmp: Path, name: str, controller: str = "et", overrides: dict | None = None, **kw) -> dict:
+def _run(tmp: Path, name: str, controller: str = "et", overrides: dict | None = None, figures: bool = False,
+         **kw) -> dict:
     """A lockstep session of the paper's scheme (trigger at the controller, no compensation: the counts below are
-    its); the default scheme's live session: tests/test_session_engine.py."""
+    its); the default scheme's live session: tests/test_session_engine.py. Figures only where a test looks at them."""
     cfg = load_config(overrides=paper(overrides if overrides is not None else SHORT))
-    return run_session(cfg, RunOptions(controller=controller, out=tmp / name, lockstep=True, progress=False, **kw))
+    return run_session(cfg, RunOptions(controller=controller, out=tmp / name, lockstep=True, progress=False,
+                                       figures=figures, **kw))
 
 
 @pytest.fixture(scope="module")
 def et_runs(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("sessions")
     # the paper's 10 s walking cycle (a shorter cycle is 5x faster and makes ET trigger every sample)
-    return tmp, _run(tmp, "et_a", overrides={}), None
+    return tmp, _run(tmp, "et_a", overrides={}, figures=True), None
 
 
 def test_lockstep_is_reproducible(et_runs):
@@ -94,8 +97,9 @@ def test_recording_is_complete_and_report_reproduces_summary(et_runs, tmp_path):
     rep = run_report(path, tmp_path / "report")
     assert rep == {k: v for k, v in a.items() if k not in ("lockstep", "inner")} | {   # wall_s: run only
         "timing": {k: v for k, v in a["timing"].items() if k != "wall_s"}}
-    for png in ("tracking.png", "inter_event.png", "latency.png", "bandwidth.png", "bus_load.png"):
+    for png in FIGURES:
         assert (tmp_path / "report" / png).stat().st_size > 1000
+        assert (tmp / "et_a" / png).stat().st_size > 1000     # the run drew them too
     assert "downlink messages" in (tmp_path / "report" / "report.md").read_text()
 
 

@@ -77,7 +77,7 @@ def test_point_overrides_and_config(tmp_path):
 
 def test_point_command():
     cmd = point_command(ET, "lockstep", Path("c.toml"), Path("o"), 2, python="py")
-    assert cmd[:6] == ["py", "-m", "sea_hil.cli", "run", "--lockstep", "--quiet"]
+    assert cmd[:7] == ["py", "-m", "sea_hil.cli", "run", "--lockstep", "--quiet", "--no-figures"]
     assert cmd[cmd.index("--controller") + 1] == "et" and cmd[cmd.index("--cycles") + 1] == "2"
     with pytest.raises(ConfigError, match="only the lockstep engine"):
         point_command(TT, "offline", Path("c.toml"), Path("o"), 1)

@@ -40,6 +40,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="--secure with the certificates of `sea-hil certs --out DIR` (default: generated into "
                         "OUT/certs); implies --secure")
     p.add_argument("--quiet", action="store_true", help="no progress display")
+    p.add_argument("--no-figures", dest="figures", action="store_false",
+                   help="write no PNG figures (about 1 s a session; `sea-hil report DIR` draws them from the "
+                        "recording later): a sweep's points run with it")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_link_args(p)
     add_live_args(p)
@@ -60,7 +63,7 @@ def _main(args: argparse.Namespace) -> int:
                       inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,
                       join_timeout_s=args.join_timeout, secure=args.secure or args.certs is not None,
-                      certs=args.certs)
+                      certs=args.certs, figures=args.figures)
     from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
     with SessionProgress(sys.stderr) as progress:
         summary = run_session(cfg, opts, log=progress)

@@ -53,6 +53,7 @@ class RunOptions:
     join_timeout_s: float = 300.0   # --controller external: wall time allowed for the outside controller to join
     secure: bool = False            # mutual TLS + ACL, the edge's identity here, the controller's in the child
     certs: Path | None = None       # secure: certificates of `sea-hil certs --out DIR`; None: generated in out/certs
+    figures: bool = True            # the five PNGs in out (--no-figures: none; `sea-hil report` draws them later)
     on_nodes: Callable[[Any, Any, Any], None] | None = None   # called with (plant, edge, controller) once they run
 
 
@@ -132,7 +133,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     summary["lockstep"] = opts.lockstep
     summary["inner"] = opts.inner
     write_summary(opts.out / "summary.json", summary)
-    write_report_figures(data, opts.out)
+    if opts.figures:
+        write_report_figures(data, opts.out)
     return summary
 
 

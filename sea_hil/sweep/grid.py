@@ -160,8 +160,8 @@ def point_command(point: GridPoint, mode: str, cfg_path: Path, out: Path, cycles
     """The `sea-hil run --lockstep` command line of one point (engine lockstep)."""
     if mode != "lockstep":
         raise ConfigError(f"only the lockstep engine runs a point as a process, not {mode!r}")
-    return [python, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet"] + ["--controller", point.controller, "--config", str(cfg_path), "--cycles", str(cycles),
-                  "--out", str(out)]
+    return [python, "-m", "sea_hil.cli", "run", "--lockstep", "--quiet", "--no-figures"] + [
+        "--controller", point.controller, "--config", str(cfg_path), "--cycles", str(cycles), "--out", str(out)]
 
 
 def _tx(summary: dict[str, Any]) -> dict[str, Any]:
