@@ -72,7 +72,7 @@ def default_record(rows: list[dict[str, Any]]) -> dict[str, Any]:
     rec = record("4s", "driver tick misses in the default real-time session (1 limb, 1 kHz)", runs=len(rows),
                  metric="summary.json timing.driver tick_misses / ticks per session (skipped deadlines), median and "
                         "min-max over sessions; p99 = median of the sessions' closed-loop latency p99 (us)",
-                 unit="%", per_run=miss, p99=pct([r["latency_p99_us"] for r in rows], 50),
+                 unit="%", per_run=miss, p99=pct([r["latency_p99_us"] for r in rows], 50), p99_unit="us",
                  goal=f"misses < {GOAL_MISS_PCT} %", command=command_line(), details=rows,
                  notes=f"Each run: `{sea_hil_run_cmd('et', False)}` with the default [timing] (docs/timing.md); "
                        f"CPU per tick median {pct([r['cpu_us_per_tick'] for r in rows], 50):.0f} us (whole session).")

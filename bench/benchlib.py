@@ -96,9 +96,10 @@ def pct(values: Sequence[float] | np.ndarray, q: float) -> float:
 def record(figure: str, title: str, *, runs: int, metric: str, unit: str, per_run: Sequence[float], p99: float,
            baseline: float | None = None, baseline_label: str = "", goal: str = "", goal_met: bool | None = None,
            notes: str = "", details: list[dict[str, Any]] | None = None, command: str | None = None,
-           median: float | None = None) -> dict[str, Any]:
+           median: float | None = None, p99_unit: str | None = None) -> dict[str, Any]:
     """A result record; `per_run` gives min/max and (unless `median` is given) the median; `ratio` = median /
-    baseline when there is a baseline."""
+    baseline when there is a baseline. `p99_unit`: the p99 column's unit where the figure's p99 is another
+    quantity than its metric (default: `unit`)."""
     vals = [float(v) for v in per_run]
     med = median if median is not None else (float(np.median(vals)) if vals else math.nan)
     ratio = med / baseline if baseline not in (None, 0) and math.isfinite(med) else None
@@ -106,7 +107,8 @@ def record(figure: str, title: str, *, runs: int, metric: str, unit: str, per_ru
             "unit": unit, "median": med, "p99": float(p99), "min": min(vals, default=math.nan),
             "max": max(vals, default=math.nan), "per_run": vals, "baseline": baseline,
             "baseline_label": baseline_label, "ratio": ratio, "goal": goal, "goal_met": goal_met, "date": now_iso(),
-            "host": host_facts(), "notes": notes, "details": details or []}
+            "host": host_facts(), "notes": notes, "details": details or [],
+            **({"p99_unit": p99_unit} if p99_unit is not None else {})}
 
 
 def _clean(obj: Any) -> Any:

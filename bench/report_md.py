@@ -63,7 +63,7 @@ def summary_table(records: list[dict[str, Any]]) -> list[str]:
             continue
         u = r.get("unit", "")
         out.append(f"| {r['figure']} | {r['title']} | `{r['command']}` | {r['runs']} | {fmt(r['median'], u)} | "
-                   f"{fmt(r.get('p99'), u)} | {fmt(r['min'])}–{fmt(r['max'], u)} | {fmt(r.get('baseline'), u)} | "
+                   f"{fmt(r.get('p99'), r.get('p99_unit', u))} | {fmt(r['min'])}–{fmt(r['max'], u)} | {fmt(r.get('baseline'), u)} | "
                    f"{fmt(r.get('ratio'))} | {r.get('goal', '')} | {_met(r)} |")
     return out
 

@@ -16,6 +16,7 @@ sys.path.insert(0, str(BENCH))
 
 import bench_bandwidth  # noqa: E402
 import bench_closed_loop_latency  # noqa: E402
+import bench_timer_floor  # noqa: E402
 import run_all  # noqa: E402
 from report_md import render  # noqa: E402
 
@@ -57,6 +58,31 @@ def test_driver_timing_quick_with_edge(tmp_path):
     assert [r["figure"] for r in recs] == ["4a", "4c"]
     (row,) = recs[0]["details"]
     assert row["ticks"] > 0 and row["edge_samples"] > 0 and row["edge_commands"] > 0
+
+
+def test_timer_floor_quick(tmp_path):
+    (rec,) = _run_script("bench_timer_floor", tmp_path, "--quick")
+    assert rec["figure"] == "4f" and rec["details"][0]["deadlines"] == 1000 and rec["p99"] >= 0
+    # its p99 is a lateness in us, the metric a percentage: the table's p99 column says so
+    row = next(ln for ln in render([rec], preliminary=True, total_s=1.0, header="h").splitlines()
+               if ln.startswith("| 4f |"))
+    assert row.split(" | ")[5].endswith(" us") and row.split(" | ")[4].endswith(" %"), row
+
+
+def test_timer_floor_counts_a_late_wake_up_as_the_deadlines_it_passed(monkeypatch):
+    """On a fake clock: every sleep wakes 10 us late, the 3rd 2.5 periods late -> 2 deadlines lost, the next tick
+    due at the 6th deadline (no bunching), and the run still ends at its last deadline."""
+    now = [0]
+    sleeps = []
+
+    def sleep(s: float) -> None:
+        sleeps.append(s)
+        now[0] += round(s * 1e9) + (2_500_000 if len(sleeps) == 3 else 10_000)
+    monkeypatch.setattr(bench_timer_floor.time, "monotonic_ns", lambda: now[0])
+    monkeypatch.setattr(bench_timer_floor.time, "sleep", sleep)
+    row = bench_timer_floor.empty_loop(0.010)
+    assert (row["deadlines"], row["misses"], row["ticks"]) == (10, 2, 8)
+    assert row["miss_pct"] == 20.0 and row["lateness_us_max"] == 2500.0 and row["lateness_us_p50"] == 10.0
 
 
 @pytest.mark.slow
