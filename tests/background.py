@@ -10,6 +10,7 @@ import os
 import signal
 import subprocess
 import threading
+from collections.abc import Callable
 from pathlib import Path
 
 REPO = Path(__file__).resolve().parents[1]
@@ -66,6 +67,40 @@ class BackgroundRun:
         """End the run if it is still going and wait for the watcher; idempotent."""
         self._end()
         self._watcher.join()
+
+
+class AfterRun:
+    """A background run started only once `first()` has returned (in a thread): the chaos session after the guest
+    suite, so that the chaos session's SCHED_FIFO nodes do not starve the guest (a guest recorder once took over 30 s
+    to end beside them). `result()` waits for the start and the run; `stop()` cancels a start not yet made."""
+
+    def __init__(self, first: Callable[[], object], start: Callable[[], BackgroundRun]) -> None:
+        self._run: BackgroundRun | None = None
+        self._cancelled = threading.Event()
+        self._thread = threading.Thread(target=self._go, args=(first, start), name="after-run starter", daemon=True)
+        self._thread.start()
+
+    def _go(self, first: Callable[[], object], start: Callable[[], BackgroundRun]) -> None:
+        try:
+            first()
+        except AssertionError:   # the first run's failure is its own test's; this one starts all the same
+            pass
+        if not self._cancelled.is_set():
+            self._run = start()
+
+    def result(self) -> tuple[int | None, str]:
+        self._thread.join()
+        if self._run is None:
+            raise AssertionError("the background run was cancelled before it started")
+        return self._run.result()
+
+    def stop(self) -> None:
+        """Cancel the start if it has not happened (the first run must end for the thread to see it), else end the
+        run; idempotent."""
+        self._cancelled.set()
+        self._thread.join()
+        if self._run is not None:
+            self._run.stop()
 
 
 def started(directory: Path) -> bool:

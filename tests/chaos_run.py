@@ -1,8 +1,9 @@
 """The chaos session of tests/test_chaos.py (tests/multicast/chaos.py in private network and PID namespaces) as a
-background run (tests/background.py). The default variant (limits on) is started when pytest has collected its test
-(tests/conftest.py), so its ~70 s of a real-time session overlap the rest of the run instead of following it; the
-test then waits for it. It has measured passing beside the UML guest suite and beside CPU hogs
-(docs/reliability.md, "Chaos"). Started by the test itself when it was not (a single test, an xdist worker)."""
+background run (tests/background.py). The default variant (limits on) is started by tests/conftest.py once pytest
+has collected its test: when the UML guest suite runs, as soon as that has ended (beside it, the chaos nodes'
+SCHED_FIFO starved the guest), else at once. Its ~70 s of a real-time session overlap the host tests instead of
+following them, and its test, moved last, waits for it (docs/reliability.md, "Chaos"). Under xdist the test runs it
+itself."""
 from __future__ import annotations
 
 import json
@@ -13,13 +14,13 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from background import BackgroundRun
+from background import AfterRun, BackgroundRun
 
 REPO = Path(__file__).resolve().parents[1]
 CHAOS = REPO / "tests" / "multicast" / "chaos.py"
 CHAOS_TEST = "tests/test_chaos.py::test_chaos_kills_and_restarts_keep_the_invariants[on]"
 CHAOS_DIR_KEY = pytest.StashKey[Path]()
-CHAOS_RUN_KEY = pytest.StashKey[BackgroundRun]()
+CHAOS_RUN_KEY = pytest.StashKey["BackgroundRun | AfterRun"]()
 TIMEOUT_S = 240
 GROUP = "239.74.163.23"
 SEED = 19

@@ -12,6 +12,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
+from background import AfterRun
 from chaos_run import CHAOS_DIR_KEY, CHAOS_RUN_KEY, CHAOS_TEST, can_run, chaos_run
 from uml_suite import BACKGROUND_KEY, RUN_DIR_KEY, SUITE_ARGS, SUITE_TEST, WORKER_RUN_DIR, can_boot, guest_run
 
@@ -59,6 +60,8 @@ def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item
     for item in items:
         if item.path.name in SERIAL_FILES:
             item.add_marker(pytest.mark.xdist_group(SERIAL_GROUP))
+    # the background chaos session's test waits for it: last, so the run goes on meanwhile
+    items.sort(key=lambda item: item.nodeid == CHAOS_TEST)
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
@@ -69,7 +72,10 @@ def pytest_collection_finish(session: pytest.Session) -> None:
     if any(item.nodeid == CHAOS_TEST for item in session.items) and can_run():
         directory = Path(tempfile.mkdtemp(prefix="sea-hil-chaos-"))
         session.config.stash[CHAOS_DIR_KEY] = directory
-        session.config.stash[CHAOS_RUN_KEY] = chaos_run(directory, "on")
+        guest = session.config.stash.get(BACKGROUND_KEY, None)
+        # after the guest suite when it runs (the chaos nodes' SCHED_FIFO would starve it), else at once
+        session.config.stash[CHAOS_RUN_KEY] = (chaos_run(directory, "on") if guest is None else
+                                               AfterRun(guest.result, lambda: chaos_run(directory, "on")))
 
 
 @pytest.hookimpl(optionalhook=True)

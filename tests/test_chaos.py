@@ -10,8 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from background import started, wait_result
-from chaos_run import CHAOS_DIR_KEY, SEED, chaos_run, config_path, report_of
+from chaos_run import CHAOS_DIR_KEY, CHAOS_RUN_KEY, SEED, chaos_run, config_path, report_of
 from paper_scheme import paper
 from recovery_rig import RecoveryRig
 from sea_hil.config import load_config
@@ -79,11 +78,13 @@ def test_a_restarted_controllers_lead_in_is_stretched_to_the_velocity_bound() ->
 @pytest.mark.parametrize("limits", ["on", pytest.param("off", marks=LIMITS_OFF_OPT_IN)])
 def test_chaos_kills_and_restarts_keep_the_invariants(request: pytest.FixtureRequest, tmp_path: Path,
                                                      limits: str) -> None:
-    """Run in the background from collection on (tests/chaos_run.py) when the whole default run has it; else here."""
+    """Run in the background (tests/chaos_run.py: after the UML guest suite, else from collection on) when pytest
+    collected it in one process; else (an xdist worker, the `off` variant) here."""
     require_netns("chaos")
     directory = request.config.stash.get(CHAOS_DIR_KEY, None)
-    if limits == "on" and directory is not None and started(directory):
-        outcome = wait_result(directory)
+    background = request.config.stash.get(CHAOS_RUN_KEY, None)
+    if limits == "on" and directory is not None and background is not None:
+        outcome = background.result()
     else:
         directory = tmp_path
         run = chaos_run(directory, limits)
