@@ -94,10 +94,14 @@ class AfterRun:
             raise AssertionError("the background run was cancelled before it started")
         return self._run.result()
 
+    def cancel(self) -> None:
+        """No start from now on, if it has not happened yet."""
+        self._cancelled.set()
+
     def stop(self) -> None:
         """Cancel the start if it has not happened (the first run must end for the thread to see it), else end the
         run; idempotent."""
-        self._cancelled.set()
+        self.cancel()
         self._thread.join()
         if self._run is not None:
             self._run.stop()
