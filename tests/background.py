@@ -72,9 +72,11 @@ class BackgroundRun:
 class AfterRun:
     """A background run started only once `first()` has returned (in a thread): the chaos session after the guest
     suite, so that the chaos session's SCHED_FIFO nodes do not starve the guest (a guest recorder once took over 30 s
-    to end beside them). `result()` waits for the start and the run; `stop()` cancels a start not yet made."""
+    to end beside them). `start()` runs in `directory`. `result()` waits for the start and the run; `stop()` cancels a
+    start not yet made."""
 
-    def __init__(self, first: Callable[[], object], start: Callable[[], BackgroundRun]) -> None:
+    def __init__(self, directory: Path, first: Callable[[], object], start: Callable[[], BackgroundRun]) -> None:
+        self.directory = directory
         self._run: BackgroundRun | None = None
         self._cancelled = threading.Event()
         self._thread = threading.Thread(target=self._go, args=(first, start), name="after-run starter", daemon=True)

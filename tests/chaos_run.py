@@ -19,8 +19,7 @@ from background import AfterRun, BackgroundRun
 REPO = Path(__file__).resolve().parents[1]
 CHAOS = REPO / "tests" / "multicast" / "chaos.py"
 CHAOS_TEST = "tests/test_chaos.py::test_chaos_kills_and_restarts_keep_the_invariants[on]"
-CHAOS_DIR_KEY = pytest.StashKey[Path]()
-CHAOS_RUN_KEY = pytest.StashKey["BackgroundRun | AfterRun"]()
+CHAOS_RUN_KEY = pytest.StashKey["BackgroundRun | AfterRun"]()   # its `directory` holds the config and output
 TIMEOUT_S = 240
 GROUP = "239.74.163.23"
 SEED = 19

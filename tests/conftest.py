@@ -13,7 +13,7 @@ from typing import Any
 
 import pytest
 from background import AfterRun
-from chaos_run import CHAOS_DIR_KEY, CHAOS_RUN_KEY, CHAOS_TEST, can_run, chaos_run
+from chaos_run import CHAOS_RUN_KEY, CHAOS_TEST, can_run, chaos_run
 from uml_suite import BACKGROUND_KEY, RUN_DIR_KEY, SUITE_ARGS, SUITE_TEST, WORKER_RUN_DIR, can_boot, guest_run
 
 pytest_plugins = ["pytester"]
@@ -71,11 +71,10 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         _start_background(session.config)
     if any(item.nodeid == CHAOS_TEST for item in session.items) and can_run():
         directory = Path(tempfile.mkdtemp(prefix="sea-hil-chaos-"))
-        session.config.stash[CHAOS_DIR_KEY] = directory
         guest = session.config.stash.get(BACKGROUND_KEY, None)
         # after the guest suite when it runs (the chaos nodes' SCHED_FIFO would starve it), else at once
         session.config.stash[CHAOS_RUN_KEY] = (chaos_run(directory, "on") if guest is None else
-                                               AfterRun(guest.result, lambda: chaos_run(directory, "on")))
+                                               AfterRun(directory, guest.result, lambda: chaos_run(directory, "on")))
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -90,7 +89,7 @@ def pytest_unconfigure(config: pytest.Config) -> None:
         background = config.stash.get(key, None)
         if background is not None:
             background.stop()
-    if CHAOS_DIR_KEY in config.stash:
-        shutil.rmtree(config.stash[CHAOS_DIR_KEY], ignore_errors=True)
+    if CHAOS_RUN_KEY in config.stash:
+        shutil.rmtree(config.stash[CHAOS_RUN_KEY].directory, ignore_errors=True)
     if not _is_worker(config):
         shutil.rmtree(config.stash[RUN_DIR_KEY], ignore_errors=True)

@@ -26,7 +26,7 @@ def test_after_run_starts_only_once_the_first_has_returned(tmp_path: Path) -> No
     def start() -> BackgroundRun:
         starts.append(first_done.is_set())
         return BackgroundRun(tmp_path, [sys.executable, "-c", "print('second')"], timeout_s=60)
-    after = AfterRun(first_done.wait, start)
+    after = AfterRun(tmp_path, first_done.wait, start)
     assert not started(tmp_path) and starts == []
     first_done.set()
     try:
@@ -37,7 +37,7 @@ def test_after_run_starts_only_once_the_first_has_returned(tmp_path: Path) -> No
 
 def test_a_cancel_before_the_first_has_returned_stops_the_start(tmp_path: Path) -> None:
     release = threading.Event()
-    after = AfterRun(release.wait, lambda: BackgroundRun(tmp_path, [sys.executable, "-c", "pass"], timeout_s=60))
+    after = AfterRun(tmp_path, release.wait, lambda: BackgroundRun(tmp_path, [sys.executable, "-c", "pass"], timeout_s=60))
     after.cancel()         # what stop() does first; stop() then waits for the first run to end
     release.set()          # the first run ends (as the guest suite's stop ends it in pytest_unconfigure)
     after.stop()

@@ -10,7 +10,7 @@ from pathlib import Path
 
 import pytest
 
-from chaos_run import CHAOS_DIR_KEY, CHAOS_RUN_KEY, SEED, chaos_run, config_path, report_of
+from chaos_run import CHAOS_RUN_KEY, SEED, chaos_run, config_path, report_of
 from paper_scheme import paper
 from recovery_rig import RecoveryRig
 from sea_hil.config import load_config
@@ -81,9 +81,9 @@ def test_chaos_kills_and_restarts_keep_the_invariants(request: pytest.FixtureReq
     """Run in the background (tests/chaos_run.py: after the UML guest suite, else from collection on) when pytest
     collected it in one process; else (an xdist worker, the `off` variant) here."""
     require_netns("chaos")
-    directory = request.config.stash.get(CHAOS_DIR_KEY, None)
     background = request.config.stash.get(CHAOS_RUN_KEY, None)
-    if limits == "on" and directory is not None and background is not None:
+    if limits == "on" and background is not None:
+        directory = background.directory
         outcome = background.result()
     else:
         directory = tmp_path

@@ -59,7 +59,11 @@ def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_
     published = summary["edge"]["uplink_msgs"]      # the edge's own count (the recorder may join a state late)
     assert samples <= published <= samples + 2, summary["edge"]
     assert 0 < tx["downlink_msgs"] < published, (tx, published)
-    assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
+    # on failure, the counts of every observer (a race seen in 2 of ~8 guest runs on 2026-12-02, cause not known yet)
+    assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], {
+        "latency_samples": summary["timing"]["latency_samples"], "recorded_downlink": tx["downlink_msgs"],
+        "lead_in": summary.get("lead_in"), "edge_downlink_applied": summary["edge"].get("downlink_applied"),
+        "edge_timing": summary["timing"].get("edge"), "late_setpoints": summary["edge"].get("late_setpoints")}
     assert json.loads((out / "summary.json").read_text())["tracking"] == summary["tracking"]
 
     # frames really crossed vcan0. The lockstep plant (its own process) advances a sample only on the edge's
