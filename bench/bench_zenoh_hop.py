@@ -5,9 +5,10 @@ This process listens on a free loopback TCP port; an echo child process (this sc
 One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
              53-byte pong of opaque bytes (the sizes of StatePayload and SetpointPayload);
-  project    the real path: encode(StatePayload) + `sea_hil.protocol.zsession.publisher` (express, REAL_TIME, DROP) here;
-             the echo receives like `controller/remote.py` (`LatestSubscriber`, newest-only slot), decodes,
-             encodes a SetpointPayload and publishes it; this side receives with blocking recv() and decodes;
+  project    the real path: `encode_state` (the edge's encoder) + `sea_hil.protocol.zsession.publisher` (express,
+             REAL_TIME, DROP) here; the echo receives like `controller/remote.py` (`LatestSubscriber`, newest-only),
+             decodes, encodes a setpoint (`encode_setpoint`, as the controller) and publishes it; this side receives
+             with blocking recv() and decodes;
   blocking   the project's payloads and publishers, but the echo uses a FIFO with blocking recv();
   tls        (`--secure` only, figure 2s) `project` over the secure profile (docs/security.md): mutual TLS with
              throwaway certificates, the ACL on both sides, pinging on the limb's `state` key as the edge's CN and
@@ -34,11 +35,13 @@ from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # 
 from sea_hil.protocol.zcerts import make_certs  # noqa: E402
 from sea_hil.config import ZenohConfig  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
+from sea_hil.protocol.payload_hot import encode_setpoint, encode_state  # noqa: E402
 from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload,  # noqa: E402
-                                       StatePayload, TriggerReason, encode)
+                                       StatePayload, TriggerReason)
 from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
 from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.protocol.zsession import LatestSubscriber, free_tcp_port, make_config, open_session, publisher  # noqa: E402
+from sea_hil.protocol.zlatest import LatestSubscriber  # noqa: E402
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")
 PROFILE_MODES = ("options", "latest", "codec")
@@ -68,8 +71,7 @@ SENTINEL = b"timeout"
 
 
 def _state(seq: int) -> bytes:
-    return encode(StatePayload(seq, time.monotonic_ns(), seq * 1_000_000, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0),
-                               (0.0, 0.0)))
+    return encode_state(seq, time.monotonic_ns(), seq * 1_000_000, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))
 
 
 def _publisher(session: zenoh.Session, key: str, mode: str) -> zenoh.Publisher:
@@ -98,8 +100,8 @@ def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
             continue
         p = counters.try_decode(data)
         if isinstance(p, StatePayload):
-            pub.put(encode(SetpointPayload(p.seq, time.monotonic_ns(), p.seq, (0.001, 0.002), (0.0, 0.0),
-                                           TriggerReason.ERROR_BOUND)))
+            pub.put(encode_setpoint(p.seq, time.monotonic_ns(), p.seq, (0.001, 0.002), (0.0, 0.0),
+                                    TriggerReason.ERROR_BOUND))
 
 
 class _Watchdog:

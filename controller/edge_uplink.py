@@ -9,7 +9,8 @@ import time
 from typing import Any, Callable
 
 from sea_hil.protocol.can_frames import Feedback
-from sea_hil.protocol.payloads import PAYLOAD_SIZE, EventStatePayload, MsgType, StatePayload, encode
+from sea_hil.protocol.payload_hot import encode_state
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, EventStatePayload, MsgType, encode
 from sea_hil.protocol.wire_size import estimate_wire_bytes
 from sea_hil.protocol.zsession import LinkedPublisher
 
@@ -31,7 +32,7 @@ class StatePublisher:
         """Publish the state of `fb` (sampled at `sample_t_ns`); (seq, payload, delivery time or None if lost)."""
         self.seq += 1
         return self._put(self.seq, sample_t_ns, PAYLOAD_SIZE[MsgType.STATE],
-                         lambda t: StatePayload(self.seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s, fb.delta_m,
+                         lambda t: encode_state(self.seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s, fb.delta_m,
                                                 fb.nut_vel_m_s, epoch=self.epoch))
 
     def publish_event(self, fb: Feedback, sample_t_ns: int, seq: int, event_seq: int, reason: Any,
@@ -39,11 +40,12 @@ class StatePublisher:
         """Publish the event state `seq` (the sample index + 1) the edge's trigger chose."""
         self.seq = seq
         return self._put(seq, sample_t_ns, PAYLOAD_SIZE[MsgType.EVENT_STATE],
-                         lambda t: EventStatePayload(seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s, fb.delta_m,
-                                                     fb.nut_vel_m_s, event_seq, reason, trajectory_id,
-                                                     epoch=self.epoch))
+                         lambda t: encode(EventStatePayload(seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s,
+                                                            fb.delta_m, fb.nut_vel_m_s, event_seq, reason,
+                                                            trajectory_id, epoch=self.epoch)))
 
-    def _put(self, seq: int, sample_t_ns: int, size: int, make: Callable[[int], Any]) -> tuple[int, bytes, int | None]:
+    def _put(self, seq: int, sample_t_ns: int, size: int, make: Callable[[int], bytes]
+             ) -> tuple[int, bytes, int | None]:
         for book, value in ((self.sent_at, time.monotonic_ns()), (self.sampled_at, sample_t_ns)):
             book[seq] = value
             if len(book) > KEEP:
@@ -51,7 +53,7 @@ class StatePublisher:
         made: list[bytes] = []
 
         def data(at_ns: int) -> bytes:
-            made.append(encode(make(self.stamp(at_ns))))
+            made.append(make(self.stamp(at_ns)))
             return made[0]
         at = self.uplink.put(data, sample_t_ns, wire_bytes=estimate_wire_bytes(size))
         if at is not None:      # None: lost on the emulated link, never awaited

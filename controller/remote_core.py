@@ -24,7 +24,8 @@ from sea_hil.controller.outer import OuterController, Setpoint
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import LeadIn, anchored_lead_in, make_trajectory, trajectory_id
-from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
+from sea_hil.protocol.payload_hot import encode_setpoint
+from sea_hil.protocol.payloads import StatePayload, TriggerReason, VoltagePayload, encode
 
 
 @dataclass(frozen=True)
@@ -90,9 +91,8 @@ class ControllerCore:
             if self.predictor is not None:
                 self.predictor.sent(self.predictor.apply_time_ns(now), sp.deflection_m, sp.sliding)
             if self.inner_mode == "edge":
-                messages.append(("setpoint", encode(SetpointPayload(self.setpoint_seq, wall_ns(), p.seq,
-                                                                    sp.deflection_m, sp.sliding, sp.reason,
-                                                                    epoch=self.epoch))))
+                messages.append(("setpoint", encode_setpoint(self.setpoint_seq, wall_ns(), p.seq, sp.deflection_m,
+                                                             sp.sliding, sp.reason, epoch=self.epoch)))
         if self.inner_mode == "remote":
             m = (*p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
             u = self.inner.voltage(m)  # type: ignore[arg-type]

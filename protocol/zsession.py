@@ -1,4 +1,5 @@
-"""Helpers on the zenoh 1.x Python API: explicit-endpoint sessions, newest-only subscribers, link-emulated publishers.
+"""Helpers on the zenoh 1.x Python API: explicit-endpoint sessions, control publishers, link-emulated publishers (the
+newest-only subscriber is `sea_hil.protocol.zlatest`).
 
 Sessions never rely on multicast scouting: one side listens on e.g. `tcp/127.0.0.1:<port>`, the other connects.
 With `[zenoh.tls]` / `[zenoh.acl]` enabled (the secure profile, docs/security.md) `session_config` adds mutual TLS
@@ -9,7 +10,6 @@ from __future__ import annotations
 import json
 import re
 import socket
-import threading
 from collections.abc import Mapping
 from typing import Any, Callable, Protocol
 
@@ -81,58 +81,6 @@ def publisher(session: zenoh.Session, key: str, *, express: bool = True,
               congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> zenoh.Publisher:
     """A publisher for control traffic: by default unbatched (express), highest priority, drop when congested."""
     return session.declare_publisher(key, express=express, priority=priority, congestion_control=congestion_control)
-
-
-class LatestSubscriber:
-    """Newest-sample-only subscriber: a ring of depth 1 (one slot, overwritten by every arrival; never a backlog).
-
-    zenoh's callback thread only swaps the slot's reference and notifies; `try_latest()` takes the newest unread
-    sample (or None) and `recv(timeout_s)` blocks on a condition until one arrives, so a waiting loop wakes as soon
-    as the sample is in (the 1.x Python `RingChannel` has no timed receive, and polling it adds its poll period to
-    every hop: bench/bench_zenoh_hop.py). `overwritten` counts samples replaced before anyone read them.
-    """
-
-    def __init__(self, session: zenoh.Session, key: str) -> None:
-        self.key = key
-        self.overwritten = 0
-        self._latest: zenoh.Sample | None = None
-        self._cond = threading.Condition()
-        # a plain callable: zenoh-python runs it in a Python thread of its own, fed by zenoh's receiving thread.
-        # `zenoh.handlers.Callback(fn, indirect=False)` (run it in that receiving thread) measured no better or worse
-        # (docs/timing.md, "Zenoh hop")
-        self._sub = session.declare_subscriber(key, self._on_sample)
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        with self._cond:
-            if self._latest is not None:
-                self.overwritten += 1
-            self._latest = sample
-            self._cond.notify()
-
-    def try_latest(self) -> zenoh.Sample | None:
-        with self._cond:
-            sample, self._latest = self._latest, None
-            return sample
-
-    def recv(self, timeout_s: float) -> zenoh.Sample | None:
-        with self._cond:
-            if self._latest is None:
-                self._cond.wait(timeout_s)
-            sample, self._latest = self._latest, None
-            return sample
-
-    def close(self) -> None:
-        self._sub.undeclare()
-
-    def __enter__(self) -> LatestSubscriber:
-        return self
-
-    def __exit__(self, *_exc: object) -> None:
-        self.close()
-
-
-def latest_subscriber(session: zenoh.Session, key: str) -> LatestSubscriber:
-    return LatestSubscriber(session, key)
 
 
 class _Putter(Protocol):

@@ -19,7 +19,7 @@ import zenoh
 
 from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.payloads import AckPayload
-from sea_hil.protocol.zsession import LatestSubscriber
+from sea_hil.protocol.zlatest import LatestSubscriber
 from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
 
 
