@@ -1,7 +1,6 @@
 """Zenoh session helpers: two peers on loopback TCP (no multicast), newest-only subscriber, LinkedPublisher."""
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Iterator
 
@@ -148,47 +147,22 @@ def test_config_validation_of_keys():
         Keys.from_config(ZenohConfig.model_construct(prefix="sea", limb="a*"))
 
 
-def test_latest_recv_times_out_and_close_ends_a_receive_from_another_thread(pair):
-    _, b = pair
-    sub = LatestSubscriber(b, Keys.make("test", "limb1").state, poll_s=0.005)
-    assert sub.recv(0.02) is None and sub.wakeups == 1      # ended by its waker: nothing arrived
-    got: list[object] = []
-    waiting = threading.Thread(target=lambda: got.append(sub.recv(60.0)))
-    waiting.start()
-    sub.close()                                             # blocked or about to block: either way it returns
-    waiting.join(timeout=10.0)
-    assert not waiting.is_alive() and got == [None]
-    assert sub.recv(0.0) is None and sub.try_latest() is None
-    sub.close()                                             # idempotent
-
-
-def test_wake_ups_never_leave_their_session_nor_hide_a_real_sample(pair):
+def test_latest_recv_times_out_and_takes_the_newest_of_what_queued(pair):
     a, b = pair
     keys = Keys.make("test", "limb1")
-    peer = a.declare_subscriber(keys.state, zenoh.handlers.FifoChannel(64))   # e.g. the recorder, on the peer
-    with LatestSubscriber(b, keys.state, poll_s=0.005) as sub:
-        mine = publisher(b, keys.state, congestion_control=zenoh.CongestionControl.BLOCK)
-        _until(lambda: (mine.put(b"probe"), peer.try_recv())[1], "the peer's subscription")
-        sub.try_latest()                                    # the probes (local delivery too)
-        for _ in range(3):
-            assert sub.recv(0.01) is None
-        assert sub.wakeups >= 3
-        mine.put(b"done")
-        seen = _until(lambda: (s := peer.try_recv()) is not None and s.payload.to_bytes() != b"probe" and s, "done")
-        assert seen.payload.to_bytes() == b"done"           # no empty wake-up sample reached the peer
+    with LatestSubscriber(b, keys.state) as sub:
+        assert sub.recv(0.01) is None and sub.try_latest() is None     # nothing came
+        marker = b.declare_subscriber(keys.control, zenoh.handlers.FifoChannel(16))
         pub = publisher(a, keys.state, congestion_control=zenoh.CongestionControl.BLOCK)
         _connect(pub, sub)
-        marker = b.declare_subscriber(keys.control, zenoh.handlers.FifoChannel(16))
         _until(lambda: (a.put(keys.control, b"probe"), marker.try_recv())[1], "the marker subscriber")
         sub.try_latest()
-        pub.put(_state(5))
-        a.put(keys.control, b"after-5", priority=zenoh.Priority.REAL_TIME, express=True,
-              congestion_control=zenoh.CongestionControl.BLOCK)    # same session and priority: delivered after it
-        _until(lambda: (m := marker.try_recv()) is not None and m.payload.to_bytes() == b"after-5", "the marker")
-        sub._put_wake()                                     # a wake-up after the real sample: the real one stays
-        assert _seq_of(sub.try_latest()) == 5 and sub.try_latest() is None
+        for seq in (1, 2, 3):
+            pub.put(_state(seq))
+        a.put(keys.control, b"after-3", priority=zenoh.Priority.REAL_TIME, express=True,
+              congestion_control=zenoh.CongestionControl.BLOCK)    # same session and priority: delivered after them
+        _until(lambda: (m := marker.try_recv()) is not None and m.payload.to_bytes() == b"after-3", "the marker")
+        before = sub.overwritten
+        assert _seq_of(sub.recv(1.0)) == 3 and sub.overwritten == before + 2 and sub.recv(0.0) is None
         marker.undeclare()
-        a.put(keys.state, b"")                              # an empty payload from a peer is a sample, not a wake-up
-        empty = _until(lambda: (s := sub.recv(0.05)) is not None and s.payload.to_bytes() == b"" and s, "empty")
-        assert empty.attachment is None
-    peer.undeclare()
+    sub.close()                                             # idempotent
