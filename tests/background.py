@@ -1,8 +1,8 @@
 """A test's long run started in the background when pytest has collected it (tests/conftest.py), so it overlaps
 the rest of the run instead of following it; the test then waits for it and asserts its result. Used for the
-with-vcan guest's socketcan suite (tests/uml_suite.py) and the chaos session (tests/chaos_run.py). The process is
-ended at the latest when pytest ends (`stop`). Under pytest-xdist the controller starts it and a worker's test waits
-through the files of the run directory (`wait_result`)."""
+with-vcan guest's socketcan suite (tests/uml_suite.py), the chaos session (tests/chaos_run.py) and the fuzz files
+(tests/cpu_suite.py). The process is ended at the latest when pytest ends (`stop`). Under pytest-xdist the
+controller starts it and a worker's test waits through the files of the run directory (`wait_result`)."""
 from __future__ import annotations
 
 import fcntl
@@ -22,12 +22,12 @@ class BackgroundRun:
     any process (an xdist worker whose test waits for a run the controller started) waits with `wait_result(DIR)`
     without polling. A watcher thread enforces `timeout_s` (then stops the run) and releases the lock."""
 
-    def __init__(self, directory: Path, argv: list[str], timeout_s: float) -> None:
+    def __init__(self, directory: Path, argv: list[str], timeout_s: float, env: dict[str, str] | None = None) -> None:
         self.directory = directory
         self._lock = open(directory / "lock", "w")  # noqa: SIM115 - released and closed by the watcher
         fcntl.flock(self._lock, fcntl.LOCK_EX)
         self._log = open(directory / "output.txt", "w", encoding="utf-8")  # noqa: SIM115 - closed by the watcher
-        self.proc = subprocess.Popen(argv, cwd=REPO, stdin=subprocess.DEVNULL,
+        self.proc = subprocess.Popen(argv, cwd=REPO, env=env, stdin=subprocess.DEVNULL,
                                      stdout=self._log, stderr=subprocess.STDOUT, text=True, start_new_session=True)
         self._watcher = threading.Thread(target=self._watch, args=(timeout_s,), name=f"{Path(argv[0]).name} watcher",
                                          daemon=True)

@@ -1,7 +1,8 @@
 """Test-suite set-up: pytest's own `pytester` (tests/test_api.py runs a user's test with the sea-hil plugin), and
-two long runs started in the background as soon as their test is collected, so they overlap the rest of the run
-(tests/background.py): the with-vcan guest's socketcan suite (tests/uml_suite.py) and the chaos session
-(tests/chaos_run.py, not under xdist: a worker runs it in its test); both are ended when pytest ends. Under pytest-xdist
+three long runs started in the background as soon as their test is collected, so they overlap the rest of the run
+(tests/background.py): the with-vcan guest's socketcan suite (tests/uml_suite.py), then the chaos session
+(tests/chaos_run.py), then the fuzz files (tests/cpu_suite.py; the last two not under xdist: a worker runs them in
+its process); all are ended when pytest ends. Under pytest-xdist
 (`SEA_HIL_TEST_WORKERS=2 scripts/test` runs `-n 2 --dist loadgroup`) the controller process starts and ends it,
 once, and the tests that run sessions share one xdist group (`SERIAL_GROUP`), so no two of them run at a time."""
 from __future__ import annotations
@@ -14,6 +15,7 @@ from typing import Any
 import pytest
 from background import AfterRun
 from chaos_run import CHAOS_RUN_KEY, CHAOS_TEST, can_run, chaos_run
+from cpu_suite import CPU_RUN_KEY, CPU_SUITE_TEST, cpu_run, in_child, moved
 from uml_suite import BACKGROUND_KEY, RUN_DIR_KEY, SUITE_ARGS, SUITE_TEST, WORKER_RUN_DIR, can_boot, guest_run
 
 pytest_plugins = ["pytester"]
@@ -55,13 +57,21 @@ def _start_background(config: pytest.Config) -> None:
         config.stash[BACKGROUND_KEY] = guest_run(config.stash[RUN_DIR_KEY], *SUITE_ARGS)
 
 
+@pytest.hookimpl(trylast=True)      # after -k / -m / --deselect: only what really runs is taken or waited for
 def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
-    del config
     for item in items:
         if item.path.name in SERIAL_FILES:
             item.add_marker(pytest.mark.xdist_group(SERIAL_GROUP))
-    # the background chaos session's test waits for it: last, so the run goes on meanwhile
-    items.sort(key=lambda item: item.nodeid == CHAOS_TEST)
+    # the fuzz files run in the background when their waiting test runs in this (one) process: out of this run
+    if not (_is_worker(config) or in_child() or config.option.collectonly) and \
+            any(item.nodeid == CPU_SUITE_TEST for item in items):
+        taken = [item for item in items if moved(item.nodeid)]
+        if taken:
+            config.hook.pytest_deselected(items=taken)
+            items[:] = [item for item in items if not moved(item.nodeid)]
+            config.stash[CPU_RUN_KEY] = None            # to be started at the end of the collection
+    # the background runs' tests wait for them: last, so the run goes on meanwhile
+    items.sort(key=lambda item: item.nodeid in (CHAOS_TEST, CPU_SUITE_TEST))
 
 
 def pytest_collection_finish(session: pytest.Session) -> None:
@@ -75,6 +85,12 @@ def pytest_collection_finish(session: pytest.Session) -> None:
         # after the guest suite when it runs (the chaos nodes' SCHED_FIFO would starve it), else at once
         session.config.stash[CHAOS_RUN_KEY] = (chaos_run(directory, "on") if guest is None else
                                                AfterRun(directory, guest.result, lambda: chaos_run(directory, "on")))
+    if CPU_RUN_KEY in session.config.stash:
+        # after the chaos session (else the guest suite): the idle core is at the end; beside them it slowed both
+        before = session.config.stash.get(CHAOS_RUN_KEY, None) or session.config.stash.get(BACKGROUND_KEY, None)
+        cpu_dir = Path(tempfile.mkdtemp(prefix="sea-hil-cpu-"))
+        session.config.stash[CPU_RUN_KEY] = (cpu_run(cpu_dir) if before is None else
+                                             AfterRun(cpu_dir, before.result, lambda: cpu_run(cpu_dir)))
 
 
 @pytest.hookimpl(optionalhook=True)
@@ -85,11 +101,12 @@ def pytest_xdist_node_collection_finished(node: Any, ids: list[str]) -> None:
 
 
 def pytest_unconfigure(config: pytest.Config) -> None:
-    for key in (BACKGROUND_KEY, CHAOS_RUN_KEY):
+    for key in (BACKGROUND_KEY, CHAOS_RUN_KEY, CPU_RUN_KEY):
         background = config.stash.get(key, None)
         if background is not None:
             background.stop()
-    if CHAOS_RUN_KEY in config.stash:
-        shutil.rmtree(config.stash[CHAOS_RUN_KEY].directory, ignore_errors=True)
+    for key in (CHAOS_RUN_KEY, CPU_RUN_KEY):
+        if config.stash.get(key, None) is not None:
+            shutil.rmtree(config.stash[key].directory, ignore_errors=True)
     if not _is_worker(config):
         shutil.rmtree(config.stash[RUN_DIR_KEY], ignore_errors=True)
