@@ -76,7 +76,8 @@ class EdgeNode(Node):
         self.sync = (clock or RealTimeClock()).edge(self)
         seed = cfg.link.seed
         self.publisher = StatePublisher(
-            LinkedPublisher(publisher(session, self.keys.state), LinkEmulator(cfg.link.uplink, f"{seed}/up")),
+            LinkedPublisher(publisher(session, self.keys.state, congestion_control=self.sync.congestion_control),
+                            LinkEmulator(cfg.link.uplink, f"{seed}/up")),
             self.counters, new_epoch(), self.sync.state_stamp)
         self.events = EdgeEvents(cfg, mode, self.inner, self.period_ns, self.outer_every) \
             if cfg.trigger.placement == "edge" else None

@@ -49,8 +49,8 @@ class RemoteController(Node):
         self.trajectory_mismatches = 0
         self.sync = (clock or RealTimeClock()).controller(self)
         self.source = self.sync.state_source(session, self.keys.state)
-        self.sp_pub = publisher(session, self.keys.setpoint)
-        self.v_pub = publisher(session, self.keys.voltage)
+        self.sp_pub = publisher(session, self.keys.setpoint, congestion_control=self.sync.congestion_control)
+        self.v_pub = publisher(session, self.keys.voltage, congestion_control=self.sync.congestion_control)
         self.event_pub = publisher(session, self.keys.event, express=False,
                                    congestion_control=zenoh.CongestionControl.BLOCK)
         self.payloads = PayloadCounters()

@@ -130,9 +130,9 @@ class RecorderNode(Node):
         while self._sub is not None:
             s = self._sub.try_recv()
             if s is None:
-                self._pause(max(0.001, self.tap_batch_s))   # idle: wait, then drain the batch
                 if self.stop_event.is_set():
-                    return
+                    return          # stopped, and what arrived up to now is recorded
+                self._pause(max(0.001, self.tap_batch_s))   # idle: wait, then drain the batch
                 continue
             self._on_zenoh(s)
 

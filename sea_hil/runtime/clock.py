@@ -124,6 +124,7 @@ class RealTimePacer:
 
 
 class RealTimeEdgeSync:
+    congestion_control = zenoh.CongestionControl.DROP   # a late control message is worth less than a fresh one
     """Edge in real time: setpoints/voltages are handled as they arrive (`EdgeNode.on_arrival`); nothing waits."""
 
     def __init__(self, edge: Any) -> None:
@@ -186,7 +187,8 @@ def control_payload(edge: Any, data: bytes) -> AckPayload | None:
 
 
 class RealTimeControllerSync:
-    """Controller in real time: the newest state only (a ring of depth 1, never a backlog), no ACKs."""
+    """Controller in real time: the newest state only (never a backlog), no ACKs."""
+    congestion_control = zenoh.CongestionControl.DROP
 
     def __init__(self, ctrl: Any) -> None:
         self.ctrl = ctrl

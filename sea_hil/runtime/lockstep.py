@@ -91,7 +91,15 @@ class LockstepPacer:
             self.answered.add(frame.node_id)
 
 
+# Lockstep's control messages wait for a full transmission queue rather than being dropped (zenoh's DROP, the real-time
+# choice): a run must be complete to be reproducible, and with DROP a slow subscriber (a recorder in the UML guest)
+# missed a setpoint another node applied (tests/socketcan/test_session_vcan.py, 2 of 8 runs)
+CONGESTION = zenoh.CongestionControl.BLOCK
+
+
 class LockstepEdgeSync:
+    congestion_control = CONGESTION
+
     def __init__(self, edge: Any, resend_s: float) -> None:
         self.edge = edge
         self.resend_ns = int(resend_s * 1e9)
@@ -206,9 +214,11 @@ class LockstepEdgeSync:
 
 
 class LockstepControllerSync:
+    congestion_control = CONGESTION
+
     def __init__(self, ctrl: Any) -> None:
         self.ctrl = ctrl
-        self.ack_pub = publisher(ctrl.session, ctrl.keys.control)
+        self.ack_pub = publisher(ctrl.session, ctrl.keys.control, congestion_control=CONGESTION)
         self._last_answer: tuple[int, list[tuple[Any, bytes]]] | None = None
 
     def state_source(self, session: zenoh.Session, key: str) -> FifoStates:
