@@ -78,7 +78,10 @@ class ExternalController:
         self.wire, self.lockstep = wire, lockstep
         self.outer = OuterLoop(cfg, cycles, mode)
         base = f"{cfg['zenoh']['prefix']}/{cfg['zenoh']['limb']}"
-        pub = dict(express=True, priority=zenoh.Priority.REAL_TIME, congestion_control=zenoh.CongestionControl.DROP)
+        # real time: DROP (a late answer is worth less than the next); lockstep: BLOCK, so no subscriber (a recorder)
+        # misses an answer (docs/zenoh-protocol.md)
+        congestion = zenoh.CongestionControl.BLOCK if lockstep else zenoh.CongestionControl.DROP
+        pub = dict(express=True, priority=zenoh.Priority.REAL_TIME, congestion_control=congestion)
         self.sp_pub = session.declare_publisher(f"{base}/setpoint", **pub)
         self.ack_pub = session.declare_publisher(f"{base}/control", **pub)
         self.event_pub = session.declare_publisher(f"{base}/event", express=False,
