@@ -7,15 +7,16 @@ from typing import Any
 
 # Why a goal may be missed and what to try next; shown only for records with goal_met == False.
 LEVERS = {
-    "2": "The project path receives through `LatestSubscriber` (zenoh callback -> newest-only slot -> condition "
-         "wake-up of the controller thread) and decodes/encodes validated payloads (~7 us per decode); the raw "
-         "path answers inside zenoh's receive with opaque bytes. The remaining gap is the thread hand-off and "
-         "the GIL. Next lever: answer in the zenoh callback itself (no hand-off) while keeping newest-only "
-         "semantics, and a cheaper payload validation.",
-    "3": "Median meets the goal since latency is stamped at arrival (zenoh callback); the p99 tail comes from GIL "
-         "contention in the `run` process (plant, edge and zenoh threads share one interpreter) and from the "
-         "controller process being descheduled on 2 cores. Next lever: plant and edge in separate processes, "
-         "or the 1 kHz loops in native code.",
+    "2": "The project path's newest-only receive now wakes the controller's thread directly (`LatestSubscriber`: "
+         "zenoh's thread puts into a SimpleQueue) and STATE / SETPOINT go through one struct call each way; what "
+         "is left over raw is the decode and validation of real payloads on both ends (docs/timing.md, 'Zenoh "
+         "hop'). The ratio is near the bound and varies run to run on this VM.",
+    "3": "The p99 meets its bound; the median does not on the Intel Xeon VM: 1.29-1.37 ms, minimum 0.78-1.0 ms, "
+         "with the code before session 9's hop changes too (56de948, A/B, 2 runs each: p50 1.31-1.37 against "
+         "1.29-1.32 ms), against 0.50-0.79 ms on the AMD host of 2026-11-25 (older code). Part of it is by design: "
+         "the edge applies a setpoint at its next 1 kHz feedback sample (up to 1 ms later). Not split further yet: "
+         "the controller's processing and the wake-ups on a VM ~1.7x slower per core. Next lever: measure the "
+         "parts (state publish -> controller receive -> setpoint publish -> edge arrival -> apply).",
     "5": "ET's event count is now below 1/3 of TT's in every real-time run (setpoints are applied on arrival and "
          "the cycles start on the trajectory after the lead-in, docs/deviations.md section 8). What fails is the "
          "error bound: in steady state ET's knee error (held v_x between events) is ~1.5x TT's in this model, "
