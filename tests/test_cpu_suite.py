@@ -5,13 +5,13 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-from cpu_suite import CPU_RUN_KEY, FILES, cpu_run
+from cpu_suite import CPU_RUN_KEY, cpu_run, moved
 
 
 def test_the_fuzz_files_pass_in_the_background(request: pytest.FixtureRequest, tmp_path: Path) -> None:
     background = request.config.stash.get(CPU_RUN_KEY, None)
     if background is None:
-        if any(item.nodeid.split("::", 1)[0] in FILES for item in request.session.items):
+        if any(moved(item.nodeid) for item in request.session.items):
             pytest.skip("the fuzz files run in this process (xdist, or collected without the background run)")
         run = cpu_run(tmp_path)
         try:

@@ -124,8 +124,8 @@ class RealTimePacer:
 
 
 class RealTimeEdgeSync:
-    congestion_control = zenoh.CongestionControl.DROP   # a late control message is worth less than a fresh one
     """Edge in real time: setpoints/voltages are handled as they arrive (`EdgeNode.on_arrival`); nothing waits."""
+    congestion_control = zenoh.CongestionControl.DROP   # a late control message is worth less than a fresh one
 
     def __init__(self, edge: Any) -> None:
         self.edge = edge

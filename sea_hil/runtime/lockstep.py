@@ -93,7 +93,7 @@ class LockstepPacer:
 
 # Lockstep's control messages wait for a full transmission queue rather than being dropped (zenoh's DROP, the real-time
 # choice): a run must be complete to be reproducible, and with DROP a slow subscriber (a recorder in the UML guest)
-# missed a setpoint another node applied (tests/socketcan/test_session_vcan.py, 2 of 8 runs)
+# missed a setpoint another node applied (tests/socketcan/test_session_vcan.py: 2 of 12 guest runs; 0 of 9 with BLOCK)
 CONGESTION = zenoh.CongestionControl.BLOCK
 
 
