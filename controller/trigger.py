@@ -42,7 +42,7 @@ def event_reason(started: bool, eps_i: tuple[float, ...], t_i_ns: int, t_ns: int
                  threshold: float, r: float, max_inter_event_ns: int) -> int:
     """The trigger rule on plain numbers: the `TriggerReason` value of the event at (t_ns, eps) after the last event
     (t_i_ns, eps_i), or NO_EVENT; `started` False: no event yet (INITIAL). Plain float code: `EventTrigger.update`
-    runs it, and the offline session kernel compiles it (sea_hil/offline/session_kernel.py)."""
+    runs it."""
     if not started:
         return _INITIAL
     e_norm = _distance(eps_i, eps)

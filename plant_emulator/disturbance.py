@@ -6,6 +6,8 @@ import math
 import random
 from typing import Callable
 
+import numpy as np
+
 from sea_hil.config import DisturbanceConfig
 from sea_hil.config.model import JointDisturbanceConfig
 
@@ -60,3 +62,41 @@ class _HeldNoise:
             self._index = index
             self._value = self._a * u
         return self._value
+
+
+class DisturbanceTable:
+    """The disturbance torques a driver integrates with, precomputed for compiled loops: row k * substeps + i holds
+    d(t_i), d(t_i + h/2), d(t_i + h) of sub-step i of sample k, sampled in the order and at the float times
+    `DriverCore.step` -> `advance` samples them (t = k * period_ns * 1e-9, h = period / substeps), so a stateful
+    noise disturbance gives the same values. Grown on demand (`upto`), in sample order."""
+
+    CHUNK = 4096   # samples added at a time
+
+    def __init__(self, cfg: DisturbanceConfig, period_ns: int, substeps: int) -> None:
+        self.zero = cfg.is_zero()     # every joint, incl. per-joint tables ([disturbance.hip] / [disturbance.knee])
+        self._dist = None if self.zero else make_disturbance(cfg)
+        self.period_ns, self.substeps = period_ns, substeps
+        self.rows = np.zeros((0, 6))
+        self.samples = 0
+
+    def upto(self, n_samples: int) -> np.ndarray:
+        """The table covering samples 0 .. n_samples - 1 (at least)."""
+        if n_samples > self.samples:
+            n = max(n_samples, self.samples + self.CHUNK)
+            self.rows = np.concatenate([self.rows, self._rows(self.samples, n)])
+            self.samples = n
+        return self.rows
+
+    def _rows(self, k0: int, k1: int) -> np.ndarray:
+        substeps = self.substeps
+        out = np.zeros(((k1 - k0) * substeps, 6))
+        if self._dist is None:
+            return out
+        dist, h = self._dist, (self.period_ns * 1e-9) / substeps
+        hh = 0.5 * h
+        for k in range(k0, k1):
+            t = k * self.period_ns * 1e-9
+            for i in range(substeps):
+                ti = t + i * h
+                out[(k - k0) * substeps + i] = (*dist(ti), *dist(ti + hh), *dist(ti + h))
+        return out

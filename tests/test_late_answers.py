@@ -1,7 +1,7 @@
 """Late answers (issue 19, `[safety.setpoint] max_answer_age_s`): the edge applies a setpoint only if the state it
 answers was sampled at most that long before; a later one is counted, logged and dropped (the setpoint timeout and
 the local fallback act as if it had been lost), and the local fallback's answer timeout is capped at that age. The
-offline engine does the same (tests/test_session_kernel.py, case late-answers)."""
+offline engine does the same (tests/test_engine_lockstep.py, case late-answers)."""
 from __future__ import annotations
 
 import logging

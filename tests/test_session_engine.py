@@ -16,7 +16,9 @@ from paper_scheme import PAPER_FLAGS, paper
 from test_pre_refactor_equality import as_payload_v2, with_totals
 
 from sea_hil.config import load_config
-from sea_hil.offline.session_engine import SessionRecords, run_engine, tracking_record
+from sea_hil.controller.edge_events import tracking_record
+from sea_hil.offline.session_engine import run_engine
+from sea_hil.offline.session_records import SessionRecords
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode

@@ -22,75 +22,46 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-import numpy as np
-
 from sea_hil.config import SeaHilConfig
+from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
-from sea_hil.controller.edge_events import make_trigger, tracking_record
-from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
-from sea_hil.controller.outer import OuterController
-from sea_hil.controller.predictor import Predictor
-from sea_hil.controller.trajectory import LeadIn, make_trajectory
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger
+from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
+from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
-from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
-from sea_hil.offline.session_fast import run_compiled, run_kernel, unsupported
+from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, SessionRecords
 from sea_hil.offline.wire_quantiser import dbc_resolutions
-from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.disturbance import DisturbanceTable
 from sea_hil.plant_emulator.dynamics import State, initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
-from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
+from sea_hil.protocol.link import LinkEmulator
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
 from sea_hil.recorder.reader import RecordedMessage, SessionData
-from sea_hil.errors import SeaHilError
-
-__all__ = ["EngineOptions", "EngineResult", "SessionRecords", "driver_disturbance_table", "engine_summary",
-           "run_engine", "tracking_record"]
+from sea_hil.report.session_summary import session_summary
 
 _log = logging.getLogger("sea_hil.offline")
-
-
-def driver_disturbance_table(cfg: SeaHilConfig, n_samples: int, period_ns: int) -> np.ndarray:
-    """(n_samples * substeps, 6): d(t_i), d(t_i + h/2), d(t_i + h) of every sub-step, sampled in the order and at
-    the float times `DriverCore.step` -> `advance` samples them (so a stateful noise disturbance gives the same
-    values)."""
-    dc, substeps = cfg.disturbance, cfg.sim.substeps
-    if dc.is_zero():        # every joint, incl. per-joint tables ([disturbance.hip] / [disturbance.knee])
-        return np.zeros((n_samples * substeps, 6))
-    dist = make_disturbance(dc)
-    h = (period_ns * 1e-9) / substeps
-    hh = 0.5 * h
-    out = np.empty((n_samples * substeps, 6))
-    for k in range(n_samples):
-        t = k * period_ns * 1e-9
-        for i in range(substeps):
-            ti = t + i * h
-            out[k * substeps + i] = (*dist(ti), *dist(ti + hh), *dist(ti + h))
-    return out
 
 
 class _Env:
     """What the sample loop (`sea_hil.offline.session_loop.SessionLoop`) works with: the session's parts."""
 
-    def __init__(self, cfg: SeaHilConfig, mode: str, cycles: int, p: Any, jit: bool) -> None:
-        cc = cfg.controller
-        self.c, self.rho, self.boundary_layer = cc.c, cc.rho, cc.boundary_layer
+    def __init__(self, cfg: SeaHilConfig, mode: str, cycles: int, jit: bool) -> None:
         self.traj = make_trajectory(cfg.trajectory)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
-        self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
-        # the controller stops at its first state after the cycles; lost states delay that by a few samples only
-        self.n_max = (self.lead_in_ns + self.duration_ns) // self.period_ns + 20 * self.outer_every + 1000
+        lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
+        # the controller stops at its first state after the cycles (as in lockstep, which runs until it does): lost
+        # states delay that by a few samples, a far start pose stretches the lead-in, re-anchors of the edge's
+        # trigger restart it; n_max is a safety cap only
+        self.n_max = 4 * ((lead_in_ns + self.duration_ns) // self.period_ns + 20 * self.outer_every + 1000
+                          + _lead_in_stretch_samples(cfg, self.traj, self.period_ns))
         self.cfg, self.mode = cfg, mode
-        self.params = nominal_params(cfg)    # the remote controller's (and the edge's) nominal model
-        self.outer = OuterController(cfg, self.params, mode)
         self.nominal = nominal_params(cfg)      # the controller's model (the edge and the remote use it)
         self.inner = InnerLoop(cfg, self.nominal, tuple(cfg.plant.initial_theta_rad), 1.0 / cfg.can.feedback_rate_hz)
         seed = cfg.link.seed
@@ -98,78 +69,66 @@ class _Env:
         self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
         self.rec = SessionRecords(Keys.from_config(cfg.zenoh))
         self.state_bytes, self.setpoint_bytes = STATE_BYTES, SETPOINT_BYTES
-        self.tracking_record = tracking_record
         kernel = compiled(make_session_steps) if jit else None
         self.steps = kernel if kernel is not None else make_session_steps()
         self.jit = kernel is not None
-        self.predictor: Predictor | None = None
         dl = DriveLimits.from_config(cfg.safety.drive)
         self.drive_limits = (*dl.position_min_rad, *dl.position_max_rad, *dl.velocity_max_rad_s, *dl.spring_force_max_n)
         self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), _log)
 
-    def lead_in(self, fb: tuple) -> LeadIn:
-        return LeadIn(fb[0], fb[1], self.traj.sample(0.0), self.lead_in_ns * 1e-9)
 
-    def make_trigger(self) -> EventTrigger | TimeTrigger:
-        return make_trigger(self.cfg, self.mode)
+def _lead_in_stretch_samples(cfg: SeaHilConfig, traj: Any, period_ns: int) -> int:
+    """Samples the lead-in from the start pose adds beyond `lead_in_s` (`lead_in_duration_s`: a start far from the
+    trajectory stretches it)."""
+    tc = cfg.trajectory
+    lead_s = lead_in_duration_s(tuple(cfg.plant.initial_theta_rad), traj.sample(0.0), tc.lead_in_s,
+                                tc.lead_in_max_velocity_rad_s)
+    return int((lead_s - tc.lead_in_s) * 1e9) // period_ns + 1
 
-    @staticmethod
-    def downlink_due(queue: DelayQueue[SetpointPayload], now_ns: int) -> list[SetpointPayload]:
-        return queue.pop_due(now_ns)
+
+def with_options(cfg: SeaHilConfig, opts: EngineOptions) -> SeaHilConfig:
+    """`cfg` with the trigger placement and delay compensation of `opts` (what the nodes read from their config)."""
+    trig = cfg.trigger.model_copy(update={"placement": opts.placement, "edge_check": opts.edge_check,
+                                          "edge_model": opts.edge_model})
+    ctl = cfg.controller.model_copy(update={"compensation": opts.compensation})
+    return cfg.model_copy(update={"trigger": trig, "controller": ctl})
 
 
 def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
-               opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
+               opts: EngineOptions | None = None) -> EngineResult:
     """`run_session` without cyclic garbage collection (sea_hil/offline/gc_pause.py)."""
     with gc_paused():
-        return run_session(cfg, mode, cycles, jit, opts, whole)
+        return run_session(cfg, mode, cycles, jit, opts)
 
 
 def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, Any]:
-    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs), without cyclic garbage
-    collection: where the compiled kernel covers it, straight from the kernel's records
-    (`sea_hil.offline.kernel_summary`, no messages built), else `session_summary` of the engine's messages; the
-    same dict either way (tests/test_kernel_summary.py)."""
-    from sea_hil.offline.kernel_summary import kernel_summary
-    from sea_hil.report.session_summary import session_summary
-    with gc_paused():
-        opts = EngineOptions.from_config(cfg)
-        env, x, p, lsb, dist_tab = _prepare(cfg, mode, cycles, True)
-        if not unsupported(cfg, opts, env.traj):
-            run = run_kernel(env, cfg, x, p, lsb, dist_tab)
-            if run is not None:
-                return kernel_summary(run, env.rec.keys.state, env.rec.state_bytes, mode)
-        return session_summary(run_session(cfg, mode, cycles, opts=opts).data, mode)
+    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs)."""
+    return session_summary(run_engine(cfg, mode, cycles).data, mode)
 
 
-def _prepare(cfg: SeaHilConfig, mode: str, cycles: int, jit: bool) -> tuple[_Env, State, Any, tuple, np.ndarray]:
+def _prepare(cfg: SeaHilConfig, mode: str, cycles: int, jit: bool
+             ) -> tuple[_Env, State, Any, tuple, DisturbanceTable]:
     """A session's parts, its plant's start state and parameters, the DBC resolutions and the disturbance table."""
     p = limb_params(cfg.plant)
-    env = _Env(cfg, mode, cycles, p, jit)
+    env = _Env(cfg, mode, cycles, jit)
     theta0 = tuple(cfg.plant.initial_theta_rad)
     x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
-    return env, x, p, dbc_resolutions(cfg.can.fd), driver_disturbance_table(cfg, env.n_max, env.period_ns)
+    return env, x, p, dbc_resolutions(cfg.can.fd), DisturbanceTable(cfg.disturbance, env.period_ns, cfg.sim.substeps)
 
 
 def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
-                opts: EngineOptions | None = None, whole: bool = True) -> EngineResult:
-    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` selects the trigger
-    placement and delay compensation (None: the config's, `EngineOptions.from_config`; the paper's scheme is the
-    lockstep session bit for bit). `whole` (with `jit`): the session in one compiled call where it covers the options
-    (`sea_hil.offline.session_fast`), else (and with whole=False) the Python sample loop; both give the same result."""
-    opts = EngineOptions.from_config(cfg) if opts is None else opts
-    env, x, p, lsb, dist_tab = _prepare(cfg, mode, cycles, jit)
-    if whole and jit and not unsupported(cfg, opts, env.traj):
-        res = run_compiled(env, cfg, x, p, lsb, dist_tab)
-        if res is not None:
-            return res
+                opts: EngineOptions | None = None) -> EngineResult:
+    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` overrides the config's
+    trigger placement and delay compensation (None: the config's)."""
+    if opts is not None:
+        cfg = with_options(cfg, opts)
+    opts = EngineOptions.from_config(cfg)
+    env, x, p, lsb, dist = _prepare(cfg, mode, cycles, jit)
     m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
-    tab = dist_tab if env.jit else dist_tab.tolist()
-    if opts.compensation == "predict":
-        env.predictor = Predictor.for_inner(env.inner, env.period_ns, cfg.sim.substeps, jit=env.jit)
+    tab: Any = None
     if opts.placement == "edge":
         env.state_bytes = env.rec.state_bytes = PAYLOAD_SIZE[MsgType.EVENT_STATE]
-    loop = SessionLoop(env, opts)
+    loop = SessionLoop(env, opts, cycles)
     saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
     while k < env.n_max:
         now = k * env.period_ns
@@ -178,6 +137,8 @@ def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
             break
         loop.take_downlink(now)
         nxt = loop.next_k(k)
+        if tab is None or nxt > dist.samples:
+            tab = dist.upto(nxt) if env.jit else dist.upto(nxt).tolist()
         held = env.inner.deflection_m
         x, m, n_sat, u1m, u2m, bad, env.inner.observer, faulted = env.steps(
             x, k, nxt - k, env.period_ns, cfg.sim.substeps, held or (0.0, 0.0), env.inner.sliding, held is None, p,

@@ -14,11 +14,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+import json
+
 from sea_hil.controller.edge_events import EdgeEvents
-from sea_hil.controller.outer import Setpoint
-from sea_hil.controller.smc import JointState, smc_deflection
+from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.protocol.link import DelayQueue
-from sea_hil.protocol.payloads import SetpointPayload, TriggerReason
+from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload
 
 
 @dataclass(frozen=True)
@@ -42,18 +43,23 @@ class EngineOptions:
                    edge_model=t.edge_model)
 
 
-class SessionLoop:
-    """State of one offline session; `run()` steps it to the end. Built by `run_engine`."""
+def _stamp(p: StatePayload) -> int:
+    """A state's arrival on the simulated clock: its header stamp (the release sample, `LockstepEdgeSync.state_stamp`)."""
+    return p.t_ns
 
-    def __init__(self, env: Any, opts: EngineOptions) -> None:
+
+class SessionLoop:
+    """State of one offline session: the live controller's core (`ControllerCore`) behind the emulated links, the
+    edge's event core (`EdgeEvents`) with the trigger at the edge. Built and stepped by `run_session`."""
+
+    def __init__(self, env: Any, opts: EngineOptions, cycles: int) -> None:
         self.e, self.o = env, opts
-        self.in_flight: DelayQueue[tuple[int, int, tuple, Any]] = DelayQueue()
+        self.core = ControllerCore(env.cfg, env.mode, cycles=cycles)
+        self.in_flight: DelayQueue[StatePayload] = DelayQueue()
         self.pending_down: DelayQueue[SetpointPayload] = DelayQueue()
-        self.state_seq = self.setpoint_seq = self.newest = 0
+        self.state_seq = self.newest = 0
         self.sampled_at: dict[int, int] = {}    # state seq -> sample time (the edge's late-answer check)
         self.max_answer_age_ns = int(round(env.cfg.safety.setpoint.max_answer_age_s * 1e9))
-        self.t0_ns: int | None = None
-        self.lead: Any = None
         self.edge: EdgeEvents | None = None     # the live edge's core (controller/edge_events.py)
         if opts.placement == "edge":
             self.edge = EdgeEvents(env.cfg, env.mode, env.inner, env.period_ns, env.outer_every,
@@ -74,21 +80,27 @@ class SessionLoop:
         if d is None:
             return
         if d.reason is not None:
-            self._publish(d.seq, now, fb, d.reason)
+            self._publish(d.seq, now, fb, d)
         if d.hold is not None:                     # the local fallback of a silent downlink (as the live edge)
             e.inner.hold(*d.hold)
         if d.record is not None:
             e.rec.tracking(d.record, now)
 
-    def _publish(self, seq: int, now: int, fb: tuple, reason: Any) -> None:
+    def _publish(self, seq: int, now: int, fb: tuple, d: Any) -> None:
         self.sampled_at[seq] = now
         self.sampled_at.pop(seq - 100_000, None)
         at = self.e.uplink.submit(now, self.e.state_bytes)
-        if at is not None:
-            self.in_flight.push(at, (seq, now, fb, reason))
+        if at is None:
+            return
+        stamp = -(-at // self.e.period_ns) * self.e.period_ns
+        if d is None:
+            p = StatePayload(seq, stamp, now, *fb)
+        else:
+            p = EventStatePayload(seq, stamp, now, *fb, d.event_seq, d.reason, self.edge.trajectory_id)  # type: ignore
+        self.in_flight.push(at, p)
 
     def take_downlink(self, now: int) -> None:
-        for payload in self.e.downlink_due(self.pending_down, now):
+        for payload in self.pending_down.pop_due(now):
             sampled = self.sampled_at.get(payload.state_seq)
             if self.max_answer_age_ns and sampled is not None and now - sampled > self.max_answer_age_ns:
                 continue                               # a late answer: the live edge drops it (edge_downlink.py)
@@ -96,59 +108,31 @@ class SessionLoop:
             if self.edge is not None:
                 self.edge.answered(payload.state_seq, now)
 
-    # ---- controller ---------------------------------------------------------------------------------------------
+    # ---- controller ----------------------------------------------------------------------------------------------
     def controller(self, now: int) -> bool:
-        """Answer the states released by `now`; False when the controller has finished its cycles."""
-        e = self.e
-        for seq, sample_ns, fb, edge_reason in self.in_flight.pop_due(now):
-            if seq <= self.newest:                     # released after a newer one: the controller ignores it
+        """Answer the states released by `now` with the live controller's core (`ControllerCore`, stamped with the
+        release sample as lockstep stamps them); False when the controller has finished its cycles."""
+        e, core = self.e, self.core
+        for p in self.in_flight.pop_due(now):
+            if p.seq <= self.newest:                     # released after a newer one: the controller ignores it
                 continue
-            self.newest = seq
-            e.rec.state(seq, sample_ns, fb, now)
-            # t counts from the first state (the paper's placement) or the edge's anchor, its latest INITIAL state
-            if edge_reason is TriggerReason.INITIAL or (self.t0_ns is None and self.edge is None):
-                self.t0_ns = sample_ns + e.lead_in_ns
-                self.lead = e.lead_in(fb) if e.lead_in_ns else None
-            elif self.t0_ns is None:       # no anchor yet (its state was lost): as the live controller, no answer
-                continue
-            t_ns = sample_ns - self.t0_ns
-            if t_ns > e.duration_ns:
+            self.newest = p.seq
+            e.rec.state(p.seq, p.sample_t_ns, (p.theta_rad, p.omega_rad_s, p.delta_m, p.nut_vel_m_s), now)
+            ans = core.on_state(p, _stamp, lambda: now)
+            if ans is None:
                 return False
-            ds = self._desired(t_ns)
-            sp = self._answer(seq, sample_ns, fb, now, t_ns, ds, edge_reason)
+            sp = ans.setpoint
             if sp is not None:
-                self.setpoint_seq += 1
-                payload = SetpointPayload(self.setpoint_seq, now, seq, sp.deflection_m, sp.sliding, sp.reason)
+                payload = SetpointPayload(core.setpoint_seq, now, p.seq, sp.deflection_m, sp.sliding, sp.reason)
                 e.rec.setpoint(payload, now)
                 # the edge's intake: the envelope first (a rejected setpoint never enters the downlink emulator)
                 if e.envelope.admit(payload.seq, payload.deflection_m):
                     at = e.downlink.submit(now, e.setpoint_bytes)
                     if at is not None:
                         self.pending_down.push(at, payload)
-                if e.predictor is not None:
-                    e.predictor.sent(e.predictor.apply_time_ns(now), sp.deflection_m, sp.sliding)
-            if self.edge is None:
-                e.rec.tracking(e.tracking_record(t_ns, seq, fb[0], ds, sp.reason if sp else None,
-                                                 self.setpoint_seq if sp else 0), now)
+            if ans.record is not None:
+                e.rec.tracking(json.loads(ans.record), now)
         return True
-
-    def _desired(self, t_ns: int) -> Any:
-        return self.lead.sample(t_ns * 1e-9) if t_ns < 0 and self.lead else self.e.traj.sample(t_ns * 1e-9)
-
-    def _answer(self, seq: int, sample_ns: int, fb: tuple, now: int, t_ns: int, ds: Any,
-                edge_reason: Any) -> Setpoint | None:
-        e = self.e
-        js, t_eval, ds_eval = JointState(fb[0], fb[1]), t_ns, ds
-        if e.predictor is not None:
-            e.predictor.observe_uplink(now - sample_ns)
-            apply_ns = e.predictor.apply_time_ns(now)
-            js = e.predictor.predict(fb, sample_ns, apply_ns)
-            t_eval = apply_ns - self.t0_ns
-            ds_eval = self._desired(t_eval)
-        if self.edge is None:
-            return e.outer.step(t_eval, seq, js, ds_eval)
-        vx, s = smc_deflection(js, ds_eval, e.params, e.c, e.rho, e.boundary_layer)
-        return Setpoint(vx, s, edge_reason, seq, t_eval)
 
     def next_k(self, k: int) -> int:
         """The next sample after k at which something happens."""
