@@ -8,7 +8,7 @@ reads the bus once and serves every core in its thread (one edge per bus, as `se
 
 The first `warmup_s` (Zenoh connection, first setpoint, frames queued meanwhile) are run but not counted.
 Closed-loop latency: the edges' `latency` histogram (state published -> setpoint arrived, wall clock).
-Edge timing comes from the edge's own loop-time histogram (`EdgeNode.counters.loop`, `loop_overruns`): response =
+Edge timing comes from the edge's own loop-time histogram (`EdgeCore.counters.loop`, `loop_overruns`): response =
 VOLTAGE_CMD sent minus the bus timestamp of the feedback frame that completed the sample (on the `virtual` bus: the
 driver's send time) -- bus queueing + wake-up + decode + inner loop + encode + send.
 """
@@ -105,8 +105,8 @@ def _reset(plant: PlantNode, edges: list[EdgeNode]) -> tuple[int, int]:
     (feedback, commands) counts so far, to be subtracted."""
     plant.lateness, plant.stats = LogHistogram(), TickStats()
     for e in edges:
-        e.counters.loop, e.counters.loop_overruns, e.counters.latency = LogHistogram(), 0, LogHistogram()
-    return sum(e.counters.feedback for e in edges), sum(e.counters.commands_sent for e in edges)
+        e.core.counters.loop, e.core.counters.loop_overruns, e.core.counters.latency = LogHistogram(), 0, LogHistogram()
+    return sum(e.core.counters.feedback for e in edges), sum(e.core.counters.commands_sent for e in edges)
 
 
 def _us(h: LogHistogram, q: float) -> float:
@@ -142,13 +142,13 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
         wall_s, cpu_s = time.monotonic() - t0, time.process_time() - cpu0
     resp, closed = LogHistogram(), LogHistogram()
     for e in edges:
-        resp.merge(e.counters.loop)
-        closed.merge(e.counters.latency)
+        resp.merge(e.core.counters.loop)
+        closed.merge(e.core.counters.latency)
     lat = plant.lateness
-    late = sum(e.counters.loop_overruns for e in edges)
+    late = sum(e.core.counters.loop_overruns for e in edges)
     return RigResult(limbs, wall_s, cpu_s, plant.stats.ticks, plant.stats.overruns, lat.percentile(50) * 1e6,
-                     lat.percentile(99) * 1e6, lat.max * 1e6, sum(e.counters.feedback for e in edges) - warm[0],
-                     sum(e.counters.commands_sent for e in edges) - warm[1], late, _us(resp, 50), _us(resp, 99),
+                     lat.percentile(99) * 1e6, lat.max * 1e6, sum(e.core.counters.feedback for e in edges) - warm[0],
+                     sum(e.core.counters.commands_sent for e in edges) - warm[1], late, _us(resp, 50), _us(resp, 99),
                      resp.max * 1e6 if resp.count else -1.0, _us(closed, 50), _us(closed, 99), layout)
 
 

@@ -1,13 +1,14 @@
-"""The edge node: CAN <-> Zenoh bridge next to the driver, running the backstepping inner loop at the driver's
-feedback rate with the latest setpoint v_x(t_i) held.
+"""The edge node: the I/O shell of the edge's pure core (`EdgeCore`, controller/edge_core.py) next to the driver,
+which runs the backstepping inner loop at the driver's feedback rate with the latest setpoint v_x(t_i) held.
 
-Per feedback sample (one CAN FD frame, or three classic frames assembled): publish the state to Zenoh every outer sample (`StatePublisher`,
-uplink link emulator), meet the controller as the clock says (`sync`), take setpoints that have arrived
-(`SetpointIntake`, downlink link emulator), compute the voltage and send VOLTAGE_CMD (`CommandPath`). With
-`inner="remote"` the voltages come from the controller over Zenoh and are tunnelled to CAN as received (held).
-Link emulation runs here for both directions, clocked by the driver's sample time (1 ms resolution), so lockstep
-runs are deterministic (`sea_hil.runtime.lockstep`: an answer to state k takes effect no earlier than k's sample
-time + uplink + downlink delay, in simulated time, `sim_latency_us_*`, at no cost in wall time).
+The shell receives CAN frames (`on_can`) and Zenoh payloads, hands them to the core with their receive times, meets
+the controller as its clock says (`sync`: real time or lockstep, `sea_hil.runtime`), sends the frames the core
+returns and publishes its states, tracking records and `/stats`. Per feedback sample: the core accepts it and
+publishes its state (uplink link emulator), the clock syncs, the core takes the setpoints the downlink emulator
+releases and answers with the VOLTAGE_CMD (and CLEAR_ERRORS when setpoints are fresh again). Link emulation runs in
+the core for both directions, clocked by the driver's sample time (1 ms resolution), so lockstep runs are
+deterministic (an answer to state k takes effect no earlier than k's sample time + uplink + downlink delay, in
+simulated time, `sim_latency_us_*`, at no cost in wall time).
 
 Real-time clock: if no setpoint arrives for `setpoint_timeout_s` the edge stops commanding, so the driver's watchdog
 puts it into its safe state; when setpoints come back the edge clears the fault. A setpoint (or tunnelled voltage)
@@ -22,32 +23,23 @@ import json
 import logging
 import threading
 import time
+from collections.abc import Callable
+from typing import Any
 
 import can
 import zenoh
 
-from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.config import SeaHilConfig
-from sea_hil.controller.edge_command import CommandPath
-from sea_hil.controller.edge_downlink import SetpointIntake
-from sea_hil.controller.edge_events import EdgeEvents
-from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, receive_stamped
-from sea_hil.controller.edge_uplink import StatePublisher
-from sea_hil.controller.inner import InnerLoop
-from sea_hil.controller.nominal import nominal_params
-from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
-                                        unwrap_us)
+from sea_hil.controller.edge_core import EdgeCore
+from sea_hil.errors import BusError, ConfigError
+from sea_hil.protocol.canbus import send_with_retry
+from sea_hil.protocol.can_frames import Feedback
 from sea_hil.protocol.keys import Keys
-from sea_hil.protocol.epoch import new_epoch
-from sea_hil.protocol.link import LinkEmulator
-from sea_hil.protocol.payloads import PayloadCounters
-from sea_hil.protocol.zsession import LinkedPublisher, publisher
+from sea_hil.protocol.zsession import publisher
 from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.edge")
-SAFE_STATES = (DriverState.FAULT, DriverState.ESTOP)
 
 
 class EdgeNode(Node):
@@ -61,40 +53,18 @@ class EdgeNode(Node):
             raise ConfigError("trigger.placement = 'edge' needs the inner loop at the edge and --controller et|tt")
         super().__init__()
         self.cfg, self.bus, self.node_id = cfg, bus, node_id
-        self.codec = SeaCodec.for_bus(cfg.can, [node_id])
-        self.assembler = FeedbackAssembler()
         self.keys = Keys.from_config(cfg.zenoh)
-        self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
-                               1.0 / cfg.can.feedback_rate_hz)
-        self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
-        self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
-        self.max_sample_age_ns = int(round(cfg.safety.setpoint.max_sample_age_s * 1e9))
-        self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
-        self.counters = EdgeCounters()
-        self.payloads = PayloadCounters()
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
         self.sync = (clock or RealTimeClock()).edge(self)
-        seed = cfg.link.seed
-        self.publisher = StatePublisher(
-            LinkedPublisher(publisher(session, self.keys.state, congestion_control=self.sync.congestion_control),
-                            LinkEmulator(cfg.link.uplink, f"{seed}/up")),
-            self.counters, new_epoch(), self.sync.state_stamp)
-        self.events = EdgeEvents(cfg, mode, self.inner, self.period_ns, self.outer_every) \
-            if cfg.trigger.placement == "edge" else None
+        self.state_pub = publisher(session, self.keys.state, congestion_control=self.sync.congestion_control)
         self.event_pub = publisher(session, self.keys.event, express=False,
-                                   congestion_control=zenoh.CongestionControl.BLOCK) if self.events else None
-        self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
-                                     int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync,
-                                     self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)))
-        self.command_path = CommandPath(bus, self.codec, node_id, self.inner, inner, cfg.can.send_retries,
-                                        self.counters)
+                                   congestion_control=zenoh.CongestionControl.BLOCK) \
+            if cfg.trigger.placement == "edge" else None
+        self.core = EdgeCore(cfg, node_id, inner=inner, mode=mode, state_sink=self.state_pub.put,
+                             record_sink=self._publish_record, stamp=self.sync.state_stamp,
+                             restart_possible=self.sync.restart_possible)
         self.stats_pub = publisher(session, self.keys.stats, express=False)
-        self.t_us_full = 0
-        self.sample_t_ns = 0
-        self.last_fb_seq: int | None = None
-        self.last_fb: Feedback | None = None
-        self.last_rx_ns = 0            # monotonic receive time of last_fb (0: unknown)
-        self._stopped = False          # commanded once, then stopped (stale setpoints): resume bumplessly
+        self.send_retries = cfg.can.send_retries
         downlink = self.sync.downlink_callback()
         self._subs = [session.declare_subscriber(self.keys.setpoint, downlink),
                       session.declare_subscriber(self.keys.voltage, downlink),
@@ -109,7 +79,7 @@ class EdgeNode(Node):
         return True
 
     def _bus_error(self, err: Exception) -> None:
-        self.counters.bus_errors += 1
+        self.core.counters.bus_errors += 1
         log.warning("CAN receive failed: %s", err)
 
     def _close(self) -> None:
@@ -119,121 +89,56 @@ class EdgeNode(Node):
             self.event_pub.undeclare()
 
     def _stats(self) -> dict[str, float]:
-        return edge_stats(self)
+        out = self.core.stats()
+        timing = getattr(self.bus, "timing_stats", None)   # [can] emulate_bitrate: queueing delay per CAN id
+        if timing is not None:
+            out.update(timing())
+        return out
 
     # ---- CAN side -------------------------------------------------------------------------------------------------
+    def send(self, msg: can.Message) -> None:
+        try:
+            send_with_retry(self.bus, msg, self.send_retries, 0.0002)
+        except BusError as err:
+            self.core.counters.bus_errors += 1
+            log.warning("%s", err)
+
     def on_can(self, msg: can.Message, now_ns: int) -> None:
         """Handle one received CAN frame (`now_ns`: its monotonic receive time, the start of the loop time of the
-        sample it completes). Malformed frames are counted (`rejected_frames`), logged and ignored."""
-        try:
-            frame = self.codec.decode(msg)
-        except MalformedFrame as err:
-            self.counters.rejected_frames += 1
-            log.debug("ignored frame: %s", err)
-            return
-        if isinstance(frame, Heartbeat):
-            self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-        elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
-            fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
-            if fb is not None:
-                with self.lock:
-                    self._on_feedback(fb, now_ns)
+        sample it completes)."""
+        fb = self.core.on_frame(msg)
+        if fb is not None:
+            with self.lock:
+                self._on_feedback(fb, now_ns)
 
     def _on_feedback(self, fb: Feedback, rx_ns: int) -> None:
-        if self.sync.repeat_feedback(fb):
-            return
-        c = self.counters
-        t_us_full = unwrap_us(self.t_us_full, fb.t_us) if c.feedback else fb.t_us
-        if c.feedback and t_us_full <= self.t_us_full:   # sample time must advance
-            c.rejected_samples += 1
-            log.debug("ignored feedback seq %d: sample time %d us not after %d us", fb.seq, t_us_full,
-                      self.t_us_full)
-            return
-        self.last_fb_seq = fb.seq
-        self.last_fb, self.last_rx_ns = fb, rx_ns
-        c.feedback += 1
-        self.t_us_full = t_us_full
-        now = self.sample_t_ns = self.t_us_full * 1000
-        if self.events is not None:
-            self._edge_trigger(fb, now)
-        elif round(now / self.period_ns) % self.outer_every == 0:
-            seq, data, at = self.publisher.publish(fb, now)
-            if at is not None:
-                self.sync.state_sent(at, seq, data)
-        self.publisher.poll(now)
-        self.sync.sync(now)
-        self.take_downlink(now)
-        if not self._answer(fb, now, rx_ns):
-            return
-        c.commands_sent += 1
-        loop_ns = time.monotonic_ns() - rx_ns
-        c.loop.record(max(loop_ns, 0) * 1e-9)
-        c.loop_overruns += loop_ns > self.period_ns
+        if self._send(self.core.on_feedback(fb, rx_ns, self.sync)):
+            self.core.commanded(time.monotonic_ns() - rx_ns)
 
-    def _edge_trigger(self, fb: Feedback, now: int) -> None:
-        """The trigger at the edge: publish this sample only on an event; the tracking record of an outer sample."""
-        d = self.events.on_sample(now, (fb.theta_rad, fb.omega_rad_s, fb.delta_m, fb.nut_vel_m_s))  # type: ignore
-        if d is None:
-            return
-        if d.reason is not None:
-            seq, data, at = self.publisher.publish_event(fb, now, d.seq, d.event_seq, d.reason,
-                                                         self.events.trajectory_id)  # type: ignore[union-attr]
-            if at is not None:
-                self.sync.state_sent(at, seq, data)
-        if d.hold is not None:          # the local fallback of a silent downlink (controller/edge_events.py)
-            self.inner.hold(*d.hold)
-        if d.record is not None:
-            self.event_pub.put(json.dumps(d.record).encode())  # type: ignore[union-attr]
+    def _send(self, frames: list[can.Message] | None) -> bool:
+        for msg in frames or ():
+            self.send(msg)
+        return frames is not None
 
-    def _apply(self, p: object) -> None:
-        self.command_path.apply(p)
-        if self.events is not None:
-            self.events.answered(p.state_seq, self.sample_t_ns)  # type: ignore[attr-defined]
-
-    def _answer(self, fb: Feedback, now: int, rx_ns: int) -> bool:
-        command, clear = self.sync.gate(self.intake.fresh(now))
-        self._resume_if_stopped(fb, command, clear)
-        if command and self.sync.late(rx_ns):
-            # a starved edge working through a backlog: this sample is too old to answer (its command would act
-            # 10-20 ms late, an unstable inner loop); the inner loop still sees it, nothing is sent
-            self.counters.late_samples += 1
-            self.command_path.step_only(fb)
-            return False
-        cleared = self.counters.clear_errors_sent
-        sent = self.command_path.answer(fb, command, clear)
-        if self.events is not None and self.counters.clear_errors_sent != cleared and self.events.drive_cleared(now):
-            log.info("drive cleared inside the lead-in at sample seq %d: re-anchoring the trajectory", fb.seq)
-        return sent
-
-    # ---- restart path ---------------------------------------------------------------------------------------------
-    def _resume_if_stopped(self, fb: Feedback, command: bool, clear: bool) -> None:
-        """Bumpless resume (`InnerLoop.resume`) when commanding starts again after a stop: the edge stopped commanding
-        (stale setpoints) after it had commanded, or the drive is in its safe state (FAULT/ESTOP, as its heartbeat
-        says) and may be cleared: after an edge restart, a controller restart or an outage. Never at a session's
-        first command, never in lockstep (its gate always commands and never clears)."""
-        if command and (self._stopped or (clear and self.command_path.driver_state in SAFE_STATES)):
-            self.inner.resume(fb.delta_m)
-            self.counters.resumes += 1
-            if self.counters.resumes <= 10 or self.counters.resumes % 100 == 0:
-                log.info("bumpless resume %d at sample seq %d (drive %s)", self.counters.resumes, fb.seq,
-                         self.command_path.driver_state.name)
-        self._stopped = not command and (self._stopped or self.counters.commands_sent > 0)
+    def _publish_record(self, record: dict[str, Any]) -> None:
+        self.event_pub.put(json.dumps(record).encode())  # type: ignore[union-attr]
 
     # ---- Zenoh side -----------------------------------------------------------------------------------------------
     def on_arrival(self, data: bytes, rx_ns: int) -> None:
         """Real time: handle a setpoint/voltage payload when it arrives (`on_downlink`) and, if the downlink emulator
         releases it at once, apply it and send the voltage it gives with the newest feedback."""
+        core = self.core
         with self.lock:
-            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns) or self.last_fb is None:
+            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns) or core.last_fb is None:
                 return
-            now = self.sample_t_ns
-            if self.take_downlink(now) and self._answer(self.last_fb, now, self.last_rx_ns):
-                self.counters.arrival_commands += 1
+            if self.take_downlink(core.sample_t_ns) and self._send(core.respond(core.last_fb, core.last_rx_ns,
+                                                                                 self.sync)):
+                core.counters.arrival_commands += 1
 
     def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:
         """Handle one setpoint/voltage payload from Zenoh (`rx_ns`: monotonic arrival time); True if it entered the
-        downlink emulator (`SetpointIntake.submit`)."""
-        return self.intake.submit(data, self.sample_t_ns, self.publisher.sent_at, rx_ns)
+        downlink emulator."""
+        return self.core.on_downlink(data, rx_ns)
 
     def on_ack(self, data: bytes) -> bool:
         """Handle one payload from the control key (lockstep ACKs; counted and dropped otherwise)."""
@@ -242,5 +147,29 @@ class EdgeNode(Node):
     def take_downlink(self, now: int) -> bool:
         """Apply the setpoints/voltages the downlink emulator releases by sample time `now`; True if any."""
         self.sync.drain()
-        p = self.publisher
-        return self.intake.take(now, p.sent_at, p.sampled_at, self._apply)
+        return self.core.take_downlink(now)
+
+
+def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int, *,
+                    max_age_ns: int = 10**10) -> int:
+    """The monotonic time at which a frame stamped `frame_timestamp_s` (python-can: wall clock, set by the sender on
+    the virtual bus, by the kernel on SocketCAN) arrived, so queueing and wake-up count in the loop time; `mono_now_ns`
+    when the stamp is missing or implausible (in the future or older than `max_age_ns`)."""
+    age_ns = wall_now_ns - int(frame_timestamp_s * 1e9)
+    return mono_now_ns - age_ns if 0 <= age_ns <= max_age_ns else mono_now_ns
+
+
+def receive_stamped(bus: Any, stop_event: Any, on_error: Callable[[Exception], None],
+                    timeout_s: float = 0.05) -> tuple[Any, int] | None:
+    """One frame from `bus` and its monotonic arrival time (`rx_monotonic_ns`), or None after `timeout_s` without
+    one. A receive error (e.g. the interface went down) goes to `on_error` (count, log), then waits `timeout_s` on
+    `stop_event` and returns None: the node keeps running."""
+    try:
+        msg = bus.recv(timeout=timeout_s)
+    except (can.CanError, OSError) as err:
+        on_error(err)
+        stop_event.wait(timeout_s)
+        return None
+    if msg is None:
+        return None
+    return msg, rx_monotonic_ns(msg.timestamp, time.monotonic_ns(), time.time_ns())

@@ -21,8 +21,7 @@ from typing import Any
 
 import can
 
-from sea_hil.controller.edge import EdgeNode
-from sea_hil.controller.edge_stats import receive_stamped
+from sea_hil.controller.edge import EdgeNode, receive_stamped
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import CMD_BITS

@@ -114,7 +114,7 @@ class RecoveryRig:
                 out.peak_velocity_rad_s = max(out.peak_velocity_rad_s, *map(abs, fb.omega_rad_s))
                 out.peak_voltage_v = max(out.peak_voltage_v, *map(abs, self.drv.voltage_v))
         c = self.drv.counters
-        out.limit_trips, out.watchdog_trips, out.resumes = c.limit_trips, c.watchdog_trips, self.edge.counters.resumes
-        out.resume_anchors = self.edge.events.resume_anchors if self.edge.events is not None else 0
+        out.limit_trips, out.watchdog_trips, out.resumes = c.limit_trips, c.watchdog_trips, self.edge.core.counters.resumes
+        out.resume_anchors = self.edge.core.events.resume_anchors if self.edge.core.events is not None else 0
         out.running_again, out.flags = self.drv.state.name == "RUNNING", [str(self.drv.flags)]
         return out

@@ -1,4 +1,4 @@
-"""`receive_stamped` (controller/edge_stats.py), the CAN receive of the edge and of the per-bus `EdgeMux`: a frame
+"""`receive_stamped` (controller/edge.py), the CAN receive of the edge and of the per-bus `EdgeMux`: a frame
 comes with its monotonic arrival time; a receive error is handed to the node's counter and log, the call waits on
 the stop event and returns nothing, so the node keeps running."""
 from __future__ import annotations
@@ -8,7 +8,7 @@ import time
 
 import can
 
-from sea_hil.controller.edge_stats import receive_stamped
+from sea_hil.controller.edge import receive_stamped
 
 
 class _Bus:

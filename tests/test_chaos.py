@@ -137,10 +137,10 @@ def test_a_starved_edge_answers_only_fresh_samples() -> None:
             while (msg := rig.peer.recv(timeout=0)) is not None:
                 out.append(rig.codec.decode(msg))
             return [f for f in out if isinstance(f, VoltageCmd)]
-        sent = edge.counters.commands_sent
+        sent = edge.core.counters.commands_sent
         assert deliver(int(2 * cfg.safety.setpoint.max_sample_age_s * 1e9)) == []
-        assert edge.counters.late_samples == 1 and edge.counters.commands_sent == sent
-        assert len(deliver(0)) == 1 and edge.counters.commands_sent == sent + 1
+        assert edge.core.counters.late_samples == 1 and edge.core.counters.commands_sent == sent
+        assert len(deliver(0)) == 1 and edge.core.counters.commands_sent == sent + 1
         assert edge.stats_dict()["late_samples"] == 1
         assert edge.sync.late(time.monotonic_ns() - 10**9) and not edge.sync.late(0)
     from sea_hil.runtime.lockstep import LockstepClock

@@ -56,40 +56,40 @@ def test_setpoint_is_applied_on_arrival_with_the_newest_feedback(rig) -> None:
         _feed(edge, drv, codec)
     edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)
     first = _commands(peer, codec)
-    assert len(first) == 1 and edge.counters.arrival_commands == 1   # sent at once, before the next sample
-    assert first[0].seq == edge.last_fb.seq                         # computed from the newest feedback
+    assert len(first) == 1 and edge.core.counters.arrival_commands == 1   # sent at once, before the next sample
+    assert first[0].seq == edge.core.last_fb.seq                         # computed from the newest feedback
     edge.on_arrival(_setpoint(2, 1, (-2e-4, 3e-4)), rx_ns=2)
     second = _commands(peer, codec)
     assert len(second) == 1 and second[0].voltage_v != first[0].voltage_v   # the new v_x changed the voltage
     edge.on_arrival(_setpoint(2, 1, (5e-4, 5e-4)), rx_ns=3)                # stale seq: dropped, nothing sent
-    assert _commands(peer, codec) == [] and edge.counters.stale_setpoints == 1
-    assert edge.stats_dict()["arrival_commands"] == 2 and edge.counters.setpoints == 2
+    assert _commands(peer, codec) == [] and edge.core.counters.stale_setpoints == 1
+    assert edge.stats_dict()["arrival_commands"] == 2 and edge.core.counters.setpoints == 2
 
 
 def test_arrival_before_any_feedback_or_after_stop_sends_nothing(rig) -> None:
     edge, peer, drv = rig
     codec = SeaCodec([NODE])
     edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)   # no feedback yet: held, applied at the first sample
-    assert _commands(peer, codec) == [] and edge.counters.arrival_commands == 0
+    assert _commands(peer, codec) == [] and edge.core.counters.arrival_commands == 0
     _feed(edge, drv, codec)
-    assert len(_commands(peer, codec)) == 1 and edge.counters.setpoints == 1
+    assert len(_commands(peer, codec)) == 1 and edge.core.counters.setpoints == 1
     edge.stop_event.set()
     edge.on_arrival(_setpoint(2, 1, (1e-4, 1e-4)), rx_ns=2)
-    assert _commands(peer, codec) == [] and edge.counters.arrival_commands == 0
+    assert _commands(peer, codec) == [] and edge.core.counters.arrival_commands == 0
 
 
 def test_delayed_setpoint_waits_for_its_sample(rig) -> None:
     edge, peer, drv = rig
     codec = SeaCodec([NODE])
     cfg = load_config(overrides={"link": {"downlink": {"delay_s": 0.003}}})
-    edge.intake.downlink = type(edge.intake.downlink)(cfg.link.downlink, "t/down")
+    edge.core.intake.downlink = type(edge.core.intake.downlink)(cfg.link.downlink, "t/down")
     for _ in range(10):
         _feed(edge, drv, codec)
     _commands(peer, codec)
     edge.on_arrival(_setpoint(1, 1, (1e-4, 1e-4)), rx_ns=1)
-    assert _commands(peer, codec) == [] and edge.counters.setpoints == 0    # the emulated link still holds it
+    assert _commands(peer, codec) == [] and edge.core.counters.setpoints == 0    # the emulated link still holds it
     for _ in range(3):
         _feed(edge, drv, codec)
-    assert edge.counters.setpoints == 1 and edge.counters.arrival_commands == 0
+    assert edge.core.counters.setpoints == 1 and edge.core.counters.arrival_commands == 0
     cmds = _commands(peer, codec)     # no setpoint yet -> no command; then the sample that released it answers
-    assert [c.seq for c in cmds] == [edge.last_fb.seq] == [13]
+    assert [c.seq for c in cmds] == [edge.core.last_fb.seq] == [13]

@@ -66,23 +66,23 @@ def test_out_of_envelope_setpoint_is_rejected_counted_and_never_applied(rig) -> 
         _sample(edge, drv, peer, codec)
     assert edge.on_downlink(_setpoint(1, (3e-4, -1e-4)))       # inside: accepted and applied at the next sample
     _sample(edge, drv, peer, codec)
-    held = edge.inner.deflection_m
-    assert held == (3e-4, -1e-4) and edge.counters.setpoints == 1
+    held = edge.core.inner.deflection_m
+    assert held == (3e-4, -1e-4) and edge.core.counters.setpoints == 1
     # the example: a valid-looking SETPOINT with a 1 cm deflection (~200 N of spring force)
     assert not edge.on_downlink(_setpoint(2, (0.01, -1e-4)))
     assert not edge.on_downlink(_setpoint(3, (3e-4, -0.0025)))   # the knee out (NaN never decodes: payloads.py)
     cmds = _sample(edge, drv, peer, codec)
-    assert edge.inner.deflection_m == held and edge.counters.setpoints == 1   # never applied
+    assert edge.core.inner.deflection_m == held and edge.core.counters.setpoints == 1   # never applied
     assert edge.stats_dict()["setpoints_out_of_envelope"] == 2
-    fb = edge.last_fb
+    fb = edge.core.last_fb
     m = (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s)
-    held_u = limited_voltage(m, held, edge.inner.sliding, edge.inner._p, edge.inner.gains, 24.0)[:2]
-    bad_u = limited_voltage(m, (0.01, -1e-4), edge.inner.sliding, edge.inner._p, edge.inner.gains, 24.0)[:2]
+    held_u = limited_voltage(m, held, edge.core.inner.sliding, edge.core.inner._p, edge.core.inner.gains, 24.0)[:2]
+    bad_u = limited_voltage(m, (0.01, -1e-4), edge.core.inner.sliding, edge.core.inner._p, edge.core.inner.gains, 24.0)[:2]
     assert len(cmds) == 1 and cmds[0].voltage_v == pytest.approx(held_u, abs=1e-3)   # the held setpoint's voltage
     assert abs(bad_u[0] - held_u[0]) > 1.0                                          # not the rejected one's
     assert edge.on_downlink(_setpoint(4, (-2e-4, 2e-4)))        # the stream goes on after a rejection
     _sample(edge, drv, peer, codec)
-    assert edge.inner.deflection_m == (-2e-4, 2e-4) and edge.counters.setpoints == 2
+    assert edge.core.inner.deflection_m == (-2e-4, 2e-4) and edge.core.counters.setpoints == 2
 
 
 @pytest.mark.parametrize("flags,cleared", [(ErrorFlags.WATCHDOG, True), (ErrorFlags.POSITION_LIMIT, False),
@@ -99,4 +99,4 @@ def test_edge_clears_a_watchdog_fault_but_not_a_limit_fault(rig, flags: ErrorFla
         edge.on_can(msg, 0)
     frames = [codec.decode(m) for m in iter(lambda: peer.recv(timeout=0), None)]
     assert any(isinstance(f, ClearErrors) for f in frames) is cleared
-    assert edge.counters.clear_errors_sent == int(cleared)
+    assert edge.core.counters.clear_errors_sent == int(cleared)

@@ -51,9 +51,9 @@ def feedback(k: int) -> Feedback:
 def drive(edge: EdgeNode, ctrl: RemoteController, samples: range) -> None:
     """The edge publishes one state per sample and the controller (TT: one setpoint per state) answers it."""
     for k in samples:
-        edge.sample_t_ns = k * 10 * MS
-        _, data, _ = edge.publisher.publish(feedback(k), edge.sample_t_ns)
-        ctrl.handle(data, now_ns=edge.sample_t_ns)
+        edge.core.sample_t_ns = k * 10 * MS
+        _, data, _ = edge.core.publisher.publish(feedback(k), edge.core.sample_t_ns)
+        ctrl.handle(data, now_ns=edge.core.sample_t_ns)
 
 
 def with_epoch(data: bytes, epoch: int) -> bytes:
@@ -70,15 +70,15 @@ def test_replay_of_an_earlier_session_is_rejected_and_counted() -> None:
         cap = Capture(session, [keys.state, keys.setpoint])
         drive(edge1, ctrl1, range(1, SAMPLES + 1))
         assert wait_for(lambda: cap.count(keys.setpoint) == SAMPLES and cap.count(keys.state) == SAMPLES, 10.0)
-        first = (edge1.publisher.epoch, ctrl1.epoch)
+        first = (edge1.core.publisher.epoch, ctrl1.epoch)
     with SessionBuilder(cfg) as b:                       # session 2: new nodes, new epochs
         session = b.zenoh()
         edge = b.edge(b.bus(f"virtual:epoch2-{uuid.uuid4().hex[:8]}"), session, 1)
         ctrl = b.controller(session, "tt")
-        assert 0 not in (edge.publisher.epoch, ctrl.epoch) and {edge.publisher.epoch, ctrl.epoch}.isdisjoint(first)
+        assert 0 not in (edge.core.publisher.epoch, ctrl.epoch) and {edge.core.publisher.epoch, ctrl.epoch}.isdisjoint(first)
         drive(edge, ctrl, range(1, 11))
-        assert wait_for(lambda: edge.intake.sp_seq.accepted == 10, 10.0)    # the edge learned the controller's epoch
-        states, setpoints = ctrl.states, edge.intake.sp_seq.accepted
+        assert wait_for(lambda: edge.core.intake.sp_seq.accepted == 10, 10.0)    # the edge learned the controller's epoch
+        states, setpoints = ctrl.states, edge.core.intake.sp_seq.accepted
         replay = session.declare_publisher(keys.setpoint)
         for data in cap.data[keys.setpoint]:             # session 1's setpoints 1..100, re-published
             replay.put(data)
@@ -89,11 +89,11 @@ def test_replay_of_an_earlier_session_is_rejected_and_counted() -> None:
         assert (st["epoch_foreign"], st["epoch_old"], st["controller_restarts"], st["stale_setpoints"]) == \
             (SAMPLES, 0, 0, 0)
         assert (cs["epoch_foreign"], cs["epoch_old"], cs["edge_restarts"], cs["ignored_states"]) == (SAMPLES, 0, 0, 0)
-        assert edge.intake.sp_seq.accepted == setpoints and ctrl.states == states    # nothing of it was used
+        assert edge.core.intake.sp_seq.accepted == setpoints and ctrl.states == states    # nothing of it was used
         # control: the same bytes with the current epochs would have been taken (seq 11.. are newer)
         edge.on_downlink(with_epoch(cap.data[keys.setpoint][-1], ctrl.epoch))
-        ctrl.handle(with_epoch(cap.data[keys.state][-1], edge.publisher.epoch), now_ns=12 * 10 * MS)
-        assert edge.intake.sp_seq.accepted == setpoints + 1 and ctrl.states == states + 1
+        ctrl.handle(with_epoch(cap.data[keys.state][-1], edge.core.publisher.epoch), now_ns=12 * 10 * MS)
+        assert edge.core.intake.sp_seq.accepted == setpoints + 1 and ctrl.states == states + 1
         replay.undeclare()
 
 
@@ -122,8 +122,8 @@ def test_rejections_and_foreign_versions_are_logged_once_not_per_message(caplog)
         old = struct.pack("<2sBBIQ", b"SH", 1, 2, 5, 0) + struct.pack("<I4dB", 5, 1e-3, 0.0, 0.0, 0.0, 1)  # version 1
         with caplog.at_level(logging.WARNING):
             assert not any(edge.on_downlink(old) for _ in range(500))
-        assert edge.payloads.as_dict()["rejected"] == {"version": 500}
+        assert edge.core.payloads.as_dict()["rejected"] == {"version": 500}
         assert [r.getMessage() for r in caplog.records if "version" in r.getMessage()] == \
             ["a peer sends payload version 1, this node speaks 2: its messages are dropped and counted "
              "(payload_rejected_version); run the same sea-hil release on both sides"]
-        assert decode(edge.publisher.publish(feedback(1), 0)[1]).epoch == edge.publisher.epoch
+        assert decode(edge.core.publisher.publish(feedback(1), 0)[1]).epoch == edge.core.publisher.epoch

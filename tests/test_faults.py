@@ -40,12 +40,12 @@ def test_controller_kill_safe_state_recording_and_restart(tmp_path: Path) -> Non
     procs: list[subprocess.Popen[bytes]] = []
     try:
         procs.append(rig.controller())
-        assert wait_for(lambda: rig.driver_state() is DriverState.RUNNING and rig.edge.counters.setpoints >= 5,
+        assert wait_for(lambda: rig.driver_state() is DriverState.RUNNING and rig.edge.core.counters.setpoints >= 5,
                         START_S), "session did not start"
         procs[0].send_signal(signal.SIGKILL)
         assert procs[0].wait(timeout=10) == -signal.SIGKILL
         killed = time.monotonic_ns()
-        first_sent = rig.edge.intake.sp_seq.last
+        first_sent = rig.edge.core.intake.sp_seq.last
         safe = wait_for(lambda: rig.driver_state() is DriverState.FAULT, SAFE_S)
         assert safe is not None, "driver never reached its safe state"
         drv = rig.plant.drivers[1]
@@ -58,7 +58,7 @@ def test_controller_kill_safe_state_recording_and_restart(tmp_path: Path) -> Non
         procs.append(rig.controller())
         running = wait_for(lambda: rig.driver_state() is DriverState.RUNNING, START_S)
         assert running is not None, "session did not resume after the controller restart"
-        assert rig.edge.counters.controller_restarts == 1 and rig.edge.counters.clear_errors_sent >= 1
+        assert rig.edge.core.counters.controller_restarts == 1 and rig.edge.core.counters.clear_errors_sent >= 1
         assert drv.counters.watchdog_trips == 1
         print(f"\ncontroller kill -> driver FAULT {kill_to_safe_ms:.0f} ms (bound {bound_ms:.0f} ms); "
               f"restart (process spawn) -> driver RUNNING {_ms(restarted, running):.0f} ms")
@@ -78,17 +78,17 @@ def test_one_second_link_outage_recovers_and_is_counted(tmp_path: Path) -> None:
     out_start_ns, out_end_ns = 3_000_000_000, 4_000_000_000   # sample time of the driver
     up = OutageLink(link.uplink, f"{link.seed}/up", out_start_ns, out_end_ns)
     down = OutageLink(link.downlink, f"{link.seed}/down", out_start_ns, out_end_ns)
-    rig.edge.publisher.uplink.link, rig.edge.intake.downlink = up, down
+    rig.edge.core.publisher.uplink.link, rig.edge.core.intake.downlink = up, down
     proc = rig.controller()
     try:
         assert wait_for(lambda: rig.driver_state() is DriverState.RUNNING, START_S), "session did not start"
-        assert wait_for(lambda: rig.edge.sample_t_ns >= out_start_ns, START_S)
+        assert wait_for(lambda: rig.edge.core.sample_t_ns >= out_start_ns, START_S)
         assert rig.driver_state() is DriverState.RUNNING, "session was not running when the outage began"
         assert wait_for(lambda: rig.driver_state() is DriverState.FAULT, SAFE_S), "no safe state during the outage"
-        fault_sample_ns = rig.edge.sample_t_ns
-        applied = rig.edge.counters.setpoints
-        ended = wait_for(lambda: rig.edge.sample_t_ns >= out_end_ns, SAFE_S)
-        first_sp = wait_for(lambda: rig.edge.counters.setpoints > applied, SAFE_S)
+        fault_sample_ns = rig.edge.core.sample_t_ns
+        applied = rig.edge.core.counters.setpoints
+        ended = wait_for(lambda: rig.edge.core.sample_t_ns >= out_end_ns, SAFE_S)
+        first_sp = wait_for(lambda: rig.edge.core.counters.setpoints > applied, SAFE_S)
         running = wait_for(lambda: rig.driver_state() is DriverState.RUNNING, SAFE_S)
         assert ended and first_sp and running, "no recovery after the outage"
         stats = rig.edge.stats_dict()

@@ -16,14 +16,13 @@ import can
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sea_hil.controller.edge import EdgeNode
+from sea_hil.controller.edge_core import EdgeCore, FreeRunning
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Feedback, SeaCodec, VoltageCmd, load_database
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import load_config
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
-from sea_hil.protocol.zsession import make_config, open_session
 from fuzz_budget import cases
 
 CASES = cases(10_000)   # tests/fuzz_budget.py: SEA_HIL_FUZZ_SCALE=1 for the depth of docs/reliability.md
@@ -124,58 +123,54 @@ def edge_input(draw: st.DrawFn, codec: SeaCodec, edge_t_us: Callable[[], int]) -
     return msgs
 
 
-def _fresh_setpoint(edge: EdgeNode) -> None:
-    seq = (edge.intake.sp_seq.last or 0) + 1
-    assert edge.on_downlink(encode(SetpointPayload(seq, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME)))
+def _fresh_setpoint(core: EdgeCore) -> None:
+    seq = (core.intake.sp_seq.last or 0) + 1
+    assert core.on_downlink(encode(SetpointPayload(seq, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME)))
 
 
 def test_edge_frame_handler_survives_counts_and_still_commands() -> None:
-    cfg = load_config()
-    channel = f"virtual:fuzzedge-{uuid.uuid4().hex[:8]}"
-    bus, peer = open_bus(channel), open_bus(channel)
-    session = open_session(make_config())
-    edge = EdgeNode(cfg, bus, session, NODE)
+    """The edge core's CAN input (no bus, no Zenoh session): frames in, the frames it answers with out."""
+    core, clock = EdgeCore(load_config(), NODE), FreeRunning()
     oracle = SeaCodec([NODE])
     seen = {"frames": 0, "malformed": 0, "samples": 0}
-    try:
-        _fresh_setpoint(edge)
+    sent: list[can.Message] = []
 
-        @settings(max_examples=EDGE_CASES, deadline=None, database=None, derandomize=True,
-                  suppress_health_check=[HealthCheck.too_slow])
-        @given(msgs=edge_input(oracle, lambda: edge.t_us_full))
-        def run(msgs: list[can.Message]) -> None:
-            for msg in msgs:
-                before, samples = edge.counters.rejected_frames, edge.counters.feedback
-                edge.on_can(msg, time.monotonic_ns())
-                seen["frames"] += 1
-                seen["samples"] += edge.counters.feedback - samples
-                try:
-                    oracle.decode(msg)
-                except MalformedFrame:
-                    seen["malformed"] += 1
-                    assert edge.counters.rejected_frames == before + 1
-                    continue
-                assert edge.counters.rejected_frames == before
-        run()
-        stats = edge.stats_dict()
-        assert seen["malformed"] >= EDGE_CASES * 2 // 3 and stats["rejected_frames"] == seen["malformed"]
-        assert seen["samples"] > EDGE_CASES // 150 and stats["feedback_samples"] == seen["samples"]
-        _fresh_setpoint(edge)
-        while peer.recv(0) is not None:     # forget what the fuzzing made the edge send
-            pass
-        last = edge.counters.feedback
-        t_us = (edge.t_us_full + 1000) & 0xFFFF   # the sample after the newest one seen
-        # receive time unknown (0): a sample the loaded host delays past `max_sample_age_s` would not be answered
-        # (tests/test_chaos.py::test_a_starved_edge_answers_only_fresh_samples); here the frame handling is checked
-        for msg in oracle.encode_feedback(Feedback(NODE, 200, t_us, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))):
-            edge.on_can(msg, 0)
-        assert edge.counters.feedback == last + 1
-        cmds = [f for f in (oracle.decode(m) for m in iter(lambda: peer.recv(0), None)) if isinstance(f, VoltageCmd)]
-        assert [c.seq for c in cmds] == [200]
-        print(f"\nedge: {seen['frames']} frames, {seen['malformed']} malformed and counted, "
-              f"{seen['samples']} feedback samples handled, {stats['commands_sent']} commands")
-    finally:
-        edge.close()
-        session.close()
-        bus.shutdown()
-        peer.shutdown()
+    def on_can(msg: can.Message, rx_ns: int) -> None:
+        fb = core.on_frame(msg)
+        if fb is not None:
+            sent.extend(core.on_feedback(fb, rx_ns, clock) or ())
+
+    _fresh_setpoint(core)
+
+    @settings(max_examples=EDGE_CASES, deadline=None, database=None, derandomize=True,
+              suppress_health_check=[HealthCheck.too_slow])
+    @given(msgs=edge_input(oracle, lambda: core.t_us_full))
+    def run(msgs: list[can.Message]) -> None:
+        for msg in msgs:
+            before, samples = core.counters.rejected_frames, core.counters.feedback
+            on_can(msg, time.monotonic_ns())
+            seen["frames"] += 1
+            seen["samples"] += core.counters.feedback - samples
+            try:
+                oracle.decode(msg)
+            except MalformedFrame:
+                seen["malformed"] += 1
+                assert core.counters.rejected_frames == before + 1
+                continue
+            assert core.counters.rejected_frames == before
+    run()
+    stats = core.stats()
+    assert seen["malformed"] >= EDGE_CASES * 2 // 3 and stats["rejected_frames"] == seen["malformed"]
+    assert seen["samples"] > EDGE_CASES // 150 and stats["feedback_samples"] == seen["samples"]
+    assert all(isinstance(oracle.decode(m), (VoltageCmd, ClearErrors)) for m in sent)   # within the DBC
+    _fresh_setpoint(core)
+    sent.clear()                        # forget what the fuzzing made the edge send
+    last = core.counters.feedback
+    t_us = (core.t_us_full + 1000) & 0xFFFF   # the sample after the newest one seen
+    for msg in oracle.encode_feedback(Feedback(NODE, 200, t_us, (0.1, 0.2), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0))):
+        on_can(msg, 0)
+    assert core.counters.feedback == last + 1
+    cmds = [f for f in map(oracle.decode, sent) if isinstance(f, VoltageCmd)]
+    assert [c.seq for c in cmds] == [200]
+    print(f"\nedge: {seen['frames']} frames, {seen['malformed']} malformed and counted, "
+          f"{seen['samples']} feedback samples handled, {len(sent)} commands")

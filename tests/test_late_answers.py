@@ -9,8 +9,7 @@ import logging
 import pytest
 
 from sea_hil.config import LinkDirectionConfig, load_config
-from sea_hil.controller.edge_downlink import SetpointIntake
-from sea_hil.controller.edge_stats import EdgeCounters
+from sea_hil.controller.edge_core import EdgeCounters, SetpointIntake
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.trajectory import make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TriggerReason
@@ -20,14 +19,9 @@ from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, encode
 MS = 1_000_000
 
 
-class _Sync:
-    def restart_possible(self, timed_out: bool) -> bool:
-        return timed_out
-
-
 def _intake(max_age_ns: int) -> SetpointIntake:
     return SetpointIntake(LinkEmulator(LinkDirectionConfig(), "1/down"), EdgeCounters(), PayloadCounters(),
-                          500 * MS, _Sync(), None, max_age_ns)
+                          500 * MS, lambda timed_out: timed_out, None, max_age_ns)
 
 
 def _setpoint(seq: int, state_seq: int) -> bytes:

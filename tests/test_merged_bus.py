@@ -88,7 +88,7 @@ def test_real_time_limbs_on_two_buses_share_one_driver_edge_and_tap() -> None:
             plant.publish(drv, fb)
         while (msg := mux.bus.recv(0.1)) is not None:
             mux.dispatch(msg, 1)
-        assert [e.counters.feedback for e in nodes.edges] == [1, 1]
+        assert [e.core.counters.feedback for e in nodes.edges] == [1, 1]
         ids = []
         while (msg := tap.recv(0)) is not None:
             ids.append(msg.arbitration_id >> CMD_BITS)

@@ -35,7 +35,7 @@ def state(seq: int, sample_t_ns: int, epoch: int = 1) -> bytes:
 
 
 def apply(edge: EdgeNode, now_ns: int) -> None:
-    edge.sample_t_ns = now_ns
+    edge.core.sample_t_ns = now_ns
     edge.take_downlink(now_ns)
 
 
@@ -44,9 +44,9 @@ def test_edge_ignores_and_counts_duplicated_and_older_setpoints(nodes: tuple[Edg
     verdicts = [edge.on_downlink(setpoint(s, d1=s * 1e-4)) for s in (1, 2, 2, 5, 3, 5, 1, 6)]
     assert verdicts == [True, True, False, True, False, False, False, True]
     apply(edge, 0)
-    c = edge.counters
+    c = edge.core.counters
     assert c.stale_setpoints == 4 and c.setpoints == 4            # 1, 2, 5, 6 applied
-    assert edge.inner.deflection_m == pytest.approx((6e-4, 0.0))
+    assert edge.core.inner.deflection_m == pytest.approx((6e-4, 0.0))
     st = edge.stats_dict()
     assert (st["stale_setpoints"], st["seq_duplicates"], st["seq_reordered"]) == (4, 3, 1)
 
@@ -56,28 +56,28 @@ def test_edge_voltage_stream_shares_the_replay_guard(nodes: tuple[EdgeNode, Remo
     v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
     assert [edge.on_downlink(x) for x in v] == [True, False, False, True]
     apply(edge, 0)
-    assert edge.counters.voltages == 2 and edge.command_path.voltage == (11.0, 0.0) and edge.counters.stale_setpoints == 2
+    assert edge.core.counters.voltages == 2 and edge.core.voltage == (11.0, 0.0) and edge.core.counters.stale_setpoints == 2
 
 
 def test_restarted_controller_is_accepted_only_after_the_stream_timed_out(
         nodes: tuple[EdgeNode, RemoteController]) -> None:
     edge, _ = nodes
-    edge.sample_t_ns = 1000 * MS
+    edge.core.sample_t_ns = 1000 * MS
     for s in range(1, 101):
         assert edge.on_downlink(setpoint(s))
     apply(edge, 1000 * MS)
-    timeout_ms = edge.intake.timeout_ns // MS
-    edge.sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a new epoch's seq 1 is refused
+    timeout_ms = edge.core.intake.timeout_ns // MS
+    edge.core.sample_t_ns = (1000 + timeout_ms) * MS                 # still fresh: a new epoch's seq 1 is refused
     assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL, epoch=2))
     assert not edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL))   # the old epoch's seq 1 is stale
-    edge.sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): the old epoch's seq 1
+    edge.core.sample_t_ns = (1001 + timeout_ms) * MS                 # timed out (driver safe): the old epoch's seq 1
     assert not edge.on_downlink(setpoint(1))                     # is still stale (a restart has a new epoch),
-    assert not edge.on_downlink(setpoint(edge.intake.sp_seq.window, epoch=2))   # a new epoch with seq >= window
+    assert not edge.on_downlink(setpoint(edge.core.intake.sp_seq.window, epoch=2))   # a new epoch with seq >= window
     assert edge.on_downlink(setpoint(1, reason=TriggerReason.INITIAL, epoch=2))  # refused, a fresh sender's not
     assert not edge.on_downlink(setpoint(1, epoch=2))            # and the new stream is guarded again
     assert edge.on_downlink(setpoint(2, epoch=2))
     assert not edge.on_downlink(setpoint(101))                   # the old epoch is retired
-    assert edge.counters.controller_restarts == 1 and edge.counters.stale_setpoints == 3
+    assert edge.core.counters.controller_restarts == 1 and edge.core.counters.stale_setpoints == 3
     st = edge.stats_dict()
     assert (st["controller_restarts"], st["epoch_foreign"], st["epoch_old"]) == (1, 2, 1)
 

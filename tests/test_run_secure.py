@@ -78,7 +78,7 @@ class Intruder:
             self.linked = wait_for(lambda: bool(list(intruder.info.peers_zid())), 20.0) is not None
             tick = threading.Event()
             while not self.stop.is_set():
-                epoch, last = self.edge.intake.epoch.current, self.edge.intake.sp_seq.last
+                epoch, last = self.edge.core.intake.epoch.current, self.edge.core.intake.sp_seq.last
                 if epoch is not None and last is not None:   # forge far ahead of the controller's newest
                     seq = (last + 1000) & 0xFFFF_FFFF
                     sp_pub.put(encode(SetpointPayload(seq, time.monotonic_ns(), 1, (0.01, 0.01), (0.0, 0.0),

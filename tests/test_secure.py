@@ -270,15 +270,15 @@ def test_intruder_cannot_move_driver(certs: CertSet, acl: bool) -> None:
             attack[KEYS.voltage].put(encode(VoltagePayload(100 + seq, t, 0, (12.0, 12.0))))  # newer than setpoints
         if not acl:   # the control: without the ACL the same intruder drives the limb
             _until(lambda: (watch.drain(), (12.0, 12.0) in watch.commands)[1], "the intruder's voltage on CAN")
-            assert edge.counters.voltages > 0
+            assert edge.core.counters.voltages > 0
             return
         attack[KEYS.stats].put(b"intruder-done")   # allowed, same link: arrives after the denied puts would have
         _until(lambda: any(s.payload.to_bytes() == b"intruder-done" for s in iter(barrier.try_recv, None)),
                "the intruder's barrier")
-        fb0 = edge.counters.feedback
-        _until(lambda: edge.counters.feedback >= fb0 + 3, "the edge handling later driver samples")
+        fb0 = edge.core.counters.feedback
+        _until(lambda: edge.core.counters.feedback >= fb0 + 3, "the edge handling later driver samples")
         watch.drain()
-        assert (edge.counters.voltages, edge.counters.setpoints, edge.counters.commands_sent) == (0, 0, 0)
+        assert (edge.core.counters.voltages, edge.core.counters.setpoints, edge.core.counters.commands_sent) == (0, 0, 0)
         assert watch.commands == [] and watch.max_nut_speed_m_s == 0.0
         seq = iter(range(1, 1 << 20))
 
@@ -287,4 +287,4 @@ def test_intruder_cannot_move_driver(certs: CertSet, acl: bool) -> None:
             watch.drain()
             return bool(watch.commands) and watch.max_nut_speed_m_s > 0
         _until(command, "the controller's voltage moving the driver")
-        assert set(watch.commands) == {(4.0, -4.0)} and edge.counters.voltages > 0
+        assert set(watch.commands) == {(4.0, -4.0)} and edge.core.counters.voltages > 0

@@ -103,7 +103,7 @@ class SessionLoop:
         for payload in self.pending_down.pop_due(now):
             sampled = self.sampled_at.get(payload.state_seq)
             if self.max_answer_age_ns and sampled is not None and now - sampled > self.max_answer_age_ns:
-                continue                               # a late answer: the live edge drops it (edge_downlink.py)
+                continue                               # a late answer: the live edge drops it (controller/edge_core.py)
             self.e.inner.hold(payload.deflection_m, payload.sliding)
             if self.edge is not None:
                 self.edge.answered(payload.state_seq, now)

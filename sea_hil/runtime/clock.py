@@ -142,7 +142,7 @@ class RealTimeEdgeSync:
 
     def on_ack(self, data: bytes) -> bool:
         """A payload on the control key: an ACK means nothing in real time; anything else is counted, dropped."""
-        return control_payload(self.edge, data) is not None
+        return control_payload(self.edge.core, data) is not None
 
     def repeat_feedback(self, fb: Any) -> bool:
         return False
@@ -168,20 +168,21 @@ class RealTimeEdgeSync:
     def late(self, rx_ns: int) -> bool:
         """Is a feedback sample received at monotonic `rx_ns` too old to answer (`edge.max_sample_age_ns`; 0 or an
         unknown receive time: never)?"""
-        max_ns = self.edge.max_sample_age_ns
+        max_ns = self.edge.core.max_sample_age_ns
         return max_ns > 0 and rx_ns > 0 and time.monotonic_ns() - rx_ns > max_ns
 
     def restart_possible(self, timed_out: bool) -> bool:
         return timed_out
 
 
-def control_payload(edge: Any, data: bytes) -> AckPayload | None:
-    """Decode a control-key payload; a non-ACK is counted (`unexpected_payloads`) and dropped."""
-    p = edge.payloads.try_decode(data)
+def control_payload(core: Any, data: bytes) -> AckPayload | None:
+    """Decode a control-key payload with the edge core's counters; a non-ACK is counted (`unexpected_payloads`) and
+    dropped."""
+    p = core.payloads.try_decode(data)
     if p is None:
         return None
     if not isinstance(p, AckPayload):
-        edge.counters.unexpected_payloads += 1
+        core.counters.unexpected_payloads += 1
         return None
     return p
 

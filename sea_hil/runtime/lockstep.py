@@ -122,7 +122,7 @@ class LockstepEdgeSync:
 
     def on_ack(self, data: bytes) -> bool:
         """Handle one payload from the control key (ACKs); anything else is counted and dropped."""
-        p = control_payload(self.edge, data)
+        p = control_payload(self.edge.core, data)
         if p is None:
             return False
         self.acks[p.state_seq] = p
@@ -145,9 +145,9 @@ class LockstepEdgeSync:
     # ---- the feedback path ------------------------------------------------------------------------------------
     def repeat_feedback(self, fb: Any) -> bool:
         """The driver re-sent a sample already answered: send the same command again."""
-        cmd = self.edge.command_path.last_cmd
-        if fb.seq == self.edge.last_fb_seq and cmd is not None:
-            self.edge.command_path.send(cmd)
+        cmd = self.edge.core.last_cmd
+        if fb.seq == self.edge.core.last_fb_seq and cmd is not None:
+            self.edge.send(cmd)
             return True
         return False
 
@@ -157,7 +157,7 @@ class LockstepEdgeSync:
     def state_stamp(self, at_ns: int) -> int:
         """A state's header t_ns on the simulated clock: the sample at which the uplink emulator releases it (the
         first sample at or after its delivery time), i.e. when the controller receives it."""
-        period = self.edge.period_ns
+        period = self.edge.core.period_ns
         return -(-at_ns // period) * period
 
     def gate(self, fresh: bool) -> tuple[bool, bool]:
@@ -178,14 +178,15 @@ class LockstepEdgeSync:
         but counted (`uplink_out_of_order`)."""
         for seq, data in self.in_flight.pop_due(now):
             if seq <= self.newest_released:
-                self.edge.counters.uplink_out_of_order += 1
+                self.edge.core.counters.uplink_out_of_order += 1
                 continue
             self.newest_released = seq
             self.awaiting[seq] = data
 
     def _wait_for_controller(self) -> None:
         """Block until every awaited state is acknowledged (and its setpoint received)."""
-        edge, seen = self.edge, self.edge.intake.seen_setpoints
+        edge, core = self.edge, self.edge.core
+        seen = core.intake.seen_setpoints
         last_progress = time.monotonic_ns()
         while self.awaiting and not edge.stop_event.is_set():
             progressed = self.drain()
@@ -199,11 +200,11 @@ class LockstepEdgeSync:
                 last_progress = now
             elif now - last_progress > self.resend_ns:
                 for data in self.awaiting.values():    # already through the emulator: straight to the wire
-                    edge.publisher.uplink.republish(data)  # same seq: the controller answers duplicates idempotently
+                    core.publisher.uplink.republish(data)  # same seq: the controller answers duplicates idempotently
                 if self.acks:
-                    edge.counters.lockstep_resends += 1
+                    core.counters.lockstep_resends += 1
                 else:   # no ACK yet at all: the controller is still starting up
-                    edge.counters.lockstep_startup_resends += 1
+                    core.counters.lockstep_startup_resends += 1
                 last_progress = now
             else:
                 try:

@@ -102,7 +102,7 @@ def record_edge_finals(rec: Any, nodes: LimbNodes, lockstep: bool) -> None:
     """Each limb's final edge stats on `/stats` (they carry its `node_id`; in lockstep at its sample time) and as metadata
     (`sea-hil.edge` for the first limb, the 1-limb name; `sea-hil.edge.<limb>` for the others)."""
     for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges)):
-        now_ns = edge.sample_t_ns if lockstep else time.time_ns()
+        now_ns = edge.core.sample_t_ns if lockstep else time.time_ns()
         rec.record("/stats", now_ns, now_ns, edge.stats_record(final=True))   # carries the limb's `node_id`
         rec.add_metadata("sea-hil.edge" if i == 0 else f"sea-hil.edge.{limb.name}",
                          {k: str(v) for k, v in edge.stats_dict().items()})

@@ -192,9 +192,9 @@ def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConf
         if now > budget_s:
             raise SeaHilError(f"session did not finish within {budget_s:.0f} s")
         if opts.progress:
-            c = edge.counters
+            c = edge.core.counters
             lat = c.latency.to_dict()
-            log(ProgressSample(now, edge.sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
+            log(ProgressSample(now, edge.core.sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
                                c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
     if proc.returncode != 0:
         raise SeaHilError(f"controller process exited with status {proc.returncode}")
