@@ -7,7 +7,7 @@ from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TriggerReason
 from sea_hil.offline.session_engine import run_engine
-from sea_hil.offline.session_loop import EngineOptions
+from sea_hil.offline.session_engine import EngineOptions
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.report.session_summary import session_summary
 

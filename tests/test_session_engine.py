@@ -17,8 +17,7 @@ from test_pre_refactor_equality import as_payload_v2, with_totals
 
 from sea_hil.config import load_config
 from sea_hil.controller.edge_events import tracking_record
-from sea_hil.offline.session_engine import run_engine
-from sea_hil.offline.session_records import SessionRecords
+from sea_hil.offline.session_engine import SessionRecords, run_engine
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode
@@ -89,7 +88,7 @@ def test_records_are_the_recorders_own():
     keys = Keys.from_config(load_config().zenoh)
     rec = SessionRecords(keys)
     fb = ((0.1, 0.2), (0.3, -0.4), (0.001, -0.002), (0.01, 0.02))
-    rec.state(7, 70_000_000, fb, 0)
+    rec.state(StatePayload(7, 70_000_000, 70_000_000, *fb), 0)
     sp = SetpointPayload(3, 70_000_000, 7, (0.004, -0.001), (0.5, -0.25), TriggerReason.ERROR_BOUND)
     rec.setpoint(sp, 0)
     counters = PayloadCounters()

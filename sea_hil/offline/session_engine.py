@@ -1,80 +1,139 @@
-"""Offline engine of a networked session: the lockstep session's timeline in one process, with the same link
-emulation, the same wire quantisation and the same summary, fast enough for sweeps of thousands of points.
+"""Offline engine of a networked session: the lockstep session's timeline in one process, composed of the nodes' own
+cores and the same link emulation, wire quantisation and summary, fast enough for sweeps of thousands of points.
 
-What it replays, sample by sample (1 ms), as `sea-hil run --lockstep` orders it (docs/sweep.md, "Offline engine"):
-the driver boots at rest (`plant.initial_theta_rad`) and integrates each period exactly as `DriverCore.step` does
-(the same float expressions and sub-steps, disturbance sampled at the same times); the edge publishes a state every
-outer sample through the uplink `LinkEmulator` (same seed stream `<seed>/up`, same payload size), the controller
-answers each released state at once (lead-in, trigger, SMC: the live `OuterController` and `LeadIn`), a setpoint
-enters the downlink emulator (`<seed>/down`) at that sample and is applied when released; the edge's voltage is the
-backstepping law on the DBC-quantised feedback, quantised and saturated as the VOLTAGE_CMD frame does. Two
-implementations of that loop, with the same results: the whole session in one numba call for the paper's scheme
-(`sea_hil.offline.session_fast`, `session_kernel`: the outer loop compiled from the live controller's plain-float
-functions), and the Python sample loop for every option (`sea_hil.offline.session_loop`; per-sample part in a numba
-kernel, `drive_kernel`, outer part in Python). The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built as
-the recorder's `zenoh_record` builds them and summarised by `session_summary`, so the summary is the session's.
+What it runs, sample by sample (1 ms), in the order `sea-hil run --lockstep` does (docs/sweep.md, "Offline
+engine"): the edge's core (`EdgeCore`, controller/edge_core.py) takes each sample the loop stops at (an outer sample,
+every sample with `trigger.edge_check = "sample"`, or a sample a link delivers at), publishes states through its
+uplink `LinkEmulator` (seed stream `<seed>/up`) stamped as lockstep stamps them (the release sample), the
+controller's core (`ControllerCore`, controller/remote_core.py) answers each released state at once, its setpoint
+payload enters the edge core's intake (checks, envelope, downlink emulator `<seed>/down`) and is applied when
+released. Between those samples the edge's inner step and the driver's period run in one compiled call per stretch
+(`drive_kernel.session_steps`: the edge core's own `InnerLoop` state and `inner_step`, the VOLTAGE_CMD quantisation
+and saturation, `DriverCore.step`'s RK4 sub-steps on `rk4_core` with the one disturbance table, the drive soft
+limits). The messages a recorder would see (states as delivered, setpoints as published, tracking records) are built
+as the recorder's `zenoh_record` builds them (`SessionRecords`) and summarised by `session_summary`, so the summary
+is the session's (tests/test_engine_lockstep.py: bit for bit, over a matrix of links, schemes and faults).
 
 Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats`, and `max_abs_voltage_v` is taken up to
 the controller's last sample (a session also records the commands of its shut-down tail).
 """
 from __future__ import annotations
 
-import logging
+import json
+from dataclasses import dataclass
 from typing import Any
 
 from sea_hil.config import SeaHilConfig
-from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
-from sea_hil.controller.inner import InnerLoop
-from sea_hil.controller.nominal import nominal_params
+from sea_hil.controller.edge_core import EdgeCore
+from sea_hil.controller.edge_events import EdgeEvents
+from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
 from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
 from sea_hil.offline.gc_pause import gc_paused
-from sea_hil.offline.session_loop import EngineOptions, SessionLoop
-from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, SessionRecords
 from sea_hil.offline.wire_quantiser import dbc_resolutions
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
-from sea_hil.plant_emulator.dynamics import State, initial_state
+from sea_hil.plant_emulator.dynamics import initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
+from sea_hil.protocol.can_frames import Feedback
 from sea_hil.protocol.keys import Keys
-from sea_hil.protocol.link import LinkEmulator
-from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, decode
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.session_summary import session_summary
 
-_log = logging.getLogger("sea_hil.offline")
+STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
 
 
-class _Env:
-    """What the sample loop (`sea_hil.offline.session_loop.SessionLoop`) works with: the session's parts."""
+@dataclass(frozen=True)
+class EngineOptions:
+    """Overrides of the config's control scheme (`with_options`)."""
+    placement: str = "controller"       # controller | edge
+    compensation: str = "none"          # none | predict
+    edge_check: str = "outer"           # outer | sample: how often the edge evaluates its trigger
+    edge_model: bool = False            # the edge's lookahead runs the nominal model (else: extrapolation)
 
-    def __init__(self, cfg: SeaHilConfig, mode: str, cycles: int, jit: bool) -> None:
-        self.traj = make_trajectory(cfg.trajectory)
-        self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
-        self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
-        self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
-        lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
-        # the controller stops at its first state after the cycles (as in lockstep, which runs until it does): lost
-        # states delay that by a few samples, a far start pose stretches the lead-in, re-anchors of the edge's
-        # trigger restart it; n_max is a safety cap only
-        self.n_max = 4 * ((lead_in_ns + self.duration_ns) // self.period_ns + 20 * self.outer_every + 1000
-                          + _lead_in_stretch_samples(cfg, self.traj, self.period_ns))
-        self.cfg, self.mode = cfg, mode
-        self.nominal = nominal_params(cfg)      # the controller's model (the edge and the remote use it)
-        self.inner = InnerLoop(cfg, self.nominal, tuple(cfg.plant.initial_theta_rad), 1.0 / cfg.can.feedback_rate_hz)
-        seed = cfg.link.seed
-        self.uplink = LinkEmulator(cfg.link.uplink, f"{seed}/up")
-        self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
-        self.rec = SessionRecords(Keys.from_config(cfg.zenoh))
-        self.state_bytes, self.setpoint_bytes = STATE_BYTES, SETPOINT_BYTES
-        kernel = compiled(make_session_steps) if jit else None
-        self.steps = kernel if kernel is not None else make_session_steps()
-        self.jit = kernel is not None
-        dl = DriveLimits.from_config(cfg.safety.drive)
-        self.drive_limits = (*dl.position_min_rad, *dl.position_max_rad, *dl.velocity_max_rad_s, *dl.spring_force_max_n)
-        self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), _log)
+    def __post_init__(self) -> None:
+        if self.placement not in ("controller", "edge") or self.compensation not in ("none", "predict") \
+                or self.edge_check not in ("outer", "sample"):
+            raise ValueError(f"bad engine options {self}")
+
+    @classmethod
+    def from_config(cls, cfg: SeaHilConfig) -> EngineOptions:
+        """The options a config selects (`trigger.placement`, `trigger.edge_check`, `trigger.edge_model`,
+        `controller.compensation`)."""
+        t = cfg.trigger
+        return cls(placement=t.placement, compensation=cfg.controller.compensation, edge_check=t.edge_check,
+                   edge_model=t.edge_model)
+
+
+def with_options(cfg: SeaHilConfig, opts: EngineOptions) -> SeaHilConfig:
+    """`cfg` with the trigger placement and delay compensation of `opts` (what the nodes read from their config)."""
+    trig = cfg.trigger.model_copy(update={"placement": opts.placement, "edge_check": opts.edge_check,
+                                          "edge_model": opts.edge_model})
+    ctl = cfg.controller.model_copy(update={"compensation": opts.compensation})
+    return cfg.model_copy(update={"trigger": trig, "controller": ctl})
+
+
+@dataclass
+class EngineResult:
+    data: SessionData            # the messages a session's recorder would hold (see module docstring)
+    samples: int                 # driver periods simulated
+    saturated_steps: int
+    drive_faulted: bool = False          # a drive soft limit faulted the drive (0 V from then on)
+    setpoints_out_of_envelope: int = 0   # setpoints the edge's envelope rejected
+    edge: EdgeEvents | None = None       # trigger at the edge: the edge core's events (stats, stale holds)
+
+
+class SessionRecords:
+    """What a session's recorder would record of the Zenoh traffic: the dicts `sea_hil.recorder.node.zenoh_record`
+    makes of the encoded payloads, built directly from the decoded payloads (float64 fields and JSON floats pass
+    unchanged; `tests/test_session_engine.py` checks these dicts equal the recorder's own)."""
+
+    def __init__(self, keys: Keys, state_bytes: int = STATE_BYTES) -> None:
+        self.keys = keys
+        self.state_bytes = state_bytes      # EVENT_STATE's size with the trigger at the edge
+        self.messages: dict[str, list[RecordedMessage]] = {"/zenoh/state": [], "/zenoh/setpoint": [], "/tracking": []}
+
+    def state(self, p: StatePayload, t_ns: int) -> None:
+        th, om, de, nut = p.theta_rad, p.omega_rad_s, p.delta_m, p.nut_vel_m_s
+        self.messages["/zenoh/state"].append(RecordedMessage(t_ns, t_ns, {
+            "key": self.keys.state, "seq": p.seq, "sent_t_ns": p.sample_t_ns, "payload_bytes": self.state_bytes,
+            "sample_t_ns": p.sample_t_ns, "theta1_rad": th[0], "theta2_rad": th[1], "omega1_rad_s": om[0],
+            "omega2_rad_s": om[1], "delta1_m": de[0], "delta2_m": de[1], "nut_vel1_m_s": nut[0],
+            "nut_vel2_m_s": nut[1]}, p.seq))
+
+    def setpoint(self, sp: SetpointPayload, t_ns: int) -> None:
+        self.messages["/zenoh/setpoint"].append(RecordedMessage(t_ns, t_ns, {
+            "key": self.keys.setpoint, "seq": sp.seq, "sent_t_ns": sp.t_ns, "payload_bytes": SETPOINT_BYTES,
+            "state_seq": sp.state_seq, "delta1_ref_m": sp.deflection_m[0], "delta2_ref_m": sp.deflection_m[1],
+            "s1": sp.sliding[0], "s2": sp.sliding[1], "reason": sp.reason.name}, sp.seq))
+
+    def tracking(self, record: dict[str, Any], t_ns: int) -> None:
+        self.messages["/tracking"].append(RecordedMessage(t_ns, t_ns, {**record, "key": self.keys.event},
+                                                          record["state_seq"]))
+
+
+def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOptions | None = None) -> EngineResult:
+    """`run_session` without cyclic garbage collection (sea_hil/offline/gc_pause.py)."""
+    with gc_paused():
+        return run_session(cfg, mode, cycles, opts)
+
+
+def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, Any]:
+    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs)."""
+    return session_summary(run_engine(cfg, mode, cycles).data, mode)
+
+
+def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOptions | None = None) -> EngineResult:
+    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` overrides the config's
+    trigger placement and delay compensation (None: the config's)."""
+    if opts is not None:
+        cfg = with_options(cfg, opts)
+    # the measured cycles: the edge's trigger records no tracking after them (as `sea-hil run` sets it)
+    cfg = cfg.model_copy(update={"sim": cfg.sim.model_copy(update={"cycles": cycles})})
+    return _Session(cfg, mode, cycles).run()
 
 
 def _lead_in_stretch_samples(cfg: SeaHilConfig, traj: Any, period_ns: int) -> int:
@@ -86,69 +145,111 @@ def _lead_in_stretch_samples(cfg: SeaHilConfig, traj: Any, period_ns: int) -> in
     return int((lead_s - tc.lead_in_s) * 1e9) // period_ns + 1
 
 
-def with_options(cfg: SeaHilConfig, opts: EngineOptions) -> SeaHilConfig:
-    """`cfg` with the trigger placement and delay compensation of `opts` (what the nodes read from their config)."""
-    trig = cfg.trigger.model_copy(update={"placement": opts.placement, "edge_check": opts.edge_check,
-                                          "edge_model": opts.edge_model})
-    ctl = cfg.controller.model_copy(update={"compensation": opts.compensation})
-    return cfg.model_copy(update={"trigger": trig, "controller": ctl})
+class _Session:
+    """One offline session: the edge's and the controller's cores, the plant's state, the records."""
+
+    NODE_ID = 1
+
+    def __init__(self, cfg: SeaHilConfig, mode: str, cycles: int) -> None:
+        self.cfg, self.mode = cfg, mode
+        traj = make_trajectory(cfg.trajectory)
+        self.period_ns = period = int(round(1e9 / cfg.can.feedback_rate_hz))
+        self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
+        self.every_sample = cfg.trigger.placement == "edge" and cfg.trigger.edge_check == "sample"
+        duration_ns = int(round(traj.period_s * cycles * 1e9))
+        lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
+        # the controller stops at its first state after the cycles (lockstep runs until it does): lost states delay
+        # that by a few samples, a far start pose stretches the lead-in, re-anchors of the edge's trigger restart
+        # it; n_max is a safety cap only
+        self.n_max = 4 * ((lead_in_ns + duration_ns) // period + 20 * self.outer_every + 1000
+                          + _lead_in_stretch_samples(cfg, traj, period))
+        state_bytes = PAYLOAD_SIZE[MsgType.EVENT_STATE] if cfg.trigger.placement == "edge" else STATE_BYTES
+        self.rec = SessionRecords(Keys.from_config(cfg.zenoh), state_bytes)
+        self.now = 0
+        self.released: list[bytes] = []        # state payloads the uplink emulator has released (to the controller)
+        self.edge = EdgeCore(cfg, self.NODE_ID, mode=mode, state_sink=self.released.append,
+                             record_sink=lambda record: self.rec.tracking(record, self.now),
+                             stamp=lambda at_ns: -(-at_ns // period) * period,   # `LockstepEdgeSync.state_stamp`
+                             restart_possible=lambda timed_out: False, epoch=0, wall_ns=lambda: self.now)
+        self.controller = ControllerCore(cfg, mode, cycles=cycles)
+        self.newest = 0
+        self.p = limb_params(cfg.plant)
+        theta0 = tuple(cfg.plant.initial_theta_rad)
+        self.x = initial_state(theta0[0], theta0[1], 0.0, 0.0, self.p)
+        self.lsb = dbc_resolutions(cfg.can.fd)
+        self.dist = DisturbanceTable(cfg.disturbance, period, cfg.sim.substeps)
+        dl = DriveLimits.from_config(cfg.safety.drive)
+        self.drive_limits = (*dl.position_min_rad, *dl.position_max_rad, *dl.velocity_max_rad_s, *dl.spring_force_max_n)
+        kernel = compiled(make_session_steps)
+        self.jit = kernel is not None          # without numba the same body runs as plain Python (on lists)
+        self.steps = kernel if kernel is not None else make_session_steps()
+
+    def run(self) -> EngineResult:
+        cfg, edge, inner = self.cfg, self.edge, self.edge.inner
+        m = feedback_measurement(self.x, self.p, self.lsb)  # the feedback of the current sample, as the edge decodes it
+        saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
+        tab: Any = None
+        substeps, period, x = cfg.sim.substeps, self.period_ns, self.x
+        while k < self.n_max:
+            self.now = now = k * period
+            fb = Feedback(self.NODE_ID, k & 0xFF, (now // 1000) & 0xFFFF, (m[0], m[1]), (m[2], m[3]), (m[4], m[5]),
+                          (m[6], m[7]))
+            edge.accept(fb, 0)
+            edge.publish(fb)
+            edge.poll(now)
+            if not self._controller(now):
+                break
+            edge.take_downlink(now)
+            nxt = self._next_k(k)
+            if tab is None or nxt > self.dist.samples:
+                tab = self.dist.upto(nxt) if self.jit else self.dist.upto(nxt).tolist()
+            held = inner.deflection_m
+            x, m, n_sat, u1m, u2m, bad, inner.observer, faulted = self.steps(
+                x, k, nxt - k, period, substeps, held or (0.0, 0.0), inner.sliding, held is None, self.p,
+                inner._p, inner.gains, inner.observer, inner.period_s, inner._p.voltage_limit, tab, self.lsb,
+                self.drive_limits, faulted)
+            saturated += n_sat
+            u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
+            if bad >= 0:
+                raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * period * 1e-9:.3f} s)")
+            k = nxt
+        self.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
+        return EngineResult(SessionData(messages=self.rec.messages, complete=True), k, saturated, faulted,
+                            edge.envelope.rejected, edge.events)
+
+    def _controller(self, now: int) -> bool:
+        """The controller's core answers the states released by `now` (a state released after a newer one is
+        ignored, as the live controller's sequence check does); False when it has finished its cycles."""
+        released, self.released[:] = list(self.released), []
+        for data in released:
+            p = decode(data)
+            if p.seq <= self.newest:
+                continue
+            self.newest = p.seq
+            self.rec.state(p, now)   # type: ignore[arg-type]
+            ans = self.controller.on_state(p, _stamp, lambda: now)   # type: ignore[arg-type]
+            if ans is None:
+                return False
+            for _channel, msg in ans.messages:
+                self.rec.setpoint(decode(msg), now)   # type: ignore[arg-type]
+                self.edge.on_downlink(msg)
+            if ans.record is not None:
+                self.rec.tracking(json.loads(ans.record), now)
+        return True
+
+    def _next_k(self, k: int) -> int:
+        """The next sample after k at which something happens: an outer sample (every sample with the edge's
+        trigger checked at 1 kHz), or a delivery of either link."""
+        if self.every_sample:
+            return k + 1
+        nxt = min((k // self.outer_every + 1) * self.outer_every, self.n_max)
+        for due in (self.edge.publisher.uplink.next_due_ns(), self.edge.intake.pending.next_due_ns()):
+            if due is not None and due < nxt * self.period_ns:
+                nxt = max(k + 1, -(-due // self.period_ns))
+        return nxt
 
 
-def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
-               opts: EngineOptions | None = None) -> EngineResult:
-    """`run_session` without cyclic garbage collection (sea_hil/offline/gc_pause.py)."""
-    with gc_paused():
-        return run_session(cfg, mode, cycles, jit, opts)
+def _stamp(p: StatePayload) -> int:
+    """A state's arrival on the simulated clock: its header stamp (the release sample, `LockstepEdgeSync.state_stamp`)."""
+    return p.t_ns
 
-
-def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, Any]:
-    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs)."""
-    return session_summary(run_engine(cfg, mode, cycles).data, mode)
-
-
-def _prepare(cfg: SeaHilConfig, mode: str, cycles: int, jit: bool
-             ) -> tuple[_Env, State, Any, tuple, DisturbanceTable]:
-    """A session's parts, its plant's start state and parameters, the DBC resolutions and the disturbance table."""
-    p = limb_params(cfg.plant)
-    env = _Env(cfg, mode, cycles, jit)
-    theta0 = tuple(cfg.plant.initial_theta_rad)
-    x: State = initial_state(theta0[0], theta0[1], 0.0, 0.0, p)
-    return env, x, p, dbc_resolutions(cfg.can.fd), DisturbanceTable(cfg.disturbance, env.period_ns, cfg.sim.substeps)
-
-
-def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, jit: bool = True,
-                opts: EngineOptions | None = None) -> EngineResult:
-    """One lockstep-equivalent session of `cycles` measured cycles (after the lead-in); `opts` overrides the config's
-    trigger placement and delay compensation (None: the config's)."""
-    if opts is not None:
-        cfg = with_options(cfg, opts)
-    opts = EngineOptions.from_config(cfg)
-    env, x, p, lsb, dist = _prepare(cfg, mode, cycles, jit)
-    m = feedback_measurement(x, p, lsb)     # the feedback of the current sample, as the edge decodes it
-    tab: Any = None
-    if opts.placement == "edge":
-        env.state_bytes = env.rec.state_bytes = PAYLOAD_SIZE[MsgType.EVENT_STATE]
-    loop = SessionLoop(env, opts, cycles)
-    saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
-    while k < env.n_max:
-        now = k * env.period_ns
-        loop.edge_sample(k, ((m[0], m[1]), (m[2], m[3]), (m[4], m[5]), (m[6], m[7])))
-        if not loop.controller(now):
-            break
-        loop.take_downlink(now)
-        nxt = loop.next_k(k)
-        if tab is None or nxt > dist.samples:
-            tab = dist.upto(nxt) if env.jit else dist.upto(nxt).tolist()
-        held = env.inner.deflection_m
-        x, m, n_sat, u1m, u2m, bad, env.inner.observer, faulted = env.steps(
-            x, k, nxt - k, env.period_ns, cfg.sim.substeps, held or (0.0, 0.0), env.inner.sliding, held is None, p,
-            env.nominal, env.inner.gains, env.inner.observer, env.inner.period_s, env.nominal.voltage_limit, tab, lsb,
-            env.drive_limits, faulted)
-        saturated += n_sat
-        u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
-        if bad >= 0:
-            raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * env.period_ns * 1e-9:.3f} s)")
-        k = nxt
-    env.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
-    return EngineResult(SessionData(messages=env.rec.messages, complete=True), k, saturated, faulted,
-                        env.envelope.rejected, loop.edge)
