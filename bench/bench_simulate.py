@@ -19,7 +19,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 
 from benchlib import bench_args, emit, record  # noqa: E402
 from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
-from sea_hil.offline.closed_loop import make_inner_steps, simulate  # noqa: E402
+from sea_hil.offline.closed_loop import simulate  # noqa: E402
+from sea_hil.offline.drive_kernel import make_session_steps  # noqa: E402
 from sea_hil.jit import compiled  # noqa: E402
 
 BASELINE_CPU_S = 0.32  # per 10 s cycle before the numba kernel (pure Python, issue 6)
@@ -54,7 +55,7 @@ def main(argv: list[str] | None = None) -> int:
         os.environ["NUMBA_CACHE_DIR"] = cache_dir.name  # read when numba is first imported (inside the warm-up)
     cfg = load_config(args.config)
     warmup_s, cpu_s, duration_s = measure(cfg, args.mode, runs, jit=not args.no_jit)
-    kernel = None if args.no_jit else compiled(make_inner_steps)
+    kernel = None if args.no_jit else compiled(make_session_steps)
     stats = kernel.stats if kernel is not None else None
     med = statistics.median(cpu_s)
     path = "numba kernel" if kernel is not None else "plain Python"

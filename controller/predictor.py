@@ -23,7 +23,7 @@ from sea_hil.controller.inner import inner_step
 from sea_hil.controller.observer import OBSERVER_UNSTARTED
 from sea_hil.controller.smc import JointState
 from sea_hil.dynamics import deflections, rk4_core, saturate
-from sea_hil.jit import compiled
+from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import LimbParams, sea_geometry
 
 
@@ -71,6 +71,8 @@ class Predictor:
 
     def __post_init__(self) -> None:
         self.kernel = predict_kernel(self.jit)
+        self._call: Callable[..., tuple] | None = None    # the kernel's entry point for this predictor's types
+        self._gains = self.gains._replace(compensation=0)   # the nominal closed loop without the edge's observer
 
     def warm(self, theta_rad: tuple[float, float]) -> None:
         """Compile (or load from numba's disk cache) the kernel now, with one prediction from rest at `theta_rad`:
@@ -118,7 +120,7 @@ class Predictor:
             until_ns = sample_ns + MAX_HORIZON_NS
         p = self.params
         len1, len2, _, _, _, _ = sea_geometry(q1, q2, p)
-        x = (q1, q2, w1, w2, len1 - p.l_ref[0] - d1, len2 - p.l_ref[1] - d2, nv1, nv2)
+        x = tuple(map(float, (q1, q2, w1, w2, len1 - p.l_ref[0] - d1, len2 - p.l_ref[1] - d2, nv1, nv2)))
         k, k_end = sample_ns // self.period_ns, until_ns // self.period_ns
         if k_end <= k:
             return JointState((q1, q2), (w1, w2))
@@ -132,8 +134,12 @@ class Predictor:
             if k_next > k:
                 hv, hs = held if held is not None else ((0.0, 0.0), (0.0, 0.0))
                 # the nominal closed loop without the edge's observer (it has no model of the disturbance)
-                x = self.kernel(x, k, k_next - k, self.period_ns, self.substeps, hv, hs, held is None, p,
-                                self.gains._replace(compensation=0), OBSERVER_UNSTARTED, self.dt_s)
+                # plain floats and ints: the types the entry point was made for
+                args = (x, int(k), int(k_next - k), self.period_ns, self.substeps, (float(hv[0]), float(hv[1])),
+                        (float(hs[0]), float(hs[1])), held is None, p, self._gains, OBSERVER_UNSTARTED, self.dt_s)
+                if self._call is None:
+                    self._call = entry(self.kernel, args)
+                x = self._call(*args)
                 k = k_next
             if vx is not None:
                 held = (vx, s)

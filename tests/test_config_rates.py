@@ -66,4 +66,4 @@ def test_offline_loop_runs_at_the_session_rates() -> None:
                                  "can": {"feedback_rate_hz": 500.0}})
     res = simulate(cfg, "tt")
     assert res.t_s[1] - res.t_s[0] == pytest.approx(0.02) and len(res.t_s) == 10
-    assert len(res.voltage_v) == 100          # one inner step per drive feedback sample (500 Hz over 0.2 s)
+    assert res.inner_steps == 100          # one inner step per drive feedback sample (500 Hz over 0.2 s)

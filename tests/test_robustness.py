@@ -31,7 +31,7 @@ def _max_err(r: SimResult) -> float:
 
 
 def _saturated(r: SimResult) -> float:
-    return r.saturated_steps / len(r.voltage_v)
+    return r.saturated_steps / r.inner_steps
 
 
 def _check(spec: str | None, mismatch: str | None = None, bound: float = BOUND_RAD) -> dict[str, SimResult]:

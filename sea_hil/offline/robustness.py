@@ -57,7 +57,7 @@ def run_point(pt: Point, mode: str, config: str | None, overrides: dict[str, Any
             "rms_err_hip_rad": float(np.sqrt((err[:, 0] ** 2).mean())),
             "rms_err_knee_rad": float(np.sqrt((err[:, 1] ** 2).mean())),
             "transmissions": int(len(res.event_t_s)),
-            "saturated_fraction": res.saturated_steps / len(res.voltage_v)}
+            "saturated_fraction": res.saturated_steps / res.inner_steps}
 
 
 def run_grid(points: list[Point], config: str | None, overrides: dict[str, Any], settle_s: float = 0.0,

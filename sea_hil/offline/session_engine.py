@@ -29,7 +29,7 @@ from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
 from sea_hil.errors import SeaHilError
-from sea_hil.jit import compiled
+from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
 from sea_hil.offline.gc_pause import gc_paused
@@ -189,6 +189,7 @@ class _Session:
         m = feedback_measurement(self.x, self.p, self.lsb)  # the feedback of the current sample, as the edge decodes it
         saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
         tab: Any = None
+        steps: Any = None
         substeps, period, x = cfg.sim.substeps, self.period_ns, self.x
         while k < self.n_max:
             self.now = now = k * period
@@ -204,10 +205,11 @@ class _Session:
             if tab is None or nxt > self.dist.samples:
                 tab = self.dist.upto(nxt) if self.jit else self.dist.upto(nxt).tolist()
             held = inner.deflection_m
-            x, m, n_sat, u1m, u2m, bad, inner.observer, faulted = self.steps(
-                x, k, nxt - k, period, substeps, held or (0.0, 0.0), inner.sliding, held is None, self.p,
-                inner._p, inner.gains, inner.observer, inner.period_s, inner._p.voltage_limit, tab, self.lsb,
-                self.drive_limits, faulted)
+            args = (x, k, nxt - k, period, substeps, held or (0.0, 0.0), inner.sliding, held is None, self.p, inner._p,
+                    inner.gains, inner.observer, inner.period_s, inner._p.voltage_limit, tab, self.lsb,
+                    self.drive_limits, faulted)
+            steps = entry(self.steps, args) if steps is None else steps   # the types stay these (`entry`)
+            x, m, n_sat, u1m, u2m, bad, inner.observer, faulted = steps(*args)
             saturated += n_sat
             u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
             if bad >= 0:

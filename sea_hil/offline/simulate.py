@@ -32,7 +32,7 @@ def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:
         "events_by_reason": {TriggerReason(k).name: v for k, v in sorted(reasons.items())},
         "tracking": tracking_block(res.theta_rad, res.desired_rad),
         "inter_event_s": inter_event_block(res.event_t_s),
-        "max_abs_voltage_v": [float(v) for v in np.abs(res.voltage_v).max(axis=0)],
+        "max_abs_voltage_v": [float(v) for v in res.max_abs_voltage_v],
         "saturated_steps": res.saturated_steps,
         TIMING_KEY: {"cpu_s": cpu_s},
     }
