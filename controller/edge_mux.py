@@ -1,7 +1,7 @@
-"""One edge per bus serving all its limbs: `EdgeMux` reads the bus once and hands every frame to the edge core
-(`EdgeNode`, one per limb, not started as threads of their own) whose node id the CAN id names
-(`can_id >> CMD_BITS`). Each core keeps its own inner loop, link emulators, Zenoh keys and counters; their commands
-go out on the shared bus handle.
+"""One edge per bus serving all its limbs: `EdgeMux` reads the bus once and hands every frame to the limb's edge
+(`EdgeNode`, one per limb, not started as threads of their own: the I/O shell of that limb's `EdgeCore`) whose node
+id the CAN id names (`can_id >> CMD_BITS`). Each limb's core keeps its own inner loop, link emulators and counters,
+its shell its Zenoh keys; their commands go out on the shared bus handle.
 
 Frames for no served node: well-formed ones (another device's traffic on a shared bus) are counted
 (`foreign_frames`) and dropped, as a drive's acceptance filter would; malformed ones go to the first core, which

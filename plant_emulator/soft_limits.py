@@ -29,13 +29,25 @@ class DriveLimits(NamedTuple):
     def violations(self, theta_rad: tuple[float, float], omega_rad_s: tuple[float, float],
                    deflection_m: tuple[float, float], p: LimbParams) -> ErrorFlags:
         """Flags of every limit the sample violates (ErrorFlags(0) if none); NaN violates every limit."""
-        flags = ErrorFlags(0)
-        stiffness = (p.k1, p.k2)
-        for j in range(2):
-            if not self.position_min_rad[j] <= theta_rad[j] <= self.position_max_rad[j]:
-                flags |= ErrorFlags.POSITION_LIMIT
-            if not abs(omega_rad_s[j]) <= self.velocity_max_rad_s[j]:
-                flags |= ErrorFlags.VELOCITY_LIMIT
-            if not abs(stiffness[j] * deflection_m[j]) <= self.spring_force_max_n[j]:
-                flags |= ErrorFlags.FORCE_LIMIT
-        return flags
+        return ErrorFlags(limit_bits(self, theta_rad, omega_rad_s, deflection_m, p.k1, p.k2))
+
+
+POSITION_BIT, VELOCITY_BIT, FORCE_BIT = (int(ErrorFlags.POSITION_LIMIT), int(ErrorFlags.VELOCITY_LIMIT),
+                                         int(ErrorFlags.FORCE_LIMIT))
+
+
+def limit_bits(lim: DriveLimits, theta_rad: tuple[float, float], omega_rad_s: tuple[float, float],
+               deflection_m: tuple[float, float], k1: float, k2: float) -> int:
+    """The `ErrorFlags` bits of every limit of `lim` the sample violates (0 if none; NaN violates every limit), for
+    spring stiffnesses k1, k2. Plain float code: `DriverCore` runs it, and the offline engine's compiled drive
+    (sea_hil/offline/drive_kernel.py) compiles it."""
+    bits = 0
+    stiffness = (k1, k2)
+    for j in range(2):
+        if not lim.position_min_rad[j] <= theta_rad[j] <= lim.position_max_rad[j]:
+            bits |= POSITION_BIT
+        if not abs(omega_rad_s[j]) <= lim.velocity_max_rad_s[j]:
+            bits |= VELOCITY_BIT
+        if not abs(stiffness[j] * deflection_m[j]) <= lim.spring_force_max_n[j]:
+            bits |= FORCE_BIT
+    return bits

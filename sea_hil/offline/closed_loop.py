@@ -10,7 +10,6 @@ DBC-quantised feedback), compiled with numba when it is installed (sea_hil/jit.p
 """
 from __future__ import annotations
 
-import math
 from typing import Any
 from dataclasses import dataclass
 
@@ -29,8 +28,7 @@ from sea_hil.offline.drive_kernel import make_session_steps
 from sea_hil.offline.wire_quantiser import EXACT, dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
 from sea_hil.plant_emulator.dynamics import State, initial_state
-
-INF = math.inf
+from sea_hil.plant_emulator.soft_limits import DriveLimits
 
 
 @dataclass
@@ -75,7 +73,7 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
     kernel = compiled(make_session_steps) if jit else None
     steps = kernel if kernel is not None else make_session_steps()
     tab = dist_tab if kernel is not None else dist_tab.tolist()  # plain floats for the Python path
-    no_limits = (-INF, -INF, INF, INF, INF, INF, INF, INF)       # the closed loop has no drive soft limits
+    no_limits = DriveLimits()       # the closed loop has no drive soft limits
     u_max = (0.0, 0.0)
     call: Any = None
     theta: list[tuple[float, float]] = []

@@ -11,6 +11,7 @@ from sea_hil.controller.inner import inner_step
 from sea_hil.offline.wire_quantiser import quantised
 from sea_hil.plant_emulator.dynamics import State, deflections, is_finite, saturate
 from sea_hil.plant_emulator.integrator import rk4_core
+from sea_hil.plant_emulator.soft_limits import limit_bits
 
 
 def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float, float]
@@ -26,8 +27,8 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
                       limit_v, dist_tab, lsb, lim, faulted):
     """Sample k from the plant state x and its decoded feedback m: the edge's inner step on its nominal model pn
     (`inner_step`: disturbance observer state obs, backstepping voltage) -> quantised, saturated VOLTAGE_CMD -> one
-    driver period of the plant p (0 V once `faulted`: a drive soft limit `lim` = (theta min x2, theta max x2,
-    |omega| max x2, |spring force| max x2) was left, checked on every integrated sample as `DriverCore` does).
+    driver period of the plant p (0 V once `faulted`: a drive soft limit of `lim`, a `DriveLimits`, was left, checked
+    on every integrated sample with `DriverCore`'s own `limit_bits`).
     Returns (x, m of the new x, saturated, u1, u2 commanded, obs, faulted, finite); not finite: x diverged (m is
     then the old one)."""
     u1, u2, saturated, obs = inner_step(m, vx, s, hold_measured, obs, pn, gains, limit_v, dt_s)
@@ -44,10 +45,9 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
         x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
     if not is_finite(x):
         return x, m, saturated, c1, c2, obs, faulted, False
-    if not faulted:
+    if not faulted:         # `DriverCore`'s soft-limit check on the new sample
         d1, d2, _, _ = deflections(x, p)
-        faulted = not (lim[0] <= x[0] <= lim[2] and lim[1] <= x[1] <= lim[3] and abs(x[2]) <= lim[4]
-                       and abs(x[3]) <= lim[5] and abs(p.k1 * d1) <= lim[6] and abs(p.k2 * d2) <= lim[7])
+        faulted = limit_bits(lim, (x[0], x[1]), (x[2], x[3]), (d1, d2), p.k1, p.k2) != 0
     return x, feedback_measurement(x, p, lsb), saturated, c1, c2, obs, faulted, True
 
 
