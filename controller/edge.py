@@ -29,7 +29,7 @@ from typing import Any
 import can
 import zenoh
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_core import EdgeCore
 from sea_hil.errors import BusError, ConfigError
 from sea_hil.protocol.canbus import send_with_retry

@@ -24,20 +24,22 @@ from typing import Any, Protocol
 
 import can
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import MalformedFrame
-from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, ClearErrors, DriverState, Feedback, FeedbackAssembler,
-                                        Heartbeat, SeaCodec, VoltageCmd, unwrap_us)
-from sea_hil.protocol.can_frames import LIMIT_FLAGS, ErrorFlags
+from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import (FEEDBACK_PARTS, LIMIT_FLAGS, ClearErrors, DriverState, ErrorFlags, Feedback,
+                                         Heartbeat, VoltageCmd)
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payload_hot import encode_state
-from sea_hil.protocol.payloads import (PAYLOAD_SIZE, EventStatePayload, MsgType, PayloadCounters, SequenceTracker,
-                                       SeqVerdict, SetpointPayload, VoltagePayload, encode)
+from sea_hil.protocol.payloads import (PAYLOAD_SIZE, EventStatePayload, MsgType, PayloadCounters, SetpointPayload,
+                                       VoltagePayload, encode)
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.wire_size import estimate_wire_bytes
 from sea_hil.protocol.zsession import LinkedPublisher
 from sea_hil.stats.histogram import LogHistogram

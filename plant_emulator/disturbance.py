@@ -8,8 +8,7 @@ from typing import Callable
 
 import numpy as np
 
-from sea_hil.config import DisturbanceConfig
-from sea_hil.config.model import JointDisturbanceConfig
+from sea_hil.config.model import DisturbanceConfig, JointDisturbanceConfig
 
 JointTorque = Callable[[float], float]
 

@@ -8,7 +8,8 @@ import pytest
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.dynamics import initial_state
 from sea_hil.plant_emulator.integrator import advance
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import SeaHilError
 from sea_hil.mechanics import limb_params
 from sea_hil import jit

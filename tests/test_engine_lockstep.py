@@ -14,7 +14,7 @@ import pytest
 
 from paper_scheme import paper
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.report.session_summary import session_summary

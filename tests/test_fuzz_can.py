@@ -20,7 +20,7 @@ from sea_hil.controller.edge_core import EdgeCore, FreeRunning
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Feedback, SeaCodec, VoltageCmd, load_database
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
 from fuzz_budget import cases

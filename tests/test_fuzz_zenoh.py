@@ -19,7 +19,7 @@ from sea_hil.controller.remote import RemoteController
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.mechanics import limb_params
 from sea_hil.protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
                                SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)

@@ -8,7 +8,8 @@ import logging
 
 import pytest
 
-from sea_hil.config import LinkDirectionConfig, load_config
+from sea_hil.config.comms import LinkDirectionConfig
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_core import EdgeCounters, SetpointIntake
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.trajectory import make_trajectory

@@ -12,7 +12,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.closed_loop import simulate
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.offline.wire_quantiser import dbc_resolutions, quantised

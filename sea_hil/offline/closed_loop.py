@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController
@@ -27,7 +27,7 @@ from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import make_session_steps
 from sea_hil.offline.wire_quantiser import EXACT, dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
-from sea_hil.plant_emulator.dynamics import State, initial_state
+from sea_hil.dynamics import State, initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 
 

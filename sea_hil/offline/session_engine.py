@@ -23,11 +23,12 @@ import json
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_core import EdgeCore
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
+from sea_hil.dynamics import initial_state
 from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import limb_params
@@ -35,7 +36,6 @@ from sea_hil.offline.drive_kernel import feedback_measurement, make_session_step
 from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.wire_quantiser import dbc_resolutions
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
-from sea_hil.plant_emulator.dynamics import initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_frames import Feedback
 from sea_hil.protocol.keys import Keys
