@@ -15,6 +15,7 @@ t = -lead_in_s and the desired motion until t = 0 is the `LeadIn` from that meas
 """
 from __future__ import annotations
 
+import json
 import logging
 import time
 
@@ -129,7 +130,7 @@ class RemoteController(Node):
             pub.put(msg)
         self.sync.answered(p.seq, answer)
         if ans.record is not None:
-            self.event_pub.put(ans.record)
+            self.event_pub.put(json.dumps(ans.record).encode())
 
     def _stream_seq(self, p: StatePayload) -> int:
         """The sequence number of the state stream: `event_seq` (consecutive) with the trigger at the edge, else the

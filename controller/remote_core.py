@@ -11,7 +11,6 @@ trigger (`OuterController`; with the trigger at the edge every event state is an
 """
 from __future__ import annotations
 
-import json
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
@@ -32,7 +31,8 @@ from sea_hil.protocol.payloads import StatePayload, TriggerReason, VoltagePayloa
 class Answer:
     messages: list[tuple[str, bytes]]     # ("setpoint" | "voltage", encoded payload), in order
     setpoint: Setpoint | None
-    record: bytes | None                  # the tracking record (JSON), None with the trigger at the edge
+    record: dict[str, Any] | None         # the tracking record (the node publishes it as JSON), None with the
+                                          # trigger at the edge
 
 
 class ControllerCore:
@@ -102,8 +102,8 @@ class ControllerCore:
         self.states += 1
         record = None
         if not self.edge_trigger:      # with the trigger at the edge, the edge records every outer sample
-            record = json.dumps(tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
-                                                self.setpoint_seq if messages else 0)).encode()
+            record = tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
+                                     self.setpoint_seq if messages else 0)
         return Answer(messages, sp, record)
 
     def _anchor(self, p: StatePayload) -> None:

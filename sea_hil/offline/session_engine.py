@@ -19,7 +19,6 @@ the controller's last sample (a session also records the commands of its shut-do
 """
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from typing import Any
 
@@ -235,7 +234,7 @@ class _Session:
                 self.rec.setpoint(decode(msg), now)   # type: ignore[arg-type]
                 self.edge.on_downlink(msg)
             if ans.record is not None:
-                self.rec.tracking(json.loads(ans.record), now)
+                self.rec.tracking(ans.record, now)     # as the recorder decodes its JSON (floats round-trip)
         return True
 
     def _next_k(self, k: int) -> int:
