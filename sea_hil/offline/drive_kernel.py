@@ -1,8 +1,8 @@
 """One 1 kHz sample of the offline session: the edge's inner step on the DBC-quantised feedback, the VOLTAGE_CMD
-frame's quantisation and the drive's saturation, and one driver period of the plant (`DriverCore.step`'s float
-expressions and sub-steps, the drive soft limits). Plain float code: `make_session_steps` (the per-run kernel of the
-Python sample loop and of the predictor) and the whole-session kernel (`sea_hil.offline.session_kernel`) both run
-`edge_drive_sample`, compiled by numba (sea_hil/jit.py) or as plain Python."""
+frame's quantisation and the drive's saturation, and one driver period of the plant (`DriverCore.step`'s RK4
+sub-steps on `rk4_core`, its soft-limit check `limit_bits`). Plain float code: `make_session_steps` is the kernel of
+the offline session engine (between the samples at which the edge's and the controller's cores act) and of
+`simulate`, compiled by numba (sea_hil/jit.py) or run as plain Python."""
 from __future__ import annotations
 
 from typing import Any, Callable
