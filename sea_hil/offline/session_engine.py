@@ -121,8 +121,10 @@ def run_engine(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOption
 
 
 def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, Any]:
-    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs)."""
-    return session_summary(run_engine(cfg, mode, cycles).data, mode)
+    """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs), its messages built and
+    summarised without cyclic garbage collection too (sea_hil/offline/gc_pause.py)."""
+    with gc_paused():
+        return session_summary(run_session(cfg, mode, cycles).data, mode)
 
 
 def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOptions | None = None) -> EngineResult:
