@@ -82,7 +82,7 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
     ev_r: list[int] = []
     for j in range(n_outer):
         k0 = j * ratio
-        t = k0 * dt_ns * 1e-9        # integer-ns sample time, as the driver's and the offline session engine's
+        t = k0 * dt
         ds = traj.sample(t)
         seen = JointState((quantised(x[0], lsb[0]), quantised(x[1], lsb[0])),
                           (quantised(x[2], lsb[1]), quantised(x[3], lsb[1])))
@@ -102,6 +102,6 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
         u_max = (max(u_max[0], u1), max(u_max[1], u2))
         if bad_k >= 0:
             raise SeaHilError(f"simulation diverged at t = {bad_k * dt:.3f} s")
-    t_out = np.arange(n_outer) * (ratio * dt_ns) * 1e-9  # the sample times above
+    t_out = np.arange(n_outer) * ratio * dt  # = k0 * dt of each sample
     return SimResult(mode, duration_s, t_out, np.array(theta).reshape(-1, 2), np.array(desired).reshape(-1, 2),
                      u_max, n_inner, np.array(ev_t), np.array(ev_r, dtype=int), inner.saturated_steps)
