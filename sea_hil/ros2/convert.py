@@ -20,11 +20,10 @@ at that log time. In a lockstep recording the two agree for feedback and frames.
 """
 from __future__ import annotations
 
-import bisect
 import heapq
 import math
 import tomllib
-from collections.abc import Iterable, Iterator, Mapping
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
@@ -33,9 +32,11 @@ from sea_hil.errors import MalformedFrame, SeaHilError
 from sea_hil.mechanics import LimbParams, limb_params, sea_geometry
 from sea_hil.protocol.can_assembly import unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+from sea_hil.protocol.can_frames import Heartbeat
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, META_FINAL
 from sea_hil.recorder.reader import RecordedMessage, SessionData
+from sea_hil.ros2.diagnostics import counter_status, hardware_id, heartbeat_status
+from sea_hil.ros2.timeline import Limbs, NodeClock, StateClock, limb_of_key
 
 JOINT_STATE = "sensor_msgs/msg/JointState"
 CAN_FRAME = "can_msgs/msg/Frame"
@@ -48,9 +49,6 @@ JOINT_NAMES = ["hip", "knee"]
 CAN_FRAME_ID = "can"          # header.frame_id ros2_socketcan's receiver writes
 # foxglove.LogLevel (the recording's /log/*) -> rcl_interfaces/Log level
 LOG_LEVELS = {0: 20, 1: 10, 2: 20, 3: 30, 4: 40, 5: 50}
-DIAG_OK, DIAG_WARN, DIAG_ERROR = 0, 1, 2
-# a /stats counter whose name holds one of these and is > 0 makes its DiagnosticStatus WARN
-LOSS_MARKS = ("dropped", "lost", "rejected", "overruns", "missed", "errors", "failures")
 
 
 class BagMessage(NamedTuple):
@@ -96,118 +94,6 @@ def session_config(data: SessionData) -> SeaHilConfig | None:
         return load_config(overrides=tomllib.loads(raw.decode("utf-8")))
     except (SeaHilError, ValueError):
         return None
-
-
-@dataclass(frozen=True)
-class Limbs:
-    """Which limbs the recording holds and which CAN node id is whose (metadata `sea-hil.limbs`: name -> "node_id
-    bus"; without it, the limb names of the Zenoh keys, and every node to the one limb if there is one)."""
-    names: tuple[str, ...]
-    node_limb: Mapping[int, str]
-
-    @classmethod
-    def of(cls, data: SessionData) -> Limbs:
-        meta = data.metadata.get("sea-hil.limbs", {})
-        node_limb: dict[int, str] = {}
-        for name, spec in meta.items():
-            try:
-                node_limb[int(str(spec).split()[0])] = name
-            except (ValueError, IndexError):
-                continue
-        names = set(node_limb.values())
-        for topic in ("/zenoh/state", "/zenoh/setpoint", "/tracking"):
-            names.update(filter(None, (limb_of_key(m.payload.get("key")) for m in data.messages.get(topic, []))))
-        ordered = tuple(sorted(names))
-        if not node_limb and len(ordered) == 1:
-            nodes = {m.payload.get("node_id") for m in data.messages.get("/can/raw", [])}
-            node_limb = {n: ordered[0] for n in nodes if isinstance(n, int)}
-        return cls(ordered, node_limb)
-
-    def ns(self, limb: str | None) -> str:
-        """The topic namespace of `limb`: "" for a one-limb session (or an unknown limb), else `/<limb>`."""
-        return f"/{limb}" if limb and len(self.names) > 1 else ""
-
-    def of_node(self, node_id: Any) -> str | None:
-        return self.node_limb.get(node_id) if isinstance(node_id, int) else None
-
-
-def limb_of_key(key: Any) -> str | None:
-    """`sea/limb1/state` -> `limb1`."""
-    if not isinstance(key, str) or key.count("/") < 1:
-        return None
-    return key.rsplit("/", 2)[-2] or None
-
-
-class NodeClock:
-    """The drive's sample time at a log time: per node, the log times of its FEEDBACK_ANGLE (or CAN FD FEEDBACK)
-    messages and their `t_us`, unwrapped. A node before its first feedback (or none) falls back to the newest sample
-    time of any node at that log time (0 before any)."""
-
-    def __init__(self, feedback: Iterable[RecordedMessage]) -> None:
-        self._log: dict[int, list[int]] = {}
-        self._sample: dict[int, list[int]] = {}
-        full: dict[int, int] = {}
-        all_log: list[int] = []
-        all_max: list[int] = []
-        newest = 0
-        for m in feedback:
-            p = m.payload
-            node, t_us = p.get("node_id"), p.get("t_us")
-            if not isinstance(node, int) or not isinstance(t_us, int):
-                continue
-            try:
-                us = t_us if node not in full else unwrap_us(full[node], t_us)
-            except MalformedFrame:
-                continue
-            full[node] = us
-            self._log.setdefault(node, []).append(m.log_time_ns)
-            self._sample.setdefault(node, []).append(us * 1000)
-            newest = max(newest, us * 1000)
-            all_log.append(m.log_time_ns)
-            all_max.append(newest)
-        self._all_log, self._all_max = all_log, all_max
-
-    def at(self, node_id: Any, log_time_ns: int) -> int:
-        logs = self._log.get(node_id) if isinstance(node_id, int) else None
-        if logs:
-            i = bisect.bisect_right(logs, log_time_ns)
-            if i:
-                return self._sample[node_id][i - 1]
-        return self.newest(log_time_ns)
-
-    def newest(self, log_time_ns: int) -> int:
-        j = bisect.bisect_right(self._all_log, log_time_ns)
-        return self._all_max[j - 1] if j else 0
-
-
-class StateClock:
-    """Sample time of a state number of one limb: exact for the states recorded (`/zenoh/state`), else counted
-    from the nearest recorded state at the sample period (the edge's state numbers step by one per sample)."""
-
-    def __init__(self, states: Iterable[RecordedMessage], default_period_ns: int) -> None:
-        known: dict[int, int] = {}
-        for m in states:
-            seq, t = m.payload.get("seq"), m.payload.get("sample_t_ns")
-            if isinstance(seq, int) and isinstance(t, int):
-                known.setdefault(seq, t)
-        self._known = known
-        self._seqs = sorted(known)
-        period = default_period_ns
-        if len(self._seqs) >= 2 and self._seqs[-1] > self._seqs[0]:
-            span = known[self._seqs[-1]] - known[self._seqs[0]]
-            period = max(1, round(span / (self._seqs[-1] - self._seqs[0])))
-        self.period_ns = period
-
-    def at(self, seq: Any) -> int | None:
-        if not isinstance(seq, int):
-            return None
-        if seq in self._known:
-            return self._known[seq]
-        if not self._seqs:
-            return max(0, (seq - 1) * self.period_ns)
-        i = bisect.bisect_right(self._seqs, seq)
-        base = self._seqs[i - 1] if i else self._seqs[0]
-        return max(0, self._known[base] + (seq - base) * self.period_ns)
 
 
 @dataclass
@@ -286,17 +172,7 @@ class Converter:
                 not_heartbeat.add(can_id)
                 continue
             yield BagMessage(m.log_time_ns, "/diagnostics", DIAGNOSTICS,
-                             {"header": header(t), "status": [self._heartbeat_status(d, limb)]}, m.sequence)
-
-    def _heartbeat_status(self, hb: Heartbeat, limb: str | None) -> dict[str, Any]:
-        level = (DIAG_ERROR if hb.state in (DriverState.FAULT, DriverState.ESTOP)
-                 else DIAG_WARN if hb.flags else DIAG_OK)
-        flags = "|".join(f.name or "" for f in ErrorFlags if f & hb.flags) or "none"
-        values = {"state": hb.state.name, "error_flags": flags, "rejected_frames": hb.rejected_frames,
-                  "overruns": hb.overruns, "seq": hb.seq}
-        return {"level": level, "name": self._name(limb, f"driver{hb.node_id}"),
-                "message": f"{hb.state.name}, error flags {flags}", "hardware_id": f"sea-hil drive node {hb.node_id}",
-                "values": [{"key": k, "value": str(v)} for k, v in values.items()]}
+                             {"header": header(t), "status": [heartbeat_status(d, self._name(limb, f"driver{d.node_id}"))]}, m.sequence)
 
     def _name(self, limb: str | None, what: str) -> str:
         return f"{limb}/{what}" if limb and len(self.limbs.names) > 1 else what
@@ -411,8 +287,8 @@ class Converter:
             values = {k: v for k, v in p.items() if k not in ("node",)}
             yield BagMessage(m.log_time_ns, "/diagnostics", DIAGNOSTICS,
                              {"header": header(self.node_clock.newest(m.log_time_ns)),
-                              "status": [self._counter_status(self._name(limb, node), values,
-                                                              _hardware(p.get("node_id")))]},
+                              "status": [counter_status(self._name(limb, node), values,
+                                                              hardware_id(p.get("node_id")))]},
                              m.sequence)
 
     def final_diagnostics(self) -> Iterator[BagMessage]:
@@ -421,24 +297,4 @@ class Converter:
         if final:
             yield BagMessage(self.end_ns, "/diagnostics", DIAGNOSTICS,
                              {"header": header(self.node_clock.newest(self.end_ns)),
-                              "status": [self._counter_status("recorder", final, "")]})
-
-    @staticmethod
-    def _counter_status(name: str, values: Mapping[str, Any], hardware_id: str) -> dict[str, Any]:
-        losses = [k for k, v in values.items() if any(mark in k for mark in LOSS_MARKS) and _positive(v)]
-        return {"level": DIAG_WARN if losses else DIAG_OK, "name": name,
-                "message": f"nonzero: {', '.join(losses)}" if losses else "ok", "hardware_id": hardware_id,
-                "values": [{"key": str(k), "value": "" if v is None else str(v)} for k, v in values.items()]}
-
-
-def _hardware(node_id: Any) -> str:
-    return f"sea-hil drive node {node_id}" if isinstance(node_id, int) else ""
-
-
-def _positive(v: Any) -> bool:
-    if isinstance(v, str):
-        try:
-            v = float(v)
-        except ValueError:
-            return False
-    return isinstance(v, (int, float)) and not isinstance(v, bool) and v > 0
+                              "status": [counter_status("recorder", final, "")]})
