@@ -3,6 +3,9 @@ stamps are the drive's sample time) and on bad input (truncated, foreign, not MC
 while writing: one line, exit 2, nothing left behind). Recordings made here with the recorder's own taps."""
 from __future__ import annotations
 
+import json
+import subprocess
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -19,6 +22,7 @@ from sea_hil.recorder.writer import SessionRecorder
 
 from ros2_bag import export, t_ns
 
+REPO = Path(__file__).resolve().parent.parent
 T0_NS = 1_700_000_000_000_000_000
 
 
@@ -128,3 +132,15 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path: Path, capsys, monkeypa
     _one_line_error(capsys, "disk full (simulated)")
     _nothing_left(tmp_path, "b")
     assert len(calls) == 10
+
+
+def test_the_bench_script_times_the_cli_on_a_recording(tmp_path: Path):
+    _wall_clock_recording(tmp_path / "rt.mcap", False)
+    out = tmp_path / "bench.json"
+    proc = subprocess.run([sys.executable, str(REPO / "bench" / "bench_ros2_export.py"), "--quick", "--session",
+                           str(tmp_path / "rt.mcap"), "--json", str(out)], cwd=REPO, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    (rec,) = json.loads(out.read_text())
+    assert (rec["figure"], rec["runs"], rec["unit"]) == ("ros2", 1, "s") and rec["median"] > 0
+    assert rec["command"].startswith("python bench/bench_ros2_export.py") and rec["details"][0]["bag_bytes"] > 0
