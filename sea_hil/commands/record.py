@@ -6,6 +6,7 @@ import signal
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.config import SeaHilConfig
 from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.recorder.clock import TIME_BASES
 
@@ -23,6 +24,17 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.set_defaults(func=_main)
 
 
+def as_observer(cfg: SeaHilConfig, mode: str | None) -> SeaHilConfig:
+    """The recorder that only connects (no `--listen`, no `--mode`) joins as a Zenoh client of the node it connects
+    to. Two peers forward each other only their own publications, so a recorder peer on the edge's endpoint never
+    saw the controller's setpoints (issue 32); a peer routes everything its clients subscribe to (and so does a
+    router). docs/topologies.md."""
+    z = cfg.zenoh
+    if mode is not None or z.mode != "peer" or not z.connect or z.listen:
+        return cfg
+    return cfg.model_copy(update={"zenoh": z.model_copy(update={"mode": "client"})})
+
+
 def _main(args: argparse.Namespace) -> int:
     import os
     import sys
@@ -31,7 +43,7 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.recorder.writer import SessionRecorder
     from sea_hil.session.builder import SessionBuilder
     # started by `edge`/`controller --foxglove`: a Zenoh client of that node, ended with it
-    cfg = config_from_args(args, live_overrides(args, live_child_overrides()))
+    cfg = as_observer(config_from_args(args, live_overrides(args, live_child_overrides())), args.mode)
     if args.out is None and not cfg.live.enabled:
         raise ConfigError("record needs --out FILE.mcap (or --foxglove for a live view without a file)")
     out = args.out if args.out is not None else Path(os.devnull)
