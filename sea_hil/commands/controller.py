@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from sea_hil.commands.node_cli import add_node_args, node_session
+from sea_hil.commands.node_cli import add_node_args, node_session, print_result
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,4 +21,6 @@ def _main(args: argparse.Namespace) -> int:
     with node_session(args, "controller") as (b, _cfg, session):
         node = b.controller(session, args.controller, inner=args.inner, cycles=args.cycles)
         done = b.serve(node, args.timeout)
+        counters = node.stats_dict()
+    print_result(args, "controller", counters, done)
     return 0 if done else 3

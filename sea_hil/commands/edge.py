@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import argparse
 
-from sea_hil.commands.node_cli import add_node_args, node_session, raise_node
+from sea_hil.commands.node_cli import add_node_args, node_session, print_result, raise_node
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -21,4 +21,6 @@ def _main(args: argparse.Namespace) -> int:
         node = b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller)
         raise_node(args, node, cfg, "edge")
         b.serve(node)
+        counters = node.stats_dict()
+    print_result(args, "edge", counters, True)
     return 0

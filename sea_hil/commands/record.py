@@ -4,8 +4,10 @@ from __future__ import annotations
 import argparse
 import signal
 from pathlib import Path
+from typing import Any
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
+from sea_hil.commands.node_cli import add_json_arg
 from sea_hil.config import SeaHilConfig
 from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.recorder.clock import TIME_BASES
@@ -21,6 +23,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     add_zenoh_args(p)
     add_live_args(p)
     add_config_args(p)
+    add_json_arg(p)
     p.set_defaults(func=_main)
 
 
@@ -62,5 +65,26 @@ def _main(args: argparse.Namespace) -> int:
         rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
         node = b.recorder(rec, session, bus, time_base=args.time_base)
         b.callback(lambda: rec.close(final_stats=node.counters()))   # after the node has stopped its taps
+        # subscribed: from here on the recorder receives what is routed to it (a topology's start-up waits for it)
+        print(f"sea-hil record: recording {cfg.zenoh.prefix}/** to {out}", file=sys.stderr, flush=True)
         b.serve(node, args.duration, signals=(signal.SIGINT, signal.SIGTERM))
+        counters = node.counters()
+    print_record_result(args, out if args.out is not None else None, counters)
     return 0
+
+
+def print_record_result(args: argparse.Namespace, out: Path | None, counters: dict[str, Any]) -> None:
+    """The recorder's own result: its counters (from the file's final record, the writer's included) and whether
+    the file is complete against the nodes' counters (`sea_hil.report.completeness`)."""
+    from sea_hil.recorder.reader import read_session
+    from sea_hil.report.completeness import completeness_block
+    from sea_hil.report.node_summary import node_summary, print_node_summary
+    completeness = None
+    if out is not None:
+        data = read_session(out)
+        final = data.metadata.get("sea-hil.final", {})
+        counters = {**counters, **{k: int(v) for k, v in final.items() if v.lstrip("-").isdigit()}}
+        completeness = completeness_block(data)
+    summary = node_summary("recorder", counters, finished=True, completeness=completeness,
+                           recording=None if out is None else str(out))
+    print_node_summary(summary, as_json=args.json, command="record")
