@@ -131,7 +131,13 @@ def _if_recorded(comp: dict[str, Any], channel: str, msgs: int, size: int) -> st
     c = (comp.get("channels") or {}).get(channel, {})
     if c.get("status") == "unverified" and not c.get("recorded"):
         return NOT_RECORDED
+    if c.get("status") == "incomplete":
+        return f"{msgs} / {size} (incomplete: {c['missing']} of {c['expected']} messages not recorded)"
     return f"{msgs} / {size}"
+
+
+def _or_not_recorded(present: bool, text: str) -> str:
+    return text if present else NOT_RECORDED
 
 
 def _latency(lat: dict[str, Any]) -> str:
@@ -154,6 +160,7 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     tx = summary["transmissions"]
     lat = summary["timing"]["latency_us"]
     comp = summary.get("completeness") or {}
+    tracked = bool(data.messages.get("/tracking"))   # the controller's records of the tracking (none: no figure)
     lines = ["# sea-hil session report", "",
              f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
              f"file complete: {data.complete}, messages: {data.message_count}", "",
@@ -161,13 +168,18 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
              f"| downlink messages / bytes | {_if_recorded(comp, 'downlink', tx['downlink_msgs'], tx['downlink_bytes'])} |",
              f"| uplink messages / bytes | {_if_recorded(comp, 'state', tx['uplink_msgs'], tx['uplink_bytes'])} |",
              f"| total link messages / bytes (up + down) | {tx['total_msgs']} / {tx['total_bytes']} |",
-             f"| max abs tracking error hip / knee [rad] | {summary['tracking']['max_abs_error_rad'][0]:.5f} / "
-             f"{summary['tracking']['max_abs_error_rad'][1]:.5f} |",
-             f"| rms tracking error hip / knee [rad] | {summary['tracking']['rms_error_rad'][0]:.5f} / "
-             f"{summary['tracking']['rms_error_rad'][1]:.5f} |",
-             f"| inter-event min / median / max [s] | {summary['inter_event_s']['min']:.3f} / "
-             f"{summary['inter_event_s']['median']:.3f} / {summary['inter_event_s']['max']:.3f} |",
-             f"| max abs voltage [V] | {summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f} |",
+             f"| max abs tracking error hip / knee [rad] | " + _or_not_recorded(
+                 tracked, f"{summary['tracking']['max_abs_error_rad'][0]:.5f} / "
+                          f"{summary['tracking']['max_abs_error_rad'][1]:.5f}") + " |",
+             f"| rms tracking error hip / knee [rad] | " + _or_not_recorded(
+                 tracked, f"{summary['tracking']['rms_error_rad'][0]:.5f} / "
+                          f"{summary['tracking']['rms_error_rad'][1]:.5f}") + " |",
+             f"| inter-event min / median / max [s] | " + _or_not_recorded(
+                 tracked, f"{summary['inter_event_s']['min']:.3f} / {summary['inter_event_s']['median']:.3f} / "
+                          f"{summary['inter_event_s']['max']:.3f}") + " |",
+             f"| max abs voltage [V] | " + _or_not_recorded(
+                 bool(data.messages.get("/can/command")),
+                 f"{summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f}") + " |",
              f"| closed-loop latency p50 / p99 / max [us] | {_latency(lat)} |",
              *_lead_in_rows(summary),
              *_limb_rows(summary),
