@@ -30,3 +30,33 @@ def test_a_controller_alone_prints_its_table_and_json() -> None:
     jsonschema.validate(summary, NODE_SUMMARY_SCHEMA)
     assert summary["node"] == "controller" and not summary["finished"]
     assert summary["counters"]["states_handled"] == 0 and "latency_us" not in summary
+
+
+def test_sea_hil_router_routes_between_two_clients() -> None:
+    """`sea-hil router` (zenoh-python's router mode; docs/topologies.md): two clients of it reach each other."""
+    import threading
+
+    from sea_hil.protocol.zsession import make_config, open_session
+    from sea_hil.session.processes import end_process
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    proc = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "router", "--listen", ep], stdin=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, text=True)
+    try:
+        assert proc.stderr is not None and proc.stderr.readline().startswith("sea-hil router: listening on")
+        got = threading.Event()
+        a = open_session(make_config(mode="client", connect=[ep]))
+        b = open_session(make_config(mode="client", connect=[ep]))
+        try:
+            sub = a.declare_subscriber("sea/test/**", lambda s: got.set())
+            pub = b.declare_publisher("sea/test/x")
+            for _ in range(100):     # until the subscription has reached the router: each put is a new chance
+                pub.put(b"x")
+                if got.wait(0.1):
+                    break
+            assert got.is_set()
+            sub.undeclare()
+        finally:
+            b.close()
+            a.close()
+    finally:
+        assert end_process(proc, timeout_s=30) == 0

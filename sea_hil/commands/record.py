@@ -46,7 +46,8 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.recorder.writer import SessionRecorder
     from sea_hil.session.builder import SessionBuilder
     # started by `edge`/`controller --foxglove`: a Zenoh client of that node, ended with it
-    cfg = as_observer(config_from_args(args, live_overrides(args, live_child_overrides())), args.mode)
+    child = live_child_overrides()    # the live view of `edge`/`controller --foxglove`: that node prints the result
+    cfg = as_observer(config_from_args(args, live_overrides(args, child)), args.mode)
     if args.out is None and not cfg.live.enabled:
         raise ConfigError("record needs --out FILE.mcap (or --foxglove for a live view without a file)")
     out = args.out if args.out is not None else Path(os.devnull)
@@ -69,7 +70,8 @@ def _main(args: argparse.Namespace) -> int:
         print(f"sea-hil record: recording {cfg.zenoh.prefix}/** to {out}", file=sys.stderr, flush=True)
         b.serve(node, args.duration, signals=(signal.SIGINT, signal.SIGTERM))
         counters = node.counters()
-    print_record_result(args, out if args.out is not None else None, counters)
+    if not child:
+        print_record_result(args, out if args.out is not None else None, counters)
     return 0
 
 
