@@ -168,16 +168,16 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
              f"| downlink messages / bytes | {_if_recorded(comp, 'downlink', tx['downlink_msgs'], tx['downlink_bytes'])} |",
              f"| uplink messages / bytes | {_if_recorded(comp, 'state', tx['uplink_msgs'], tx['uplink_bytes'])} |",
              f"| total link messages / bytes (up + down) | {tx['total_msgs']} / {tx['total_bytes']} |",
-             f"| max abs tracking error hip / knee [rad] | " + _or_not_recorded(
+             "| max abs tracking error hip / knee [rad] | " + _or_not_recorded(
                  tracked, f"{summary['tracking']['max_abs_error_rad'][0]:.5f} / "
                           f"{summary['tracking']['max_abs_error_rad'][1]:.5f}") + " |",
-             f"| rms tracking error hip / knee [rad] | " + _or_not_recorded(
+             "| rms tracking error hip / knee [rad] | " + _or_not_recorded(
                  tracked, f"{summary['tracking']['rms_error_rad'][0]:.5f} / "
                           f"{summary['tracking']['rms_error_rad'][1]:.5f}") + " |",
-             f"| inter-event min / median / max [s] | " + _or_not_recorded(
+             "| inter-event min / median / max [s] | " + _or_not_recorded(
                  tracked, f"{summary['inter_event_s']['min']:.3f} / {summary['inter_event_s']['median']:.3f} / "
                           f"{summary['inter_event_s']['max']:.3f}") + " |",
-             f"| max abs voltage [V] | " + _or_not_recorded(
+             "| max abs voltage [V] | " + _or_not_recorded(
                  bool(data.messages.get("/can/command")),
                  f"{summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f}") + " |",
              f"| closed-loop latency p50 / p99 / max [us] | {_latency(lat)} |",
