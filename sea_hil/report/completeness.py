@@ -17,6 +17,7 @@ fields a verdict reads; `complete` is true only when both are empty. Every count
 """
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 from sea_hil.recorder.reader import SessionData
@@ -110,7 +111,7 @@ def completeness_block(data: SessionData) -> dict[str, Any]:
             "never_seen": never, "can_frames_lost": lost, "recorder_dropped": _int(meta, "dropped") or 0}
 
 
-def completeness_lines(block: dict[str, Any]) -> list[str]:
+def completeness_lines(block: Mapping[str, Any]) -> list[str]:
     """One line per channel that is not complete (empty when the recording is complete): for tables and warnings."""
     out = []
     for name, c in block.get("channels", {}).items():
