@@ -1,6 +1,7 @@
 """Is a recording complete? Each recorded channel against the counters the nodes published themselves (issue 32).
 
-The edge's and the controller's final `/stats` records say how much they sent: states published (`uplink_msgs`),
+The edge's and the controller's final `/stats` records say how much they sent: states published (`uplink_msgs` less
+the `uplink_pending` an emulated link still held at the end),
 downlink messages sent (`setpoints_sent`, setpoints and voltages share one sequence), VOLTAGE_CMD frames sent
 (`commands_sent` + `arrival_commands`); the recorder's own final record (`sea-hil.final` metadata) says how many CAN
 frames it saw go missing (`can_frames_missed`, from the frames' rolling sequence numbers) and how many records its
@@ -62,11 +63,14 @@ def final_records(data: SessionData) -> dict[str, list[dict[str, Any]]]:
     return out
 
 
-def _channel(recorded: int, finals: list[dict[str, Any]], keys: tuple[str, ...], source: str) -> dict[str, Any]:
-    """One channel: `recorded` against the sum of `keys` over the node's final records (None: none recorded)."""
+def _channel(recorded: int, finals: list[dict[str, Any]], keys: tuple[str, ...], source: str,
+             minus: tuple[str, ...] = ()) -> dict[str, Any]:
+    """One channel: `recorded` against the sum of `keys` less `minus` over the node's final records (None: none
+    recorded)."""
     if not finals:
         return {"status": UNVERIFIED, "expected": None, "recorded": recorded, "missing": None, "source": source}
-    expected = int(sum(int(f.get(k, 0)) for f in finals for k in keys))
+    expected = int(sum(int(f.get(k, 0)) for f in finals for k in keys)
+                   - sum(int(f.get(k, 0)) for f in finals for k in minus))
     out = {"status": COMPLETE if recorded >= expected else INCOMPLETE, "expected": expected, "recorded": recorded,
            "missing": max(expected - recorded, 0), "source": source}
     if recorded > expected:
@@ -85,7 +89,9 @@ def completeness_block(data: SessionData) -> dict[str, Any]:
     edge, ctrl = finals.get("edge", []), finals.get("controller", [])
     meta = data.metadata.get("sea-hil.final", {})
     channels = {
-        "state": _channel(_unique_count(data, "/zenoh/state"), edge, ("uplink_msgs",), "edge uplink_msgs"),
+        # uplink_msgs counts the states the link emulator kept, also those still held in its delay queue at the end
+        "state": _channel(_unique_count(data, "/zenoh/state"), edge, ("uplink_msgs",),
+                          "edge uplink_msgs - uplink_pending", minus=("uplink_pending",)),
         "downlink": _channel(_unique_count(data, "/zenoh/setpoint") + _unique_count(data, "/zenoh/voltage"), ctrl,
                              ("setpoints_sent",), "controller setpoints_sent"),
     }
