@@ -64,3 +64,15 @@ def test_can_frames_lost_on_the_bus_are_counted_against_the_recording() -> None:
     block = completeness_block(data)
     assert block["can_frames_lost"] == 7 and "can_frames" in block["incomplete"]
     assert block["channels"]["can_frames"]["missing"] == 7 and block["channels"]["can_frames"]["expected"] == 1007
+
+
+def test_a_cut_off_recording_checked_against_the_nodes_own_summaries() -> None:
+    """The edge's and controller's final records never reached the recorder; their `--json` results from their
+    hosts (`sea-hil report --node-summary`) say how much it missed."""
+    data = _session(20, 170, range(1, 60), {20, 30})
+    block = completeness_block(data, {"edge": {"uplink_msgs": 175, "uplink_pending": 0},
+                                      "controller": {"setpoints_sent": 3}})
+    jsonschema.validate(block, COMPLETENESS_SCHEMA)
+    assert block["incomplete"] == ["state", "downlink"] and block["unverified"] == []
+    assert (block["channels"]["state"]["missing"], block["channels"]["downlink"]["missing"]) == (175 - 59, 1)
+    assert block["counters_from_node_summaries"] == ["controller", "edge"] and not block["complete"]

@@ -25,6 +25,7 @@ import pytest
 
 from test_udp_multicast import require_netns
 
+from sea_hil.cli import main
 from sea_hil.config import load_config
 from sea_hil.report.node_summary import NODE_SUMMARY_SCHEMA
 from sea_hil.report.summary import deterministic as summary_deterministic
@@ -148,3 +149,10 @@ def test_readme_peer_to_peer_topology_records_every_channel(short_config: Path, 
     assert missing["incomplete"] == ["state"] and missing["unverified"] == ["downlink"], missing
     assert missing["channels"]["state"]["missing"] == edge["counters"]["uplink_msgs"]
     assert missing["never_seen"] == ["controller final stats"]
+    # ... and with the controller's own --json result from its host, how much of the downlink it lacks
+    (tmp_path / "controller.json").write_text(report["stdout"]["controller"], encoding="utf-8")
+    assert main(["report", str(out / "late.mcap"), "--out", str(tmp_path / "late"), "--json",
+                 "--node-summary", str(tmp_path / "controller.json")]) == 0
+    checked = json.loads((tmp_path / "late" / "summary.json").read_text())["completeness"]
+    assert checked["incomplete"] == ["state", "downlink"] and checked["unverified"] == [], checked
+    assert checked["channels"]["downlink"]["missing"] == ctrl["counters"]["setpoints_sent"]

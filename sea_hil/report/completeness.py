@@ -11,6 +11,7 @@ writer dropped. `completeness_block` compares them with what the file holds, cha
 - `incomplete`: fewer recorded than sent (a recorder started late, cut off, or a lossy path): `missing` says how many;
 - `unverified`: the node's final record is not in the file (its node never finished, or the recorder stopped first,
   or never received that node: a recorder that was not routed the controller's keys), so nothing can be compared;
+  (given the node's own `--json` summary from its host, `sea-hil report --node-summary`, the check runs against it);
 - `not recorded`: the recording has no CAN tap (`sea-hil record` without `--can`): a deployment choice, not a loss.
 
 `incomplete` lists the channels with a measured shortfall and `unverified` those that could not be checked, the
@@ -47,6 +48,7 @@ COMPLETENESS_SCHEMA: dict[str, Any] = {
         "never_seen": {"type": "array", "items": {"type": "string"}},
         "can_frames_lost": _MAYBE_COUNT,
         "recorder_dropped": _COUNT,
+        "counters_from_node_summaries": {"type": "array", "items": {"type": "string"}},
     }}
 
 
@@ -83,9 +85,15 @@ def _int(meta: dict[str, str], key: str) -> int | None:
     return int(value) if value is not None and value.lstrip("-").isdigit() else None
 
 
-def completeness_block(data: SessionData) -> dict[str, Any]:
-    """The `completeness` block of summary.json (module docstring)."""
+def completeness_block(data: SessionData, node_counters: Mapping[str, Mapping[str, Any]] | None = None
+                       ) -> dict[str, Any]:
+    """The `completeness` block of summary.json (module docstring). `node_counters` (node kind -> counters, e.g. a
+    node's `--json` summary saved on its host: `sea-hil report --node-summary`) stand in for a final record the
+    file lacks, so a recorder cut off before the edge's final statistics still says how much it missed."""
     finals = final_records(data)
+    supplied = sorted(k for k in (node_counters or {}) if not finals.get(k))
+    for kind in supplied:
+        finals[kind] = [dict((node_counters or {})[kind])]
     edge, ctrl = finals.get("edge", []), finals.get("controller", [])
     meta = data.metadata.get("sea-hil.final", {})
     channels = {
@@ -108,12 +116,13 @@ def completeness_block(data: SessionData) -> dict[str, Any]:
         channels["can_frames"] = {"status": INCOMPLETE, "expected": (_int(meta, "can_frames") or 0) + lost,
                                   "recorded": _int(meta, "can_frames") or 0, "missing": lost,
                                   "source": "recorder can_frames_missed (sequence gaps)"}
-    never = [f"{node} final stats" for node in NODES if not finals.get(node)]
+    never = [f"{node} final stats" for node in NODES if not finals.get(node) or node in supplied]
     incomplete = [name for name, c in channels.items() if c["status"] == INCOMPLETE]
     unverified = [name for name, c in channels.items() if c["status"] == UNVERIFIED]
     return {"complete": not incomplete and not unverified and not never, "incomplete": incomplete,
             "unverified": unverified, "channels": channels,
-            "final_records": {node: len(recs) for node, recs in sorted(finals.items())},
+            "final_records": {node: len(recs) for node, recs in sorted(finals.items()) if node not in supplied},
+            **({"counters_from_node_summaries": supplied} if supplied else {}),
             "never_seen": never, "can_frames_lost": lost, "recorder_dropped": _int(meta, "dropped") or 0}
 
 

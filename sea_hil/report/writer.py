@@ -189,11 +189,13 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     return "\n".join(lines)
 
 
-def run_report(path: Path, out: Path) -> dict[str, Any]:
+def run_report(path: Path, out: Path, node_counters: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """Figures, summary.json and report.md of a recording; `node_counters` (node kind -> its counters, from the
+    nodes' `--json` summaries) complete the completeness check where the file lacks a node's final record."""
     data = read_session(path)
     session = data.metadata.get("sea-hil.session", {})
     summary = session_summary(data, session.get("controller", "et"))
-    summary["completeness"] = completeness_block(data)
+    summary["completeness"] = completeness_block(data, node_counters)
     write_report_figures(data, out)
     write_summary(out / "summary.json", summary)
     (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")
