@@ -60,3 +60,16 @@ def test_sea_hil_router_routes_between_two_clients() -> None:
             a.close()
     finally:
         assert end_process(proc, timeout_s=30) == 0
+
+
+def test_a_recorder_that_only_connects_joins_as_a_client() -> None:
+    """Two zenoh 1.10 peers forward each other only their own publications (docs/topologies.md): a recorder on the
+    edge's endpoint is its client, unless it listens or --mode says otherwise."""
+    from sea_hil.commands.record import as_observer
+    from sea_hil.config import load_config
+    connect = {"zenoh": {"connect": ["tcp/127.0.0.1:7447"]}}
+    assert as_observer(load_config(overrides=connect), None).zenoh.mode == "client"
+    assert as_observer(load_config(overrides=connect), "peer").zenoh.mode == "peer"
+    both = {"zenoh": {"connect": ["tcp/127.0.0.1:7447"], "listen": ["tcp/127.0.0.1:7448"]}}
+    assert as_observer(load_config(overrides=both), None).zenoh.mode == "peer"
+    assert as_observer(load_config(), None).zenoh.mode == "peer"
