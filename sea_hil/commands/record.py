@@ -78,12 +78,11 @@ def _main(args: argparse.Namespace) -> int:
 def print_record_result(args: argparse.Namespace, out: Path | None, counters: dict[str, Any]) -> None:
     """The recorder's own result: its counters (from the file's final record, the writer's included) and whether
     the file is complete against the nodes' counters (`sea_hil.report.completeness`)."""
-    from sea_hil.recorder.reader import read_session
-    from sea_hil.report.completeness import completeness_block
+    from sea_hil.report.completeness import completeness_block, read_for_completeness
     from sea_hil.report.node_summary import node_summary, print_node_summary
     completeness = None
     if out is not None:
-        data = read_session(out)
+        data = read_for_completeness(out)
         final = data.metadata.get("sea-hil.final", {})
         counters = {**counters, **{k: int(v) for k, v in final.items() if v.lstrip("-").isdigit()}}
         completeness = completeness_block(data)

@@ -22,7 +22,7 @@ from __future__ import annotations
 from collections.abc import Mapping
 from typing import Any
 
-from sea_hil.recorder.reader import SessionData
+from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
 
 COMPLETE, INCOMPLETE, UNVERIFIED, NOT_RECORDED = "complete", "incomplete", "unverified", "not recorded"
 STATUSES = (COMPLETE, INCOMPLETE, UNVERIFIED, NOT_RECORDED)
@@ -50,6 +50,23 @@ COMPLETENESS_SCHEMA: dict[str, Any] = {
         "recorder_dropped": _COUNT,
         "counters_from_node_summaries": {"type": "array", "items": {"type": "string"}},
     }}
+
+
+COUNTED = ("/zenoh/state", "/zenoh/setpoint", "/zenoh/voltage", "/can/command", "/stats")   # what the check reads
+
+
+def read_for_completeness(path: Any) -> SessionData:
+    """The recording with only what `completeness_block` reads (`COUNTED`, and one `/can/raw` message to tell a CAN
+    tap): a pass in constant memory but for those topics (the recorder's result at its end; CAN feedback and raw
+    frames are most of a file)."""
+    kept: dict[str, list[RecordedMessage]] = {}
+
+    def keep(topic: str, msg: RecordedMessage) -> None:
+        if topic in COUNTED or (topic == "/can/raw" and not kept.get(topic)):
+            kept.setdefault(topic, []).append(msg)
+    data = read_session(path, on_message=keep)
+    data.messages.update(kept)
+    return data
 
 
 def _unique_count(data: SessionData, topic: str) -> int:
