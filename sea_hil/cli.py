@@ -13,8 +13,8 @@ from typing import NoReturn
 
 from sea_hil.errors import SeaHilError, Terminated
 
-COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "export", "sweep", "robustness",
-            "certs")
+COMMANDS = ("simulate", "plant", "edge", "controller", "record", "router", "run", "report", "export", "sweep",
+            "robustness", "certs")
 
 
 class OneLineParser(argparse.ArgumentParser):

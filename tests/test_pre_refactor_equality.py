@@ -163,6 +163,8 @@ def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, li
     jsonschema.validate(new, SUMMARY_SCHEMA)
     assert set(new["timing"]) == timing_keys and set(new["timing"]["edge"]) == edge_timing_keys
     got = deterministic(new)
+    completeness = got.pop("completeness")   # issue 32: the recording against the nodes' counters (new; all there)
+    assert completeness["complete"], completeness
     assert {k: got.pop(k) for k in SESSION_ADDED} == one_limb_blocks(got)
     assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
     diff = {k: (got[k], expected[k]) for k in expected if got[k] != expected[k]}

@@ -22,6 +22,9 @@ def add_zenoh_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
     p.add_argument("--limb", help="limb name in the Zenoh keys (default from config: limb1)")
+    p.add_argument("--mode", choices=("peer", "client"),
+                   help="Zenoh mode (zenoh.mode; default from config: peer; `record` with only --connect: client, "
+                        "docs/topologies.md)")
 
 
 def add_link_args(p: argparse.ArgumentParser) -> None:
@@ -107,6 +110,8 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
         z["listen"] = list(args.listen)
     if getattr(args, "limb", None):
         z["limb"] = args.limb
+    if getattr(args, "mode", None):
+        z["mode"] = args.mode
     if z:
         ov["zenoh"] = {**ov.get("zenoh", {}), **z}
     if getattr(args, "can", None):

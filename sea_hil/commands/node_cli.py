@@ -25,6 +25,18 @@ def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
     add_live_args(p, node=True)
     add_config_args(p)
     add_scheme_args(p)
+    add_json_arg(p)
+
+
+def add_json_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true",
+                   help="at the end print the node's summary as JSON (one line) instead of its table")
+
+
+def print_result(args: argparse.Namespace, kind: str, counters: dict[str, Any], finished: bool) -> None:
+    """The node's own result at its end (`sea_hil.report.node_summary`)."""
+    from sea_hil.report.node_summary import node_summary, print_node_summary
+    print_node_summary(node_summary(kind, counters, finished=finished), as_json=args.json, command=args.command)
 
 
 @contextmanager

@@ -6,14 +6,13 @@ their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/
 writes (bounded queue: a recorder that falls behind drops and counts); with a `RecorderProcess` the node only
 forwards raw frames and the child process decodes and writes.
 
-On SocketCAN the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
-large receive buffer (`enlarge_rx_buffer`) and the frames that were missed anyway are counted from seq gaps
+On SocketCAN (and udp_multicast) the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
+large receive buffer (`sea_hil.protocol.canbus.enlarge_rx_buffer`; on udp_multicast too) and the frames that were missed anyway are counted from seq gaps
 (`can_frames_missed`, `sea_hil.recorder.can_tap.SeqGapCounter`).
 """
 from __future__ import annotations
 
 import logging
-import socket
 import threading
 import time
 from typing import Any
@@ -22,6 +21,7 @@ import can
 import zenoh
 
 from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.canbus import RX_BUFFER_BYTES, enlarge_rx_buffer
 from sea_hil.protocol.keys import everything
 from sea_hil.protocol.payloads import PayloadCounters
 from sea_hil.recorder.clock import TimeBase
@@ -32,32 +32,10 @@ from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
 from sea_hil.runtime.node import Node
 from sea_hil.stats.schema import StatsError
 
-__all__ = ["RecorderNode", "enlarge_rx_buffer", "zenoh_record"]
+__all__ = ["RecorderNode", "zenoh_record"]
 
 log = logging.getLogger("sea_hil.record")
-SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it
 SHORT_PAUSE_S = 0.01         # a tap pause up to this long is a plain sleep (`RecorderNode._pause`)
-RX_BUFFER_BYTES = 8 << 20   # the kernel doubles it: ~21k queued frames at ~770 B each, ~5 s of one 1 kHz limb
-
-
-def enlarge_rx_buffer(bus: can.BusABC, size_bytes: int = RX_BUFFER_BYTES) -> int | None:
-    """Raise the receive buffer of a SocketCAN bus's socket (SO_RCVBUFFORCE as root, else SO_RCVBUF, which the
-    kernel caps at net.core.rmem_max); -> the size the kernel granted, None for buses without a socket."""
-    sock = getattr(bus, "socket", None)
-    if not isinstance(sock, socket.socket):
-        return None
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, size_bytes)
-    except OSError:   # no CAP_NET_ADMIN: the capped request
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size_bytes)
-        except OSError as err:
-            log.warning("cannot enlarge the CAN receive buffer: %s", err)
-    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
-    if granted < size_bytes:
-        log.warning("CAN receive buffer is %d bytes (asked for %d; raise net.core.rmem_max): frames may be "
-                    "dropped by the kernel, counted as can_frames_missed", granted, size_bytes)
-    return granted
 
 
 def _enlarge_all(bus: Any, size_bytes: int) -> int | None:

@@ -17,6 +17,8 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
+from sea_hil.report.completeness import completeness_lines
+
 JOINTS = ("hip", "knee")
 _MISSING = object()
 
@@ -160,6 +162,10 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
     for what, value in (("wall time", wall), ("CPU time", cpu)):
         if isinstance(value, (int, float)):
             rows.append((what, f"{value:.1f} s"))
+    comp = summary.get("completeness")
+    if isinstance(comp, Mapping):   # a recording against the nodes' own counters (sea_hil.report.completeness)
+        rows.append(("recording complete", "yes" if comp.get("complete") else
+                     "no: " + "; ".join(completeness_lines(comp))))
     rows.append(("warnings", "; ".join(_warnings(summary)) or "none"))
     if files:
         rows.append(("files", "\n".join(str(f) for f in files)))

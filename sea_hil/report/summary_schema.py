@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from typing import Any
 
+from sea_hil.report.completeness import COMPLETENESS_SCHEMA
+
 _NUMBER = {"type": "number"}
 _COUNT = {"type": "integer", "minimum": 0}
 _PAIR = {"type": "array", "items": _NUMBER, "minItems": 2, "maxItems": 2}
@@ -64,6 +66,7 @@ SUMMARY_SCHEMA: dict[str, Any] = {
         "limbs_total": LIMBS_TOTAL,                                           # sessions: all limbs
         "lockstep": {"type": "boolean"},                                     # `run` only
         "inner": {"enum": ["edge", "remote"]},                               # `run` only
+        "completeness": COMPLETENESS_SCHEMA,                                 # from a recording: `run`, `report`
     }, required=("controller", "duration_s", "transmissions", "events_by_reason", "tracking", "inter_event_s",
                  "max_abs_voltage_v", "timing")),
     "anyOf": [{"required": ["saturated_steps", "quantised"]},                  # offline

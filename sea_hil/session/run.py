@@ -25,6 +25,7 @@ from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
 from sea_hil.report.console import ProgressSample
+from sea_hil.report.completeness import completeness_block
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
@@ -127,6 +128,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
     summary = session_summary(data, opts.controller)   # every limb (`limbs`, `limbs_total`)
+    summary["completeness"] = completeness_block(data)   # the file against the nodes' own counters (issue 32)
     summary["timing"]["wall_s"] = wall_s
     if b.timelines:   # [can] emulate_bitrate: queueing delay and latency per CAN id (simulated time in lockstep)
         summary["timing"]["can_bus"] = b.bus_timing()

@@ -189,7 +189,9 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
     from sea_hil.recorder.writer import read_session
     from sea_hil.report.session_summary import session_summary
     from sea_hil.report.summary import write_summary
+    from sea_hil.report.completeness import completeness_block
     data = read_session(mcap)
     summary = session_summary(data, s.controller)
+    summary["completeness"] = completeness_block(data)   # the file against the nodes' own counters (issue 32)
     write_summary(out / "summary.json", summary)
     return NodeSessionResult(summary, data, plant_lines[-1] if plant_lines else "")
