@@ -30,17 +30,23 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 import zenoh  # noqa: E402
-
 from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-from sea_hil.protocol.zcerts import make_certs  # noqa: E402
+
 from sea_hil.config import ZenohConfig  # noqa: E402
+from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.payload_hot import encode_setpoint, encode_state  # noqa: E402
-from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload,  # noqa: E402
-                                       StatePayload, TriggerReason)
-from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
-from sea_hil.errors import SeaHilError  # noqa: E402
+from sea_hil.protocol.payloads import (  # noqa: E402
+    PAYLOAD_SIZE,
+    MsgType,
+    PayloadCounters,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+)
+from sea_hil.protocol.zcerts import make_certs  # noqa: E402
 from sea_hil.protocol.zlatest import LatestSubscriber  # noqa: E402
+from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")

@@ -26,16 +26,16 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 import zenoh  # noqa: E402
-
 from benchlib import stop_process, wait_ready  # noqa: E402
+
+from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
 from sea_hil.controller.edge import EdgeNode  # noqa: E402
 from sea_hil.controller.edge_mux import EdgeMux  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
-from sea_hil.stats.histogram import LogHistogram  # noqa: E402
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 from sea_hil.session.builder import SessionBuilder  # noqa: E402
+from sea_hil.stats.histogram import LogHistogram  # noqa: E402
 
 PREFIX = "sea"
 

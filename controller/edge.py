@@ -26,20 +26,27 @@ import time
 import can
 import zenoh
 
-from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.config import SeaHilConfig
 from sea_hil.controller.edge_command import CommandPath
 from sea_hil.controller.edge_downlink import SetpointIntake
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, receive_stamped
 from sea_hil.controller.edge_uplink import StatePublisher
+from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
-                                        unwrap_us)
-from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.can_codec import (
+    FEEDBACK_PARTS,
+    DriverState,
+    Feedback,
+    FeedbackAssembler,
+    Heartbeat,
+    SeaCodec,
+    unwrap_us,
+)
 from sea_hil.protocol.epoch import new_epoch
+from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import PayloadCounters
 from sea_hil.protocol.zsession import LinkedPublisher, publisher

@@ -7,13 +7,13 @@ from typing import Any
 
 import can
 
+from sea_hil.controller.edge_downlink import SETPOINT_BYTES
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.errors import BusError
 from sea_hil.protocol.can_codec import ClearErrors, DriverState, Feedback, SeaCodec, VoltageCmd
 from sea_hil.protocol.can_frames import LIMIT_FLAGS, ErrorFlags
 from sea_hil.protocol.canbus import send_with_retry
 from sea_hil.protocol.payloads import SetpointPayload
-from sea_hil.controller.edge_downlink import SETPOINT_BYTES
 
 log = logging.getLogger("sea_hil.edge")
 

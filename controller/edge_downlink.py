@@ -12,8 +12,15 @@ from typing import Any
 
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SequenceTracker, SeqVerdict,
-                                       SetpointPayload, VoltagePayload)
+from sea_hil.protocol.payloads import (
+    PAYLOAD_SIZE,
+    MsgType,
+    PayloadCounters,
+    SequenceTracker,
+    SeqVerdict,
+    SetpointPayload,
+    VoltagePayload,
+)
 
 log = logging.getLogger("sea_hil.edge")
 SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]

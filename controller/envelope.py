@@ -26,7 +26,7 @@ class SetpointEnvelope(NamedTuple):
     deflection_max_m: tuple[float, float] = (INF, INF)
 
     @classmethod
-    def from_config(cls, cfg: SetpointEnvelopeConfig) -> "SetpointEnvelope":
+    def from_config(cls, cfg: SetpointEnvelopeConfig) -> SetpointEnvelope:
         """The configured envelope; with `enabled = false` only non-finite setpoints are rejected."""
         return cls(tuple(cfg.deflection_max_m) if cfg.enabled else (INF, INF))   # type: ignore[arg-type]
 

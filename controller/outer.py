@@ -4,10 +4,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sea_hil.config import SeaHilConfig
 from sea_hil.controller.smc import JointState, smc_deflection, tracking_errors
 from sea_hil.controller.trajectory import DesiredSample
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, epsilon, error_threshold
-from sea_hil.config import SeaHilConfig
 from sea_hil.mechanics import LimbParams
 
 

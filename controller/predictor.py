@@ -16,8 +16,9 @@ model lookahead (controller/edge_trigger.py) and the offline session engine all 
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
 from sea_hil.controller.inner import inner_step
 from sea_hil.controller.observer import OBSERVER_UNSTARTED
@@ -78,7 +79,7 @@ class Predictor:
         self.predict((theta_rad, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), 0, self.period_ns, count=False)
 
     @classmethod
-    def for_inner(cls, inner: Any, period_ns: int, substeps: int, jit: bool = True) -> "Predictor":
+    def for_inner(cls, inner: Any, period_ns: int, substeps: int, jit: bool = True) -> Predictor:
         """The predictor of the nominal closed loop with the edge's inner loop `inner` (an `InnerLoop`)."""
         return cls(inner._p, inner.gains, inner.period_s, period_ns, substeps, jit=jit)
 

@@ -25,8 +25,7 @@ from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
 from sea_hil.protocol.keys import Keys
-from sea_hil.protocol.payloads import (EventStatePayload, PayloadCounters, SeqVerdict, SequenceTracker,
-                                       StatePayload)
+from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, SequenceTracker, SeqVerdict, StatePayload
 from sea_hil.protocol.zsession import publisher
 from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node

@@ -62,7 +62,7 @@ class GaitTrajectory:
 
 class CsvTrajectory:
     def __init__(self, path: str | Path) -> None:
-        from scipy.interpolate import CubicSpline   # 0.35 s to import: only when a CSV trajectory is used
+        from scipy.interpolate import CubicSpline  # 0.35 s to import: only when a CSV trajectory is used
 
         t, q = _read_csv(Path(path))
         periodic = bool(np.allclose(q[0], q[-1]))

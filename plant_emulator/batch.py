@@ -11,7 +11,7 @@ numba up; numba not installed) `step_all` runs `DriverCore.step` per driver: the
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 

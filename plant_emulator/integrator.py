@@ -11,7 +11,8 @@ they differ only off the model's domain, where plain Python's `math` raises `Val
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 

@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable, Container
 from dataclasses import dataclass
-from typing import Callable, Container
 
 import can
 
+from sea_hil.config import SeaHilConfig
+from sea_hil.errors import BusError, MalformedFrame
+from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.batch import prepare_batch, step_all
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
@@ -25,12 +28,9 @@ from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback
 from sea_hil.protocol.canbus import send_with_retry
-from sea_hil.config import SeaHilConfig
-from sea_hil.errors import BusError, MalformedFrame
 from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node
 from sea_hil.stats.histogram import LogHistogram
-from sea_hil.mechanics import limb_params
 
 log = logging.getLogger("sea_hil.plant")
 

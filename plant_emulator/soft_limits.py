@@ -19,7 +19,7 @@ class DriveLimits(NamedTuple):
     spring_force_max_n: tuple[float, float] = (INF, INF)
 
     @classmethod
-    def from_config(cls, cfg: DriveLimitsConfig) -> "DriveLimits":
+    def from_config(cls, cfg: DriveLimitsConfig) -> DriveLimits:
         """The configured limits; none (every check passes) when `enabled` is false."""
         if not cfg.enabled:
             return cls()

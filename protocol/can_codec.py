@@ -14,21 +14,46 @@ from __future__ import annotations
 
 import math
 import numbers
+from collections.abc import Iterable
 from dataclasses import dataclass
 from importlib import resources
-from typing import Any, Iterable
+from typing import Any
 
 import can
 import cantools
 from cantools.database import EncodeError
 
-from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
-from sea_hil.protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
-                                 SEQ_MODULUS, T_US_MODULUS, ClearErrors, DeflectionSetpoint, DriverState, ErrorFlags,
-                                 EStop, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Frame,
-                                 Heartbeat, Pair, SignalBinding, VoltageCmd, binding_of, can_id_of, check_node_id,
-                                 profile_messages)
 from sea_hil.errors import ConfigError, MalformedFrame
+from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
+from sea_hil.protocol.can_frames import (
+    CMD_BITS,
+    CMD_MASK,
+    FEEDBACK_PARTS,
+    FRAME_TYPES,
+    NODE_ID_MAX,
+    NODE_ID_MIN,
+    ROLLING,
+    SEQ_MODULUS,
+    T_US_MODULUS,
+    ClearErrors,
+    DeflectionSetpoint,
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Frame,
+    Heartbeat,
+    Pair,
+    SignalBinding,
+    VoltageCmd,
+    binding_of,
+    can_id_of,
+    check_node_id,
+    profile_messages,
+)
 from sea_hil.protocol.frame_plan import FramePlan
 
 __all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
-from typing import Any, Callable, ClassVar, Union
+from typing import Any, ClassVar, Union
 
 from sea_hil.errors import MalformedFrame
 

@@ -13,7 +13,8 @@ import logging
 import queue
 import re
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import can
 from can.interfaces.virtual import VirtualBus, channels_lock

@@ -11,7 +11,8 @@ generic `encode` / `decode` (and so as cantools; tests/test_frame_plan.py checks
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 
 def _raw_expr(s: Any, v: str) -> str:

@@ -70,7 +70,7 @@ class Keys:
     @classmethod
     def from_config(cls, zenoh_cfg: object) -> Keys:
         """From a `sea_hil.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
-        return cls.make(getattr(zenoh_cfg, "prefix"), getattr(zenoh_cfg, "limb"))
+        return cls.make(zenoh_cfg.prefix, zenoh_cfg.limb)
 
     def all(self) -> dict[str, str]:
         """Channel name -> key expression."""

@@ -22,8 +22,8 @@ from __future__ import annotations
 
 import heapq
 import random
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Generic, TypeVar
 
 from pydantic import ValidationError

@@ -3,8 +3,8 @@ the `PayloadRejected` error with its machine-readable reason (for counters)."""
 from __future__ import annotations
 
 import math
-from math import isfinite
 from enum import StrEnum
+from math import isfinite
 
 from sea_hil.errors import MalformedPayload
 

@@ -20,15 +20,14 @@ from __future__ import annotations
 
 import logging
 import struct
-from math import isfinite
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
+from math import isfinite
 from typing import ClassVar, Union
 
-from sea_hil.protocol.payload_fields import (U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field,
-                                             uint_field)
-from sea_hil.protocol.sequence import SeqVerdict, SequenceTracker
+from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field, uint_field
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.wire_size import estimate_wire_bytes
 
 __all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",

@@ -101,7 +101,7 @@ def make_certs(out: Path, nodes: tuple[str, ...] = DEFAULT_NODES, *, hosts: tupl
         if not n or not all(c.isalnum() or c in "-_" for c in n):
             raise ConfigError(f"certs: node name {n!r} may contain only letters, digits, '-' and '_'")
     out.mkdir(parents=True, exist_ok=True)
-    now = dt.datetime.now(dt.timezone.utc) - dt.timedelta(minutes=5)
+    now = dt.datetime.now(dt.UTC) - dt.timedelta(minutes=5)
     until = now + dt.timedelta(days=valid_days)
     ca_key = ec.generate_private_key(ec.SECP256R1())
     ca_subject = x509.Name([x509.NameAttribute(oid.COMMON_NAME, ca_name)])

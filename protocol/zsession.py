@@ -10,8 +10,8 @@ from __future__ import annotations
 import json
 import re
 import socket
-from collections.abc import Mapping
-from typing import Any, Callable, Protocol
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
 
 import zenoh
 

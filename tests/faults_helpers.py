@@ -16,15 +16,15 @@ from pathlib import Path
 
 from paper_scheme import paper
 
+from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import DriverState
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
 from sea_hil.protocol.link import LinkCounters, LinkEmulator
+from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.processes import end_process as _end_process
 
@@ -89,7 +89,7 @@ class Rig:
     _builder: SessionBuilder
 
     @classmethod
-    def start(cls, tmp: Path, overrides: dict | None = None) -> "Rig":
+    def start(cls, tmp: Path, overrides: dict | None = None) -> Rig:
         # the paper's scheme (a state every sample: the outage and kill counts of tests/test_faults.py are its)
         cfg = load_config(None, paper({"can": {"interface": f"virtual:faults-{uuid.uuid4().hex[:8]}"},
                                        **(overrides or {})}))
@@ -154,8 +154,9 @@ def _edge_kill_main(group: str) -> dict[str, float]:
     """Plant, controller and edge as separate `sea-hil` processes; SIGKILL the edge, then restart it. Times from
     the kill to the driver's FAULT heartbeat and from the restart to its RUNNING heartbeat."""
     import signal
-    from sea_hil.protocol.can_codec import Heartbeat, SeaCodec
+
     from sea_hil.errors import MalformedFrame
+    from sea_hil.protocol.can_codec import Heartbeat, SeaCodec
     spec = f"udp_multicast:{group}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     codec, bus = SeaCodec([NODE]), open_bus(spec)

@@ -8,11 +8,11 @@ import random
 import pytest
 
 from sea_hil.config import load_config
+from sea_hil.jit import loaded
 from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.batch import make_batch_kernel, prepare_batch, step_all
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.integrator import make_advance_kernel, prepare_advance
-from sea_hil.jit import loaded
 from sea_hil.protocol.can_frames import VoltageCmd
 
 PERIOD_NS = 1_000_000

@@ -12,11 +12,27 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, FRAME_TYPES, SEQ_MODULUS, ClearErrors, DeflectionSetpoint,
-                                DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle, FeedbackJoint1,
-                                FeedbackJoint2, Heartbeat, SeaCodec, VoltageCmd, can_id_of, load_database)
-from sea_hil.protocol.can_frames import T_US_MODULUS
 from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_codec import (
+    FEEDBACK_PARTS,
+    FRAME_TYPES,
+    SEQ_MODULUS,
+    ClearErrors,
+    DeflectionSetpoint,
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Heartbeat,
+    SeaCodec,
+    VoltageCmd,
+    can_id_of,
+    load_database,
+)
+from sea_hil.protocol.can_frames import T_US_MODULUS
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -18,7 +18,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from test_udp_multicast import require_netns
 
 from sea_hil.config import load_config

@@ -8,8 +8,8 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from edge_lockstep_run import run_live_edge_lockstep
+
 from sea_hil.config import load_config
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.edge_trigger import EdgeEventGenerator

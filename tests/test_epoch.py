@@ -9,10 +9,8 @@ import threading
 import uuid
 
 import zenoh
-
 from faults_helpers import wait_for
-
-from paper_scheme import paper   # these nodes speak the paper's STATE protocol
+from paper_scheme import paper  # these nodes speak the paper's STATE protocol
 
 from sea_hil.config import load_config
 from sea_hil.controller.edge import EdgeNode

@@ -9,12 +9,12 @@ import pytest
 
 from sea_hil.cli import main
 from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.payloads import StatePayload, encode
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.export import BASE_COLUMNS, csv_name, export_can
 from sea_hil.recorder.reader import read_session
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.zenoh_tap import ZenohTap
-from sea_hil.protocol.payloads import StatePayload, encode
 
 T0_NS = 1_700_000_000_123_456_000
 

@@ -9,23 +9,35 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+from fuzz_budget import cases
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from paper_scheme import paper
 
+from sea_hil.config import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
+from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import load_config
-from sea_hil.mechanics import limb_params
-from sea_hil.protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
-                               SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)
+from sea_hil.protocol.payloads import (
+    MAGIC,
+    PAYLOAD_SIZE,
+    U32_MAX,
+    VERSION,
+    AckPayload,
+    MsgType,
+    PayloadRejected,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+    VoltagePayload,
+    decode,
+    encode,
+)
 from sea_hil.protocol.zsession import make_config, open_session
-from fuzz_budget import cases
 
 CASES = cases(10_000)   # tests/fuzz_budget.py: SEA_HIL_FUZZ_SCALE=1 for the depth of docs/reliability.md
 FUZZ = settings(max_examples=CASES, deadline=None, database=None, derandomize=True,

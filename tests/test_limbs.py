@@ -14,12 +14,20 @@ import pytest
 from sea_hil.config import config_to_toml, load_config
 from sea_hil.controller.edge_mux import EdgeMux
 from sea_hil.errors import ConfigError
-from sea_hil.protocol.can_codec import Feedback, SeaCodec
 from sea_hil.offline.session_engine import run_engine
+from sea_hil.protocol.can_codec import Feedback, SeaCodec
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic
-from sea_hil.session.limbs import (Limb, buses_of, bus_specs, expand_limbs, limb_config, limb_load_pct,
-                                   limbs_per_bus, session_limbs)
+from sea_hil.session.limbs import (
+    Limb,
+    bus_specs,
+    buses_of,
+    expand_limbs,
+    limb_config,
+    limb_load_pct,
+    limbs_per_bus,
+    session_limbs,
+)
 from sea_hil.session.run import RunOptions, run_session
 
 SHORT = {"trajectory": {"period_s": 2.0}, "safety": {"drive": {"enabled": False}, "setpoint": {"enabled": False}}}

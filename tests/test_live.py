@@ -12,8 +12,8 @@ import sys
 import threading
 
 import pytest
-
 from foxglove_ws_client import receive
+
 from sea_hil.live.channels import CHANNELS, END_MESSAGE, LOG_LEVELS
 from sea_hil.protocol.can_codec import load_database
 from sea_hil.protocol.can_frames import CMD_MASK
@@ -134,9 +134,9 @@ def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
     from sea_hil.config import load_config
     from sea_hil.controller.edge import EdgeNode
     from sea_hil.plant_emulator.node import PlantNode
-    from sea_hil.runtime.clock import clock_for
     from sea_hil.protocol.canbus import open_bus
     from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+    from sea_hil.runtime.clock import clock_for
     (tmp_path / "short.toml").write_text("[trajectory]\nperiod_s = 1.0\n", encoding="utf-8")
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     ctl = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "controller", "--listen", endpoint, "--config",

@@ -8,14 +8,13 @@ checks that the savings and the RMS error stay within 5 %. Figures: docs/can-pro
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.protocol.can_codec import load_database
 from sea_hil.config import load_config
 from sea_hil.offline.closed_loop import simulate
 from sea_hil.offline.wire_quantiser import WireQuantiser, dbc_resolutions, quantised
+from sea_hil.protocol.can_codec import load_database
 
 TOLERANCE = 0.01
 ET_SPREAD = 0.05  # ET moves by ~2 % under a 1e-12 rad perturbation (docs/can-protocol.md)

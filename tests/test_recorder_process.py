@@ -14,14 +14,14 @@ from pathlib import Path
 import can
 import pytest
 
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config import load_config
 from sea_hil.errors import RecordingError
+from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import META_FINAL, SessionRecorder, read_session
-from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
 
 CFG = load_config().record
 CAN_TOPICS = ("/can/raw", "/can/feedback", "/can/command")

@@ -8,10 +8,10 @@ import jsonschema
 import pytest
 from mcap.reader import make_reader
 
+from sea_hil.controller.trigger import TriggerReason
 from sea_hil.protocol.can_codec import Feedback, Heartbeat, SeaCodec, VoltageCmd
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags
 from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, encode
-from sea_hil.controller.trigger import TriggerReason
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.schemas import schema_for
 from sea_hil.recorder.writer import META_FINAL, SessionRecorder, read_session

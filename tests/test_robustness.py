@@ -4,7 +4,6 @@ Bounds are the issue's acceptance: max tracking error <= 0.01 rad for TT and ET,
 under a constant disturbance ET sends <= 0.40 of TT's setpoints (docs/deviations.md section 10)."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 

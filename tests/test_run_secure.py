@@ -20,7 +20,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from faults_helpers import wait_for
 
 from sea_hil.config import load_config

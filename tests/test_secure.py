@@ -18,18 +18,17 @@ from typing import Any, TypeVar
 
 import pytest
 import zenoh
-
 from paper_scheme import paper
 
-from sea_hil.protocol.can_codec import FeedbackAssembler, FEEDBACK_PARTS, SeaCodec, VoltageCmd
+from sea_hil.commands.certs import register
 from sea_hil.config import ZenohConfig, load_config
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.can_codec import FEEDBACK_PARTS, FeedbackAssembler, SeaCodec, VoltageCmd
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
+from sea_hil.protocol.zcerts import CertSet, make_certs, node_cn
 from sea_hil.protocol.zsecurity import acl_document, security_settings
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, session_config
-from sea_hil.commands.certs import register
-from sea_hil.protocol.zcerts import CertSet, make_certs, node_cn
 
 DEADLINE_S = 20.0
 KEYS = Keys.make("sea", "limb1")

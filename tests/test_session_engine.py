@@ -10,7 +10,6 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from edge_lockstep_run import run_live_edge_lockstep
 from paper_scheme import PAPER_FLAGS, paper
 from test_pre_refactor_equality import as_payload_v2, with_totals

@@ -6,13 +6,13 @@ from __future__ import annotations
 import logging
 
 import pytest
+from paper_scheme import paper
 
 from sea_hil.config import load_config
 from sea_hil.offline.session_engine import EngineOptions, driver_disturbance_table, run_engine
 from sea_hil.offline.session_fast import delivery_offsets, unsupported
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.link import LinkEmulator, parse_link_spec
-from paper_scheme import paper
 
 SHORT = {"trajectory": {"period_s": 1.5, "lead_in_s": 0.3}}
 CASES = {

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import psutil
 import pytest
-
 from faults_helpers import REPO, end_process, sea_hil_cmd, wait_for
+
 from sea_hil.recorder.reader import read_session
 
 START_S = 60.0   # interpreter + imports + zenoh of two children on a loaded 2-core machine

@@ -11,15 +11,25 @@ import time
 from pathlib import Path
 
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
-from sea_hil.errors import ConfigError
 from sea_hil.cli import main
-from sea_hil.sweep.runner import SweepOptions, point_config, progress_line, run_sweep
-from sea_hil.sweep.grid import (CSV_COLUMNS, GridPoint, LinkCondition, csv_row, expand_grid, parse_axis,
-                                pareto_front, point_command, point_overrides)
+from sea_hil.errors import ConfigError
 from sea_hil.sweep.csvlog import write_csv
+from sea_hil.sweep.grid import (
+    CSV_COLUMNS,
+    GridPoint,
+    LinkCondition,
+    csv_row,
+    expand_grid,
+    pareto_front,
+    parse_axis,
+    point_command,
+    point_overrides,
+)
 from sea_hil.sweep.output import fronts_by_link, write_outputs
+from sea_hil.sweep.runner import SweepOptions, point_config, progress_line, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN_SUMMARY = {"transmissions": {"downlink_msgs": 304, "downlink_bytes": 16112, "uplink_msgs": 1001},

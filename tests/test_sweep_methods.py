@@ -11,7 +11,7 @@ import pytest
 from sea_hil.cli import main
 from sea_hil.commands.sweep import method_axes
 from sea_hil.errors import ConfigError
-from sea_hil.sweep.grid import CSV_COLUMNS, LinkCondition, expand_grid
+from sea_hil.sweep.grid import CSV_COLUMNS, expand_grid
 from sea_hil.sweep.methods import METHODS, Scheme, parse_choices, parse_links, schemes_from_axes
 from sea_hil.sweep.methods_output import curves_by_link, domination_markdown, methods_figure
 from sea_hil.sweep.runner import SweepOptions, point_config, point_spec

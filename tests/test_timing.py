@@ -17,8 +17,15 @@ from sea_hil.config import load_config
 from sea_hil.config.timing import TimingConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason, pair_field, uint_field
-from sea_hil.protocol.payloads import (MsgType, PayloadCounters, SetpointPayload, StatePayload, TriggerReason, decode,
-                                       encode)
+from sea_hil.protocol.payloads import (
+    MsgType,
+    PayloadCounters,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+    decode,
+    encode,
+)
 from sea_hil.runtime import clock as clock_module
 from sea_hil.runtime.clock import RealTimePacer
 from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy, child_cpus

@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-
 from etsmc import OuterLoop
 
 DEFAULT_LAYOUT = Path(__file__).resolve().parents[2] / "protocol" / "payloads.toml"

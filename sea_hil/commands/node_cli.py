@@ -8,8 +8,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from sea_hil.commands.common import (add_config_args, add_link_args, add_scheme_args, add_zenoh_args,
-                                     config_from_args)
+from sea_hil.commands.common import add_config_args, add_link_args, add_scheme_args, add_zenoh_args, config_from_args
 from sea_hil.live.cli import add_live_args, live_overrides
 
 

@@ -26,6 +26,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     import os
     import sys
+
     from sea_hil.errors import ConfigError
     from sea_hil.live.child import live_child_overrides
     from sea_hil.recorder.writer import SessionRecorder

@@ -5,8 +5,14 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import (add_config_args, add_link_args, add_period_arg, add_scenario_args,
-                                     add_scheme_args, config_from_args)
+from sea_hil.commands.common import (
+    add_config_args,
+    add_link_args,
+    add_period_arg,
+    add_scenario_args,
+    add_scheme_args,
+    config_from_args,
+)
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -54,8 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.session.run import RunOptions, print_summary, run_session
     from sea_hil.errors import ConfigError
+    from sea_hil.session.run import RunOptions, print_summary, run_session
     if args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args, live_overrides(args))

@@ -29,8 +29,8 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.offline.simulate import run_compare, run_simulation
     from sea_hil.errors import ConfigError
+    from sea_hil.offline.simulate import run_compare, run_simulation
     if args.cycles is not None and args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args)

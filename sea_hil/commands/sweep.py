@@ -87,8 +87,14 @@ def method_axes(args: argparse.Namespace) -> tuple[list, list, list | None]:
     from sea_hil.commands.common import check_period_ms
     from sea_hil.config.shorthand import scenario_config
     from sea_hil.sweep.grid import LinkCondition
-    from sea_hil.sweep.methods import (COMPENSATIONS, TRIGGERS, parse_choices, parse_links, schemes_from_axes,
-                                       schemes_from_methods)
+    from sea_hil.sweep.methods import (
+        COMPENSATIONS,
+        TRIGGERS,
+        parse_choices,
+        parse_links,
+        schemes_from_axes,
+        schemes_from_methods,
+    )
     periods = parse_axis("period-ms", args.period_ms) if args.period_ms else None
     if periods:
         base = scenario_config(args.config, {})
@@ -107,8 +113,8 @@ def method_axes(args: argparse.Namespace) -> tuple[list, list, list | None]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
     from sea_hil.sweep.output import write_outputs
+    from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
     if args.links and any(getattr(args, n.replace("-", "_")) is not None for n in LINK_AXIS_DEFAULTS):
         raise ConfigError("--links replaces --delay-ms, --jitter-ms and --loss: give one or the other")
     for name, default in LINK_AXIS_DEFAULTS.items():

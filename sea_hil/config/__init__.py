@@ -7,13 +7,26 @@ callers pass the config object down.
 from __future__ import annotations
 
 from sea_hil.config.base import Pair
-from sea_hil.config.comms import (CanConfig, LinkConfig, LinkDirectionConfig, RecordConfig, ZenohAclConfig, ZenohConfig,
-                                  ZenohTlsConfig)
+from sea_hil.config.comms import (
+                                  CanConfig,
+                                  LinkConfig,
+                                  LinkDirectionConfig,
+                                  RecordConfig,
+                                  ZenohAclConfig,
+                                  ZenohConfig,
+                                  ZenohTlsConfig,
+)
 from sea_hil.config.limbs import LimbConfig
 from sea_hil.config.live import LiveConfig
 from sea_hil.config.loader import config_from_dict, config_to_toml, default_toml_text, load_config
-from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
-                                  TriggerConfig)
+from sea_hil.config.model import (
+                                  ControllerConfig,
+                                  DisturbanceConfig,
+                                  PlantConfig,
+                                  SimConfig,
+                                  TrajectoryConfig,
+                                  TriggerConfig,
+)
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.config.safety import DriveLimitsConfig, EndStopConfig, SafetyConfig, SetpointEnvelopeConfig
 

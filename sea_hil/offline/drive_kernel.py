@@ -5,7 +5,8 @@ Python sample loop and of the predictor) and the whole-session kernel (`sea_hil.
 `edge_drive_sample`, compiled by numba (sea_hil/jit.py) or as plain Python."""
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sea_hil.controller.inner import inner_step
 from sea_hil.offline.wire_quantiser import quantised

@@ -25,18 +25,19 @@ from typing import Any
 import numpy as np
 
 from sea_hil.config import SeaHilConfig
-from sea_hil.controller.inner import InnerLoop
-from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.edge_events import make_trigger, tracking_record
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
+from sea_hil.controller.inner import InnerLoop
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger
+from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
-from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
+from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.session_fast import run_compiled, run_kernel, unsupported
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, SessionRecords
@@ -48,7 +49,6 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
-from sea_hil.errors import SeaHilError
 
 __all__ = ["EngineOptions", "EngineResult", "SessionRecords", "driver_disturbance_table", "engine_summary",
            "run_engine", "tracking_record"]

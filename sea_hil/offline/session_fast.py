@@ -16,8 +16,17 @@ from sea_hil.controller.trajectory import GaitTrajectory
 from sea_hil.controller.trigger import NO_EVENT, EventTrigger
 from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
-from sea_hil.offline.session_kernel import (BAD_SETPOINT, DIVERGED, Controller, Drive, Edge, Links, Records,
-                                            make_session_kernel, new_records)
+from sea_hil.offline.session_kernel import (
+    BAD_SETPOINT,
+    DIVERGED,
+    Controller,
+    Drive,
+    Edge,
+    Links,
+    Records,
+    make_session_kernel,
+    new_records,
+)
 from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, tracking_fields
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason

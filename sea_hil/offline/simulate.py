@@ -11,8 +11,14 @@ from sea_hil.config import SeaHilConfig
 from sea_hil.offline.closed_loop import SimResult, simulate
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, TriggerReason
 from sea_hil.report.figures import inter_event_figure, tracking_figure
-from sea_hil.report.summary import (TIMING_KEY, compare_table, inter_event_block, tracking_block,
-                                    transmissions_block, write_summary)
+from sea_hil.report.summary import (
+    TIMING_KEY,
+    compare_table,
+    inter_event_block,
+    tracking_block,
+    transmissions_block,
+    write_summary,
+)
 
 
 def offline_transmissions(res: SimResult) -> dict[str, int]:

@@ -24,10 +24,10 @@ import zenoh
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.keys import everything
 from sea_hil.protocol.payloads import PayloadCounters
+from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
 from sea_hil.runtime.node import Node
 from sea_hil.stats.schema import StatsError

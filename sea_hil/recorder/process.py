@@ -24,12 +24,12 @@ from typing import TYPE_CHECKING, Any, BinaryIO
 
 from sea_hil.config import LiveConfig, RecordConfig, SeaHilConfig
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.live.link import live_child_argv
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
 from sea_hil.recorder.meta import write_session_header
 from sea_hil.recorder.schemas import validate_payload
-from sea_hil.live.link import live_child_argv
+from sea_hil.recorder.writer import SessionRecorder
 
 if TYPE_CHECKING:
     from sea_hil.live.feed import LiveFeed
@@ -236,7 +236,7 @@ def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: 
     tap = CanTap(time_base=time_base)
     live = None
     if live_json is not None:
-        from sea_hil.live.feed import start_live_feed   # the SDK is imported only when asked for
+        from sea_hil.live.feed import start_live_feed  # the SDK is imported only when asked for
         live = start_live_feed(live_json)
     try:
         while (head := _read_exact(stream, _LEN.size)) is not None:

@@ -4,8 +4,9 @@ from __future__ import annotations
 import json
 import os
 import struct
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, BinaryIO, Callable, Iterator, NamedTuple
+from typing import Any, BinaryIO, NamedTuple
 
 from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema

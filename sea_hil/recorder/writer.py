@@ -20,8 +20,15 @@ from mcap.writer import CompressionType, Writer
 
 from sea_hil.config import RecordConfig, SeaHilConfig
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.meta import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, encode_payload,
-                                     session_metadata, write_session_header)
+from sea_hil.recorder.meta import (
+    CONFIG_ATTACHMENT,
+    META_CONFIG,
+    META_FINAL,
+    META_SESSION,
+    encode_payload,
+    session_metadata,
+    write_session_header,
+)
 from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
 from sea_hil.recorder.schemas import TOPICS, schema_bytes, schema_name, validate_payload
 

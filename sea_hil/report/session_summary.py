@@ -15,7 +15,8 @@ Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb'
 every limb's transmissions, tracking and latency, `limbs_total` the sums and the worst tracking."""
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 

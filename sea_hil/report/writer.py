@@ -9,11 +9,11 @@ from typing import Any
 import numpy as np
 
 from sea_hil.recorder.writer import SessionData, read_session
-from sea_hil.stats.can_bits import nominal_bits
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
 from sea_hil.report.session_summary import session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary
+from sea_hil.stats.can_bits import nominal_bits
 
 
 def _bins(msgs: list, value: Any, t0_ns: int, width_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:

@@ -14,9 +14,10 @@ import json
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.errors import ConfigError, SeaHilError
@@ -28,12 +29,12 @@ from sea_hil.report.console import ProgressSample
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
+from sea_hil.runtime.realtime import child_cpus, child_priority
+from sea_hil.session import limb_nodes
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
-from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_cpus, child_priority
 from sea_hil.session.secure import secure_profile
 
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from sea_hil.protocol.zcerts import DEFAULT_NODES, make_certs
 from sea_hil.config import SeaHilConfig
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.zcerts import DEFAULT_NODES, make_certs
 
 HOST_NODE, CONTROLLER_NODE = "edge", "controller"
 

@@ -4,8 +4,9 @@ outer sample period a point runs (`Scheme`), the named methods of `--methods`, t
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 from sea_hil.errors import ConfigError
 

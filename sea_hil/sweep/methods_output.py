@@ -5,8 +5,9 @@ seeds folded into their mean with the 95 % band — and the sweep.md section jud
 periodic TT at the same total messages (`sea_hil.sweep.frontier`)."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import matplotlib
 

@@ -3,8 +3,9 @@ link condition, TT references and the paper's points marked), DIR/methods.png (s
 DIR/sweep.md."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import matplotlib
 

@@ -12,9 +12,10 @@ import hashlib
 import sys
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 from sea_hil.config import SeaHilConfig, config_to_toml
 from sea_hil.config.shorthand import scenario_config
@@ -112,6 +113,7 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
     """Run every point (`opts.jobs` at a time locally, or on the cluster at `opts.scheduler`); rows in point order,
     and whether the sweep was interrupted."""
     from distributed import Event, as_completed, wait
+
     from sea_hil.sweep.cluster import open_client
     configs = configs if configs is not None else build_configs(points, opts)
     csv_path = opts.out / "sweep.csv"

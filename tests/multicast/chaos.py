@@ -37,6 +37,7 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 from faults_helpers import wait_for  # noqa: E402
+
 from sea_hil.config import load_config  # noqa: E402
 from sea_hil.errors import MalformedFrame  # noqa: E402
 from sea_hil.protocol.can_codec import DriverState, Heartbeat, SeaCodec  # noqa: E402

@@ -34,8 +34,8 @@ def write_gait_slice_config(directory: Path, duration_s: float, paper: bool = Tr
     """Write ``gait-slice.csv`` (the default gait's first ``duration_s``) and ``session.toml`` using it; -> TOML.
     `paper`: the paper's scheme (trigger at the controller, no compensation; the counts these tests assert are its),
     else the default one (no [trigger] / [controller] tables: the caller may append them)."""
-    from sea_hil.controller.trajectory import GaitTrajectory
     from sea_hil.config import load_config
+    from sea_hil.controller.trajectory import GaitTrajectory
     gait = GaitTrajectory(load_config().trajectory.period_s)
     rows = ["t,theta1,theta2"]
     for i in range(int(round(duration_s / SAMPLE_STEP_S)) + 1):
