@@ -48,10 +48,10 @@ def messages() -> None:
                for s in msg.signals}
         values = tuple(row[n] for n in plan.names)
         data = msg.encode(row, strict=True)
-        print(f"  {name:16s} encode cantools {cpu_us(lambda: msg.encode(row, strict=True)):5.1f} / plan "
-              f"{cpu_us(lambda: plan.pack_plain(values)):4.1f} us; decode cantools "
-              f"{cpu_us(lambda: msg.decode(data, decode_choices=False, allow_excess=False)):5.1f} / plan "
-              f"{cpu_us(lambda: plan.unpack_plain(data)):4.1f} us")
+        print(f"  {name:16s} encode cantools {cpu_us(lambda msg=msg, row=row: msg.encode(row, strict=True)):5.1f} / plan "
+              f"{cpu_us(lambda plan=plan, values=values: plan.pack_plain(values)):4.1f} us; decode cantools "
+              f"{cpu_us(lambda msg=msg, data=data: msg.decode(data, decode_choices=False, allow_excess=False)):5.1f} / plan "
+              f"{cpu_us(lambda plan=plan, data=data: plan.unpack_plain(data)):4.1f} us")
 
 
 def codec_per_limb_sample() -> None:
@@ -60,10 +60,10 @@ def codec_per_limb_sample() -> None:
     for fd in (False, True):
         c = SeaCodec([1], fd=fd)
         msgs, m = c.encode_feedback(fb, saturate=True), c.encode(v)
-        parts = {"feedback encode": cpu_us(lambda: c.encode_feedback(fb, saturate=True)),
-                 "feedback decode": cpu_us(lambda: [c.decode(x) for x in msgs]),
-                 "voltage encode": cpu_us(lambda: c.encode(v, saturate=True)),
-                 "voltage decode": cpu_us(lambda: c.decode(m))}
+        parts = {"feedback encode": cpu_us(lambda c=c: c.encode_feedback(fb, saturate=True)),
+                 "feedback decode": cpu_us(lambda c=c, msgs=msgs: [c.decode(x) for x in msgs]),
+                 "voltage encode": cpu_us(lambda c=c: c.encode(v, saturate=True)),
+                 "voltage decode": cpu_us(lambda c=c, m=m: c.decode(m))}
         print(f"  {'CAN FD' if fd else 'classic':7s}: " + ", ".join(f"{k} {x:.1f}" for k, x in parts.items())
               + f" -> {sum(parts.values()):.1f} us CPU per limb-sample")
 
@@ -76,8 +76,8 @@ def step_per_limb_sample(limbs: list[int]) -> None:
     for n in limbs:
         cores = [DriverCore.create(i + 1, p, 1e-3, 0.1, cfg.sim.substeps, tuple(cfg.plant.initial_theta_rad),
                                    lambda t: (0.0, 0.0)) for i in range(n)]
-        alone = cpu_us(lambda: [d.step() for d in cores], 500) / n
-        batched = cpu_us(lambda: step_all(cores), 500) / n
+        alone = cpu_us(lambda cores=cores: [d.step() for d in cores], 500) / n
+        batched = cpu_us(lambda cores=cores: step_all(cores), 500) / n
         print(f"  {n} limbs: {alone:5.1f} us per limb-sample one step per limb, {batched:5.1f} us batched "
               f"({alone / batched:.2f}x)")
 

@@ -191,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
             if d["status"] == "ok":
                 print(f"pair {i + 1}/{runs} {'with' if live else 'without'} --foxglove: p99 {d['p99_us']:.0f} us  "
                       f"tick misses {d['plant_overruns']}/{d['plant_ticks']}"
-                      f"{'  live messages %d' % d.get('live_messages', 0) if live else ''}", flush=True)
+                      + (f"  live messages {d.get('live_messages', 0)}" if live else ""), flush=True)
     lock = base / "lockstep"
     sea_hil_run(lock, controller=args.controller, lockstep=True)
     cost = replay_cost(lock / "session.mcap")

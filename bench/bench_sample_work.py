@@ -92,7 +92,7 @@ def main(argv: list[str] | None = None) -> int:
                 spent[name] += time.thread_time() - t0
         for name in fns:
             cpu[name].append(1e6 * spent[name] / (args.number * args.limbs))
-    total = [sum(v) for v in zip(*cpu.values())]
+    total = [sum(v) for v in zip(*cpu.values(), strict=True)]
     for name, v in [*cpu.items(), ("total", total)]:
         print(f"{name:16s} {min(v):7.1f} us per limb-sample (best of {args.repeat}; median {sorted(v)[len(v) // 2]:.1f})")
     return 0

@@ -170,7 +170,7 @@ class _Progress:
                     raise RuntimeError("session ended before the window closed (lengthen --cycles or shorten "
                                        "it); its last lines:\n" + "".join(self.tail))
                 if self.first_setpoint_t is not None and time.monotonic() >= after_t:
-                    self.cond.wait_for(lambda: self.n != seen)
+                    self.cond.wait_for(lambda seen=seen: self.n != seen)
                     if self.n < 0:
                         continue
                     return self.sim_s

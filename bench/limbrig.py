@@ -131,7 +131,7 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
         buses = [b.bus(channel) for _ in ids] if layout == "threads" else [b.bus(channel)] * limbs
         wait_ready(proc)
         plant = b.plant(plant_bus, ids)
-        edges: list[EdgeNode] = [b.edge(bus, session, n, cfg=_limb_cfg(cfg, n)) for n, bus in zip(ids, buses)]
+        edges: list[EdgeNode] = [b.edge(bus, session, n, cfg=_limb_cfg(cfg, n)) for n, bus in zip(ids, buses, strict=True)]
         for runner in edges if layout == "threads" else [b.add(EdgeMux(buses[0], edges))]:
             runner.start()
         if warmup_s > 0:    # start-up (connections, first setpoint, queued frames) is not steady-state timing

@@ -134,7 +134,7 @@ class EdgeEventGenerator:
         measured velocity and a smoothed acceleration (finite differences of the 1 kHz or outer samples)."""
         if self._prev is not None and sample_ns > self._prev[0]:
             dt = (sample_ns - self._prev[0]) * 1e-9
-            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1]))
+            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1], strict=True))
             self._alpha = (0.8 * self._alpha[0] + 0.2 * a[0], 0.8 * self._alpha[1] + 0.2 * a[1])
         self._prev = (sample_ns, js.omega_rad_s)
         if not self.lookahead or not self.rtt_ns:
@@ -143,8 +143,8 @@ class EdgeEventGenerator:
         if model is not None:
             return model(int(self.rtt_ns)), t_eval, self.desired(t_eval)
         h = self.rtt_ns * 1e-9
-        th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha))
-        om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha))
+        th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha, strict=True))
+        om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha, strict=True))
         return JointState(th, om), t_eval, self.desired(t_eval)
 
     def overdue(self, sample_ns: int) -> bool:

@@ -97,6 +97,6 @@ def step_all(drivers: Sequence[DriverCore], *, jit: bool = True) -> list[Feedbac
     _entry(kernel, drivers[0].params)(xs, np.array(segf), np.array(segi, np.int64), np.array(dist),
                                       drivers[0].params, delta)
     return [drv.finish_period(tuple(row), (d1, d2))
-            for drv, row, (d1, d2) in zip(drivers, xs.tolist(), delta.tolist())]
+            for drv, row, (d1, d2) in zip(drivers, xs.tolist(), delta.tolist(), strict=True)]
 
 

@@ -160,7 +160,7 @@ class PlantNode(Node):
         """Integrate one period of every served limb (one compiled call for all when loaded, `plant_emulator.batch`)
         and return each driver with its new sample's feedback, in node-id order of `drivers`."""
         drivers = list(self.drivers.values())
-        return list(zip(drivers, step_all(drivers)))
+        return list(zip(drivers, step_all(drivers), strict=True))
 
     def drain_until(self, deadline_ns: int, done: Callable[[], bool] | None = None) -> None:
         """Handle received frames until `deadline_ns` (monotonic) or until `done()`."""

@@ -214,10 +214,10 @@ class SeaCodec:
             vals = [(int(v) if is_int else min(max(float(v), lo), hi))
                     if plain and lo_tol <= v <= hi_tol   # finite (NaN and inf fail the comparison) and in range
                     else _checked(lay.message.name, s, v)
-                    for (s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain), v in zip(lay.plan, lay.frame.unpack(data))]
+                    for (s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain), v in zip(lay.plan, lay.frame.unpack(data), strict=True)]
         if lay.binding is not None:
             return lay.binding.build(node_id, vals)
-        return lay.cls.from_signals(node_id, dict(zip(lay.frame.names, vals)))
+        return lay.cls.from_signals(node_id, dict(zip(lay.frame.names, vals, strict=True)))
 
     def saturate(self, obj: Any) -> tuple[Any, bool]:
         """Copy of `obj` with every physical value and counter clamped to its DBC range (not seq/t_us, enums, NaN);

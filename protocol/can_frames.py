@@ -13,7 +13,7 @@ import numbers
 from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
-from typing import Any, ClassVar, Union
+from typing import Any, ClassVar
 
 from sea_hil.errors import MalformedFrame
 
@@ -195,8 +195,8 @@ class Feedback(_Signals):
                    (j1.nut_vel_m_s, j2.nut_vel_m_s))
 
 
-Frame = Union[EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
-              FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Feedback]
+Frame = (EStop | ClearErrors | VoltageCmd | DeflectionSetpoint | Heartbeat
+         | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2 | Feedback)
 FRAME_TYPES: tuple[type, ...] = (EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
                                  FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Feedback)
 

@@ -52,16 +52,16 @@ def generate(plan: Any) -> tuple[Callable[..., Any], Callable[..., Any], Callabl
     names = [f"v{i}" for i in range(len(sigs))]
     unpacked = ", ".join(names) + ("," if len(names) == 1 else "")
     pack = ["def pack_plain(values):", f"    {unpacked} = values"]
-    for s, v in zip(sigs, names):
+    for s, v in zip(sigs, names, strict=True):
         kinds = "type({v}) is not int" if s.identity else "(type({v}) is not float and type({v}) is not int)"
         pack.append(f"    if {kinds.format(v=v)} or not ({s.minimum!r} <= {v} <= {s.maximum!r}):")
         pack.append("        return None")
-    terms = [f"(({_raw_expr(s, v)}) & {s.mask}) << {s.start}" for s, v in zip(sigs, names)]
+    terms = [f"(({_raw_expr(s, v)}) & {s.mask}) << {s.start}" for s, v in zip(sigs, names, strict=True)]
     pack.append(f"    return ({' | '.join(terms) or '0'}).to_bytes({plan.length}, 'little')")
     unpack = ["def unpack(data):", "    w = int.from_bytes(data, 'little')",
               f"    return ({', '.join(_physical_expr(s) for s in sigs)}{',' if len(sigs) == 1 else ''})"]
     plain = ["def unpack_plain(data):", "    w = int.from_bytes(data, 'little')"]
-    for s, v in zip(sigs, names):
+    for s, v in zip(sigs, names, strict=True):
         plain += [f"    {v} = {_physical_expr(s)}", f"    if {_range_test(s, v)}:", "        return None"]
     plain.append(f"    return ({unpacked})")
     return (_compile("pack_plain", pack, plan.name), _compile("unpack", unpack, plan.name),

@@ -227,7 +227,7 @@ def parse_link_spec(spec: str) -> dict[str, object]:
             if len(parts) not in (2, 3):
                 raise ConfigError(f"link spec: ge={val!r} must be p_good_to_bad/p_bad_to_good[/loss_bad]")
             names = ("ge_p_good_to_bad", "ge_p_bad_to_good", "ge_loss_bad")
-            out.update({n: _probability(p, f"ge.{n}") for n, p in zip(names, parts)})
+            out.update({n: _probability(p, f"ge.{n}") for n, p in zip(names, parts, strict=False)})
         elif key == "rate":
             out["rate_bps"] = _with_unit(val, _RATE_UNITS, key)
         elif key == "trace":   # resolved (a config written for another process stays valid) and read at once

@@ -24,7 +24,7 @@ from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
 from math import isfinite
-from typing import ClassVar, Union
+from typing import ClassVar
 
 from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field, uint_field
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
@@ -170,7 +170,7 @@ class AckPayload(_Payload):
         object.__setattr__(self, "sent", bool(self.sent))
 
 
-Payload = Union[StatePayload, EventStatePayload, SetpointPayload, VoltagePayload, AckPayload]
+Payload = StatePayload | EventStatePayload | SetpointPayload | VoltagePayload | AckPayload
 
 _BODY = {
     MsgType.STATE: struct.Struct("<Q8d"),

@@ -40,7 +40,7 @@ def _run(cores: list[DriverCore], plan, batch: bool) -> list:
     out = []
     for k, per_limb in enumerate(plan):
         start = k * PERIOD_NS
-        for drv, cmds in zip(cores, per_limb):
+        for drv, cmds in zip(cores, per_limb, strict=True):
             drv.period_start_ns = start
             for offset, u in cmds:
                 drv.handle(VoltageCmd(drv.node_id, u, drv.seq & 0xFF), start + offset)

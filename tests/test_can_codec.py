@@ -240,7 +240,7 @@ def test_quantisation_error_bounds(codec: SeaCodec) -> None:
             for name, bound in half_lsb.items():
                 if hasattr(obj, name):
                     sent, got = getattr(obj, name), getattr(back, name)
-                    pairs = zip(sent, got) if isinstance(sent, tuple) else [(sent, got)]
+                    pairs = zip(sent, got, strict=True) if isinstance(sent, tuple) else [(sent, got)]
                     err = max(abs(a - b) for a, b in pairs)
                     assert err <= bound * (1 + 1e-6), (name, err)
 

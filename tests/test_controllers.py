@@ -185,8 +185,8 @@ def test_backstepping_gives_the_designed_deflection_dynamics(cfg: SeaHilConfig, 
         # Delta_dd along the plant's motion: directional derivative of Delta_dot(x) along f(x, u), d = 0
         xdot = f(0.0, x, u, p)
         h = 1e-6
-        ddp = deflections(tuple(a + h * b for a, b in zip(x, xdot)), p)[2:4]
-        ddm = deflections(tuple(a - h * b for a, b in zip(x, xdot)), p)[2:4]
+        ddp = deflections(tuple(a + h * b for a, b in zip(x, xdot, strict=True)), p)[2:4]
+        ddm = deflections(tuple(a - h * b for a, b in zip(x, xdot, strict=True)), p)[2:4]
         delta_dd = (np.array(ddp) - np.array(ddm)) / (2 * h)
         # designed v1 and v1_dot (s and v_x held): g_dot by a central difference along the joint velocity
         hg = 1e-6

@@ -47,7 +47,7 @@ def recording(tmp_path: Path) -> tuple[Path, list[can.Message]]:
 
 def _same_frames(got: list[can.Message], want: list[can.Message], abs_s: float) -> None:
     assert len(got) == len(want)
-    for g, w in zip(got, want):
+    for g, w in zip(got, want, strict=True):
         assert (g.arbitration_id, g.is_extended_id, g.dlc, bytes(g.data)) == \
             (w.arbitration_id, w.is_extended_id, w.dlc, bytes(w.data))
         assert g.timestamp == pytest.approx(w.timestamp, abs=abs_s)

@@ -120,7 +120,7 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
                      edge.envelope.rejected, ep.old + ep.foreign)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
-            assert sum(a - b for a, b in zip(after, before)) == (0 if ok else 1)
+            assert sum(a - b for a, b in zip(after, before, strict=True)) == (0 if ok else 1)
         run()
         pc = edge.payloads.as_dict()
         assert calls["n"] >= CASES and pc["accepted"] + pc["rejected_total"] == calls["n"]
@@ -186,7 +186,7 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
                      ctrl.states + ctrl.unusable_states)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
-            assert sum(a - b for a, b in zip(after, before)) <= 1   # at most one outcome (a late state may end it)
+            assert sum(a - b for a, b in zip(after, before, strict=True)) <= 1   # at most one outcome (a late state may end it)
         run()
         st_ = ctrl.stats_dict()
         assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"]

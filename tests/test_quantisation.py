@@ -46,14 +46,14 @@ def test_quantised_equals_the_codec_round_trip(meas: tuple[float, ...], volts: t
     th, om, de, nv, vo = dbc_resolutions(fd)
     lsbs = (th, th, om, om, de, de, nv, nv)
     got = wire.measurement(meas)  # type: ignore[arg-type]
-    for value, lsb, ref in zip(meas, lsbs, got):
+    for value, lsb, ref in zip(meas, lsbs, got, strict=True):
         assert quantised(value, lsb) == ref   # bit for bit: offline == lockstep rests on it
-    for value, ref in zip(volts, wire.voltage(volts)):
+    for value, ref in zip(volts, wire.voltage(volts), strict=True):
         assert quantised(value, vo) == ref
 
 
 def test_fd_profile_is_at_least_as_fine_as_classic() -> None:
-    assert all(f <= c for f, c in zip(dbc_resolutions(True), dbc_resolutions(False)))
+    assert all(f <= c for f, c in zip(dbc_resolutions(True), dbc_resolutions(False), strict=True))
     assert dbc_resolutions(True) != dbc_resolutions(False)
 
 

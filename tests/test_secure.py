@@ -87,7 +87,7 @@ def _matched(session: zenoh.Session, *keys: str) -> dict[str, zenoh.Publisher]:
     """Publishers on `keys`, once each knows a matching remote subscriber (so a put is really sent, not dropped)."""
     pubs = {k: session.declare_publisher(k) for k in keys}
     for k, pub in pubs.items():
-        _until(lambda: pub.matching_status.matching, f"a subscriber of {k} known to the publisher")
+        _until(lambda pub=pub: pub.matching_status.matching, f"a subscriber of {k} known to the publisher")
     return pubs
 
 
@@ -153,7 +153,7 @@ def test_shipped_profiles_load(certs: CertSet, monkeypatch: pytest.MonkeyPatch) 
     cfg = load_config(repo / "configs" / "secure.toml")
     assert cfg.zenoh.tls.enabled and cfg.zenoh.acl.enabled and cfg.zenoh.tls.certificate == "certs/edge.pem"
     session_config(cfg.zenoh)
-    for node, nc in certs.nodes.items():
+    for nc in certs.nodes.values():
         z = load_config(nc.profile).zenoh
         assert Path(z.tls.certificate) == nc.certificate.resolve() and z.acl.controller_cn == node_cn("controller")
         session_config(z)
@@ -193,7 +193,7 @@ def test_only_controller_puts_reach_edge(certs: CertSet, rogue: CertSet, acl: bo
         outsiders = _outsiders(stack, certs, rogue, ep)
         got: dict[str, list[bytes]] = {k: [] for k in subs}
         for k, sub in subs.items():   # the authorised path works (and the subscription has propagated)
-            _until(lambda: (ctl.put(k, b"probe"), _drain(sub, got[k]))[1], f"controller probe on {k}")
+            _until(lambda k=k, sub=sub: (ctl.put(k, b"probe"), _drain(sub, got[k]))[1], f"controller probe on {k}")
         seen = intr.declare_subscriber(KEYS.state, zenoh.handlers.FifoChannel(64))
         _until(lambda: (edge.put(KEYS.state, b"s"), seen.try_recv())[1], "the intruder observing state (allowed)")
         attack = _matched(intr, KEYS.setpoint, KEYS.voltage, KEYS.stats)
@@ -207,7 +207,7 @@ def test_only_controller_puts_reach_edge(certs: CertSet, rogue: CertSet, acl: bo
         _until(lambda: any(s.payload.to_bytes() == b"intruder-done" for s in iter(barrier.try_recv, None)),
                "the intruder's barrier")
         for k, sub in subs.items():
-            _until(lambda: b"marker" in _drain(sub, got[k]), f"the controller's marker on {k}")
+            _until(lambda k=k, sub=sub: b"marker" in _drain(sub, got[k]), f"the controller's marker on {k}")
         peers = {str(z) for z in edge.info.peers_zid()}
         assert peers == {str(ctl.info.zid()), str(intr.info.zid())}
         assert all(not list(s.info.peers_zid()) for s in outsiders.values())

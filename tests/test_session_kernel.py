@@ -69,7 +69,7 @@ def test_delivery_offsets_are_the_emulators_own():
     offsets = delivery_offsets(cfg, "7/up", 500, 77).tolist()
     sent = [1_000_000 * i for i in range(500)]
     got = [live.submit(t, 77) for t in sent]
-    assert offsets == [-1 if a is None else a - t for a, t in zip(got, sent)]
+    assert offsets == [-1 if a is None else a - t for a, t in zip(got, sent, strict=True)]
     assert -1 in offsets and min(a for a in offsets if a >= 0) >= 0
 
 

@@ -124,8 +124,8 @@ def test_pareto_front_example():
 @given(st.lists(st.tuples(st.integers(0, 20), st.integers(0, 20)), min_size=1, max_size=25))
 def test_pareto_front_properties(xy):
     front = pareto_front(xy)
-    on = [p for p, f in zip(xy, front) if f]
-    for p, f in zip(xy, front):
+    on = [p for p, f in zip(xy, front, strict=True) if f]
+    for p, f in zip(xy, front, strict=True):
         beaten = any(q[0] <= p[0] and q[1] <= p[1] and q != p for q in on)
         assert beaten != f
     assert min(xy) in on and min(xy, key=lambda p: (p[1], p[0])) in on

@@ -80,7 +80,7 @@ def test_tiny_method_sweep_on_the_offline_engine(tmp_path: Path):
     edge_base = tmp_path / "edge.toml"
     edge_base.write_text('[trigger]\nplacement = "edge"\n', encoding="utf-8")
     assert point_config(SweepOptions(out=tmp_path, config=edge_base), points[0]).trigger.placement == "controller"
-    rows = [run_point(point_spec(opts, p, c)) for p, c in zip(points, cfgs)]
+    rows = [run_point(point_spec(opts, p, c)) for p, c in zip(points, cfgs, strict=True)]
     assert all(r["status"] == "ok" for r in rows) and all(tuple(r) == CSV_COLUMNS for r in rows)
     assert [(r["trigger"], r["compensation"], r["edge_model"], r["period_ms"]) for r in rows] == \
         [("controller", "predict", False, 10.0), ("controller", "predict", False, 20.0),

@@ -13,7 +13,7 @@ from sea_hil.errors import TrajectoryError
 
 
 def _fd(fn, t: float, h: float) -> tuple[float, float]:
-    return tuple((a - b) / (2 * h) for a, b in zip(fn(t + h), fn(t - h)))  # type: ignore[return-value]
+    return tuple((a - b) / (2 * h) for a, b in zip(fn(t + h), fn(t - h), strict=True))  # type: ignore[return-value]
 
 
 def test_gait_derivatives_match_finite_differences() -> None:

@@ -110,7 +110,10 @@ def start_live_child(args: argparse.Namespace, cfg: SeaHilConfig, can_spec: str 
     exits — else None. Start it once the node's Zenoh session is open (it may be what the child connects to)."""
     if not cfg.live.enabled:
         return None
-    echo = (lambda s: print(s, file=sys.stderr, flush=True))
+
+    def echo(s: str) -> None:
+        print(s, file=sys.stderr, flush=True)
+
     if can_spec is not None and can_spec.startswith("virtual:"):
         echo(f"live view: the CAN bus {can_spec} exists in this process only; bus load and driver state not shown")
     child = LiveChild(record_cmd(args, cfg, can_spec), echo)

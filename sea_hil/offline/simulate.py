@@ -30,7 +30,7 @@ def offline_transmissions(res: SimResult) -> dict[str, int]:
 
 
 def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:
-    reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True))}
+    reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True), strict=True)}
     return {
         "controller": res.mode,
         "duration_s": res.duration_s,

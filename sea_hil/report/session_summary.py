@@ -112,7 +112,7 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     else:
         per = [one_limb_summary(limb_view(data, name, node_id), controller) for name, node_id, _ in limbs]
     summary = per[0]
-    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per)]
+    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per, strict=True)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
     driver = driver_block(data)
     if driver is not None:

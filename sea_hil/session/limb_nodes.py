@@ -101,7 +101,7 @@ def stop_and_join(nodes: LimbNodes) -> None:
 def record_edge_finals(rec: Any, nodes: LimbNodes, lockstep: bool) -> None:
     """Each limb's final edge stats on `/stats` (they carry its `node_id`; in lockstep at its sample time) and as metadata
     (`sea-hil.edge` for the first limb, the 1-limb name; `sea-hil.edge.<limb>` for the others)."""
-    for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges)):
+    for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges, strict=True)):
         now_ns = edge.sample_t_ns if lockstep else time.time_ns()
         rec.record("/stats", now_ns, now_ns, edge.stats_record(final=True))   # carries the limb's `node_id`
         rec.add_metadata("sea-hil.edge" if i == 0 else f"sea-hil.edge.{limb.name}",

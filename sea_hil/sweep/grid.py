@@ -113,7 +113,7 @@ def expand_grid(eta: Sequence[float], r: Sequence[float], delay_ms: Sequence[flo
     """Per link condition (delay x jitter x loss, or `links`) and seed: a TT reference per TT scheme (by default
     one), then every ET point (ET scheme x eta x r)."""
     points: list[GridPoint] = []
-    conditions = links if links is not None else [LinkCondition(d, j, l) for d, j, l in
+    conditions = links if links is not None else [LinkCondition(d, j, lo) for d, j, lo in
                                                   itertools.product(delay_ms, jitter_ms, loss)]
     for link in conditions:
         for seed in seeds:

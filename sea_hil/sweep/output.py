@@ -39,7 +39,7 @@ def fronts_by_link(rows: Sequence[dict[str, Any]],
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in _plottable(fold_seeds(rows), metric):
         groups.setdefault(tuple(r.get(k, "") for k in LINK_KEYS), []).append(r)
-    return {k: list(zip(g, pareto_front([_xy(r, metric) for r in g]))) for k, g in groups.items()}
+    return {k: list(zip(g, pareto_front([_xy(r, metric) for r in g]), strict=True)) for k, g in groups.items()}
 
 
 def link_label(key: tuple) -> str:

@@ -137,7 +137,7 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
         try:
             direct = True if opts.scheduler is None else None   # a remote cluster's workers may be unreachable
             for batch in as_completed(futures).batches():   # one gather per batch of finished points
-                for fut, row in zip(batch, client.gather(batch, direct=direct)):
+                for fut, row in zip(batch, client.gather(batch, direct=direct), strict=True):
                     point = futures[fut]
                     rows[point.index] = row
                     csv_log.append(row)

@@ -28,6 +28,7 @@ import subprocess
 import sys
 import threading
 import time
+from itertools import pairwise
 from pathlib import Path
 
 import psutil
@@ -125,7 +126,7 @@ class Watch:
 
 def _last_run(seqs: list[int]) -> list[int]:
     """The states of the newest edge stream (a restarted edge numbers its states from 1 again)."""
-    starts = [i + 1 for i, (a, b) in enumerate(zip(seqs, seqs[1:])) if b <= a]
+    starts = [i + 1 for i, (a, b) in enumerate(pairwise(seqs)) if b <= a]
     return seqs[starts[-1]:] if starts else seqs
 
 
@@ -139,7 +140,7 @@ def _event_gaps(path: Path) -> int:
     events: its header seq, the sample number, has gaps by design), in `seq` for the paper's every-sample stream."""
     states = [m.payload for m in read_session(path).messages.get("/zenoh/state", [])]
     seqs = _last_run([int(p.get("event_seq", p["seq"])) for p in states])
-    return sum(b - a - 1 for a, b in zip(seqs, seqs[1:]) if b > a)
+    return sum(b - a - 1 for a, b in pairwise(seqs) if b > a)
 
 
 def _recorded_states(path: Path) -> list[int]:
@@ -187,7 +188,7 @@ class Chaos:
         kinds = ["edge", "controller", "recorder"] * 3 + [self.rng.choice(["edge", "controller", "recorder"])]
         self.rng.shuffle(kinds)
         times = sorted(self.rng.uniform(0.0, WINDOW_S) for _ in kinds)
-        return list(zip(times, kinds))
+        return list(zip(times, kinds, strict=True))
 
     def running(self, w: Watch, timeout_s: float) -> bool:
         return wait_for(lambda: w.state is DriverState.RUNNING, timeout_s, poll_s=0.01) is not None
