@@ -71,7 +71,7 @@ class EdgeNode(Node):
         self.codec = SeaCodec.for_bus(cfg.can, [node_id])
         self.assembler = FeedbackAssembler()
         self.keys = Keys.from_config(cfg.zenoh)
-        self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
+        self.inner = InnerLoop(cfg, nominal_params(cfg), cfg.plant.initial_theta_rad,
                                1.0 / cfg.can.feedback_rate_hz)
         self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))

@@ -50,7 +50,7 @@ class CommandPath:
     def step_only(self, fb: Feedback) -> None:
         """Run the inner loop on `fb` (observer, resume ramp) without sending: a sample too late to answer."""
         if self.inner_mode != "remote":
-            self.inner.voltage((*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s))  # type: ignore[arg-type]
+            self.inner.voltage((*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s))
 
     def answer(self, fb: Feedback, command: bool, clear: bool) -> bool:
         """Compute and send the VOLTAGE_CMD answering `fb` (False: not commanding). `command`/`clear` come from the
@@ -66,7 +66,7 @@ class CommandPath:
             u = self.voltage if self.voltage is not None else (0.0, 0.0)
         else:
             m = (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s)
-            u = self.inner.voltage(m)  # type: ignore[arg-type]
+            u = self.inner.voltage(m)
         self.last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
         self.send(self.last_cmd)
         return True

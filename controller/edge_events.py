@@ -72,7 +72,7 @@ class EdgeEvents:
         self.model: Predictor | None = None
         if model:
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
-            self.model.warm(tuple(cfg.plant.initial_theta_rad))
+            self.model.warm(cfg.plant.initial_theta_rad)
         self.events = 0
         self.resume_anchors = 0
         self.sampled_at: dict[int, int] = {}
@@ -88,7 +88,7 @@ class EdgeEvents:
         self.max_stale_excess_ns = 0      # ... beyond the answer timeout at that sample
         self._last_hold_ns: int | None = None   # the sample the held setpoint was computed for (answered or local)
 
-    def on_sample(self, sample_ns: int, fb: tuple) -> EdgeDecision | None:
+    def on_sample(self, sample_ns: int, fb: tuple[tuple[float, float], ...]) -> EdgeDecision | None:
         """fb = (theta, omega, delta, nut velocity) pairs of the sample at `sample_ns`; None: not checked."""
         k = round(sample_ns / self.period_ns)
         outer = k % self.outer_every == 0

@@ -143,8 +143,9 @@ class EdgeEventGenerator:
         if model is not None:
             return model(int(self.rtt_ns)), t_eval, self.desired(t_eval)
         h = self.rtt_ns * 1e-9
-        th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha, strict=True))
-        om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha, strict=True))
+        (q1, q2), (w1, w2), (a1, a2) = js.theta_rad, js.omega_rad_s, self._alpha
+        th = (q1 + w1 * h + 0.5 * a1 * h * h, q2 + w2 * h + 0.5 * a2 * h * h)
+        om = (w1 + a1 * h, w2 + a2 * h)
         return JointState(th, om), t_eval, self.desired(t_eval)
 
     def overdue(self, sample_ns: int) -> bool:

@@ -151,9 +151,11 @@ class RemoteController(Node):
 
     def _stats(self) -> dict[str, object]:
         pc = self.payloads.as_dict()
+        rejected = pc["rejected"]
+        assert isinstance(rejected, dict)
         return {"states_handled": self.states, "setpoints_sent": self.setpoint_seq,
                 "payload_accepted": pc["accepted"], "payload_rejected": pc["rejected_total"],
-                **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
+                **{f"payload_rejected_{k}": v for k, v in rejected.items()},
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
                 "trajectory_mismatches": self.trajectory_mismatches, "unanchored_states": self.core.unanchored,

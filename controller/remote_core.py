@@ -42,15 +42,15 @@ class ControllerCore:
         self.params = nominal_params(cfg)
         self.traj = make_trajectory(cfg.trajectory)
         self.outer = OuterController(cfg, self.params, mode)
-        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.controller.sample_period_s)
+        self.inner = InnerLoop(cfg, self.params, cfg.plant.initial_theta_rad, cfg.controller.sample_period_s)
         self.edge_trigger = cfg.trigger.placement == "edge"      # answer every EVENT_STATE
         self.trajectory_id = trajectory_id(cfg.trajectory)
         self.predictor: Predictor | None = None
         if cfg.controller.compensation == "predict":            # the edge's closed loop at its own rate
             period_s = 1.0 / cfg.can.feedback_rate_hz
-            edge_inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), period_s)
+            edge_inner = InnerLoop(cfg, self.params, cfg.plant.initial_theta_rad, period_s)
             self.predictor = Predictor.for_inner(edge_inner, int(round(period_s * 1e9)), cfg.sim.substeps)
-            self.predictor.warm(tuple(cfg.plant.initial_theta_rad))
+            self.predictor.warm(cfg.plant.initial_theta_rad)
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         self.lead_in: LeadIn | None = None
@@ -95,7 +95,7 @@ class ControllerCore:
                                                              sp.sliding, sp.reason, epoch=self.epoch)))
         if self.inner_mode == "remote":
             m = (*p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
-            u = self.inner.voltage(m)  # type: ignore[arg-type]
+            u = self.inner.voltage(m)
             self.setpoint_seq += 1
             messages.append(("voltage", encode(VoltagePayload(self.setpoint_seq, wall_ns(), p.seq, u,
                                                               epoch=self.epoch))))

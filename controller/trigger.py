@@ -67,7 +67,7 @@ class EventTrigger:
 
     def update(self, t_ns: int, eps: tuple[float, ...]) -> TriggerReason | None:
         started = self._eps_i is not None
-        code = event_reason(started, self._eps_i if started else _EPS_UNSET, self._t_i_ns, t_ns, eps,
+        code = event_reason(started, self._eps_i if self._eps_i is not None else _EPS_UNSET, self._t_i_ns, t_ns, eps,
                             self.threshold, self.r, self.max_inter_event_ns)
         if code == NO_EVENT:
             return None

@@ -77,7 +77,7 @@ class PlantNode(Node):
         cc = cfg.can
         self.period_ns = int(round(1e9 / cc.feedback_rate_hz))
         self.drivers = {n: DriverCore.create(n, p, 1.0 / cc.feedback_rate_hz, cc.watchdog_timeout_s, cfg.sim.substeps,
-                                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance),
+                                             cfg.plant.initial_theta_rad, make_disturbance(cfg.disturbance),
                                              DriveLimits.from_config(cfg.safety.drive))
                         for n in node_ids}
         self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
@@ -195,7 +195,7 @@ class PlantNode(Node):
                                  "send_failures": s.send_failures, "bus_errors": s.bus_errors,
                                  "foreign_frames": s.foreign_frames}
         for k in ("p50", "p99", "max"):
-            out[f"lateness_us_{k}"] = lat[k] * 1e6 if lat[k] is not None else -1.0
+            out[f"lateness_us_{k}"] = v * 1e6 if (v := lat[k]) is not None else -1.0
         for n, drv in self.drivers.items():
             c = drv.counters
             out.update({f"node{n}_rejected_frames": c.rejected_frames, f"node{n}_ignored_commands": c.ignored_commands,

@@ -124,7 +124,7 @@ class BusArbiter:
         first frame ready .. last frame delivered)."""
         def us(h: LogHistogram) -> dict[str, float]:   # values are recorded + 1 ns (a log histogram has no 0)
             d = h.to_dict()
-            return {k: -1.0 if d[k] is None else 0.0 if d[k] < 1e-8 else round(float(d[k]) * 1e6, 3)
+            return {k: -1.0 if (v := d[k]) is None else 0.0 if v < 1e-8 else round(float(v) * 1e6, 3)
                     for k in ("p50", "p99", "max")}
         span = self.busy_until_ns - (self.first_ready_ns or 0)
         return {"bitrate_bps": self.rates.bitrate_bps, "data_bitrate_bps": self.rates.data_bitrate_bps,

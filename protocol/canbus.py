@@ -84,7 +84,7 @@ class FastVirtualBus(VirtualBus):
         if rx_queue_size == 0:
             with channels_lock:
                 i = next(i for i, q in enumerate(self.channel) if q is self.queue)
-                self.queue = self.channel[i] = queue.SimpleQueue()  # type: ignore[assignment]
+                self.queue = self.channel[i] = queue.SimpleQueue()  # type: ignore[assignment,call-overload]
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """`BusABC.recv` without its generic filter loop when no filters are set (a plain queue read)."""

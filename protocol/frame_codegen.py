@@ -40,7 +40,8 @@ def _compile(name: str, lines: list[str], label: str) -> Callable[..., Any]:
     namespace: dict[str, Any] = {}
     code = compile("\n".join(lines), f"<frame plan {label}.{name}>", "exec")   # source built from the DBC only
     exec(code, namespace)  # noqa: S102
-    return namespace[name]
+    fn: Callable[..., Any] = namespace[name]
+    return fn
 
 
 def generate(plan: Any) -> tuple[Callable[..., Any], Callable[..., Any], Callable[..., Any]]:

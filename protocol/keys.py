@@ -12,11 +12,22 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
 from sea_hil.errors import ConfigError
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
 _FORBIDDEN = frozenset("*$#?")
+
+
+class _KeyedConfig(Protocol):
+    """What `Keys.from_config` reads (a `ZenohConfig`; the wire layer does not import the config)."""
+
+    @property
+    def prefix(self) -> str: ...
+
+    @property
+    def limb(self) -> str: ...
 
 
 def _check_chunk(what: str, chunk: str, full: str) -> None:
@@ -68,7 +79,7 @@ class Keys:
         return cls(prefix, limb, **{ch: f"{base}/{ch}" for ch in CHANNELS})
 
     @classmethod
-    def from_config(cls, zenoh_cfg: object) -> Keys:
+    def from_config(cls, zenoh_cfg: _KeyedConfig) -> Keys:
         """From a `sea_hil.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
         return cls.make(zenoh_cfg.prefix, zenoh_cfg.limb)
 

@@ -231,8 +231,8 @@ def parse_link_spec(spec: str) -> dict[str, object]:
         elif key == "rate":
             out["rate_bps"] = _with_unit(val, _RATE_UNITS, key)
         elif key == "trace":   # resolved (a config written for another process stays valid) and read at once
-            out["trace_path"] = str(Path(val).expanduser().resolve())
-            load_trace(out["trace_path"])
+            out["trace_path"] = trace_path = str(Path(val).expanduser().resolve())
+            load_trace(trace_path)
         elif key == "reorder":
             if val.lower() not in _BOOLS:
                 raise ConfigError(f"link spec: reorder={val!r} must be on/off")

@@ -49,7 +49,7 @@ class TimedBus:
         self.timeline.submit(self, msg)
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
-        if not self.simulated:
+        if not isinstance(self.timeline, LockstepTimeline):
             return self.raw.recv(timeout)
         return self.timeline.recv(self, timeout)
 

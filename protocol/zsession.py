@@ -107,9 +107,10 @@ class LinkedPublisher:
         """Submit `data` at `now_ns`; returns its delivery time, or None if the link dropped it. `data` may be a
         function of the delivery time that makes the bytes (`wire_bytes` then required): a sender that stamps
         messages with the emulated link's delivery time (lockstep's simulated clock)."""
-        if callable(data):
-            assert wire_bytes is not None, "a deferred message needs wire_bytes"
-        at = self.link.submit(now_ns, estimate_wire_bytes(len(data)) if wire_bytes is None else wire_bytes)
+        if wire_bytes is None:
+            assert not callable(data), "a deferred message needs wire_bytes"
+            wire_bytes = estimate_wire_bytes(len(data))
+        at = self.link.submit(now_ns, wire_bytes)
         if at is None:
             return None
         if callable(data):

@@ -20,7 +20,7 @@ import zenoh
 from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.zlatest import LatestSubscriber
-from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
+from sea_hil.runtime.realtime import ThreadPolicy
 
 
 class Clock:
@@ -66,8 +66,6 @@ class RealTimePacer:
         self.done = False
         timing = getattr(getattr(node, "cfg", None), "timing", None) or TimingConfig()
         self.timing = timing
-        self.spin_ns = timing.spin_us * 1000
-        self.gc = SlackCollector.from_config(timing)
         self.policy = ThreadPolicy(timing, "driver")
         self.applied: dict[str, object] = {}
 
@@ -77,9 +75,6 @@ class RealTimePacer:
         self.applied = self.policy.apply()
         n.on_loop_exit(self.policy.undo)
         n.prepare_kernels()
-        if self.gc is not None:
-            self.gc.start()
-            n.on_loop_exit(self.gc.stop)
         self.start_ns = time.monotonic_ns()
         self.end_ns = None if duration_s is None else self.start_ns + int(duration_s * 1e9)
         for drv in n.drivers.values():
@@ -91,12 +86,7 @@ class RealTimePacer:
         n = self.node
         self.k += 1
         deadline = self.start_ns + self.k * n.period_ns
-        if self.spin_ns:   # sleep until the tail, then poll the bus (a GIL-releasing wait of ~1 us) to the deadline
-            n.drain_until(deadline - self.spin_ns)
-            while (now := time.monotonic_ns()) < deadline:
-                n.drain_until(now + 1000)
-        else:
-            n.drain_until(deadline)
+        n.drain_until(deadline)
         now = time.monotonic_ns()
         late = now - deadline
         n.lateness.record(max(late, 0) * 1e-9 + 1e-7)
@@ -114,8 +104,6 @@ class RealTimePacer:
             n.heartbeats()
             self.policy.refresh()   # [timing] realtime_scope = "process": threads started since
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
-        if self.gc is not None:   # a due collection, if the next deadline leaves it room
-            self.gc.tick(self.start_ns + (self.k + 1) * n.period_ns - time.monotonic_ns())
         if self.end_ns is not None and now >= self.end_ns:
             self.done = True
 

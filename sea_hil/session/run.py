@@ -29,7 +29,7 @@ from sea_hil.report.console import ProgressSample
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
-from sea_hil.runtime.realtime import child_cpus, child_priority
+from sea_hil.runtime.realtime import child_priority
 from sea_hil.session import limb_nodes
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
@@ -111,15 +111,14 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            procs = []   # [timing] pinning in real time only (lockstep runs as fast as it can)
-            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing)}
+            procs = []
             base = controller_config(_without_live(child_cfg), listen[0], None if opts.lockstep else
                                      child_priority(cfg.timing))
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
                 # the child ends when this process dies (sea_hil/session/processes.py)
-                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL, **rt_child))
+                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
