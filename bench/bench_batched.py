@@ -17,12 +17,13 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.mechanics import limb_params  # noqa: E402
 from sea_hil.plant_emulator.batch import prepare_batch, step_all  # noqa: E402
 from sea_hil.plant_emulator.driver import DriverCore  # noqa: E402
 from sea_hil.plant_emulator.integrator import prepare_advance  # noqa: E402
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd, load_database  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec, load_database  # noqa: E402
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
 from sea_hil.protocol.frame_plan import FramePlan  # noqa: E402
 
 HOT = ("VOLTAGE_CMD", "FEEDBACK_ANGLE", "FEEDBACK_JOINT1", "FEEDBACK_JOINT2", "VOLTAGE_CMD_FD", "FEEDBACK_FD",

@@ -146,7 +146,7 @@ def live_records(details: list[dict[str, Any]], command: str) -> list[dict[str, 
 def replay_cost(mcap: Path, repeats: int = 5) -> dict[str, Any]:
     """CPU cost of the live view itself (LiveView.feed + LiveServer.publish, no client), replaying a recording: the
     work that would take the nodes' GIL if it were served from the `run` process (best of `repeats`)."""
-    from sea_hil.config import LiveConfig
+    from sea_hil.config.live import LiveConfig
     from sea_hil.live.server import LiveServer
     from sea_hil.live.view import LiveView
     data = read_session(mcap)

@@ -23,10 +23,11 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode  # noqa: E402
 from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us  # noqa: E402
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
 from sea_hil.protocol.canbus import open_bus  # noqa: E402
 from sea_hil.recorder.can_tap import RawFrame  # noqa: E402
 from sea_hil.stats.histogram import LogHistogram  # noqa: E402

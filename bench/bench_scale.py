@@ -26,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 from benchlib import bench_args, emit, record  # noqa: E402
 from limbrig import RigResult, run_rig  # noqa: E402
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.session.limbs import limb_load_pct  # noqa: E402
 
 MAX_MISS = 0.001

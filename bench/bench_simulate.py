@@ -19,7 +19,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 
 from benchlib import bench_args, emit, record  # noqa: E402
 
-from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.config.root import SeaHilConfig  # noqa: E402
 from sea_hil.jit import compiled  # noqa: E402
 from sea_hil.offline.closed_loop import make_inner_steps, simulate  # noqa: E402
 

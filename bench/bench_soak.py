@@ -42,7 +42,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 from benchlib import REPO, bench_args, command_line, emit, record  # noqa: E402
 from sessionwatch import watch_run  # noqa: E402
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.recorder.reader import RecordedMessage, read_session  # noqa: E402
 
 GOAL_RSS_MB = 5.0

@@ -32,7 +32,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 import zenoh  # noqa: E402
 from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
 
-from sea_hil.config import ZenohConfig  # noqa: E402
+from sea_hil.config.comms import ZenohConfig  # noqa: E402
 from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.payload_hot import encode_setpoint, encode_state  # noqa: E402

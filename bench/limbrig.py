@@ -28,7 +28,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 import zenoh  # noqa: E402
 from benchlib import stop_process, wait_ready  # noqa: E402
 
-from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.config.root import SeaHilConfig  # noqa: E402
 from sea_hil.controller.edge import EdgeNode  # noqa: E402
 from sea_hil.controller.edge_mux import EdgeMux  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402

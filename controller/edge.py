@@ -26,7 +26,7 @@ import time
 import can
 import zenoh
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_command import CommandPath
 from sea_hil.controller.edge_downlink import SetpointIntake
 from sea_hil.controller.edge_events import EdgeEvents
@@ -36,15 +36,10 @@ from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.protocol.can_codec import (
-    FEEDBACK_PARTS,
-    DriverState,
-    Feedback,
-    FeedbackAssembler,
-    Heartbeat,
-    SeaCodec,
-    unwrap_us,
-)
+from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Heartbeat
+from sea_hil.protocol.canbus import CanHandle
 from sea_hil.protocol.epoch import new_epoch
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
@@ -60,7 +55,7 @@ SAFE_STATES = (DriverState.FAULT, DriverState.ESTOP)
 class EdgeNode(Node):
     kind = "edge"
 
-    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, session: zenoh.Session, node_id: int, *,
+    def __init__(self, cfg: SeaHilConfig, bus: CanHandle, session: zenoh.Session, node_id: int, *,
                  inner: str = "edge", clock: Clock | None = None, mode: str = "et") -> None:
         if inner not in ("edge", "remote"):
             raise ValueError("inner must be 'edge' or 'remote'")
@@ -140,7 +135,7 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-        elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
+        elif isinstance(frame, Feedback | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # FD, or the 3 classic parts
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:
                 with self.lock:

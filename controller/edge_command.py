@@ -10,16 +10,16 @@ import can
 from sea_hil.controller.edge_downlink import SETPOINT_BYTES
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.errors import BusError
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, Feedback, SeaCodec, VoltageCmd
-from sea_hil.protocol.can_frames import LIMIT_FLAGS, ErrorFlags
-from sea_hil.protocol.canbus import send_with_retry
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, ClearErrors, DriverState, ErrorFlags, Feedback, VoltageCmd
+from sea_hil.protocol.canbus import CanHandle, send_with_retry
 from sea_hil.protocol.payloads import SetpointPayload
 
 log = logging.getLogger("sea_hil.edge")
 
 
 class CommandPath:
-    def __init__(self, bus: can.BusABC, codec: SeaCodec, node_id: int, inner: InnerLoop, inner_mode: str,
+    def __init__(self, bus: CanHandle, codec: SeaCodec, node_id: int, inner: InnerLoop, inner_mode: str,
                  send_retries: int, counters: Any) -> None:
         self.bus, self.codec, self.node_id = bus, codec, node_id
         self.inner, self.inner_mode = inner, inner_mode

@@ -12,15 +12,8 @@ from typing import Any
 
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import (
-    PAYLOAD_SIZE,
-    MsgType,
-    PayloadCounters,
-    SequenceTracker,
-    SeqVerdict,
-    SetpointPayload,
-    VoltagePayload,
-)
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload, VoltagePayload
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 
 log = logging.getLogger("sea_hil.edge")
 SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]

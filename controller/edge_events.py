@@ -22,14 +22,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.envelope import SetpointEnvelope, admissible
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import make_trajectory, trajectory_id
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, error_threshold
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass(frozen=True)

@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 from sea_hil.controller.smc import JointState, tracking_errors
 from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn, anchored_lead_in
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, _distance, epsilon
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, _distance, epsilon
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass

@@ -9,7 +9,7 @@ import logging
 import math
 from typing import NamedTuple
 
-from sea_hil.config import SetpointEnvelopeConfig
+from sea_hil.config.safety import SetpointEnvelopeConfig
 
 INF = float("inf")
 

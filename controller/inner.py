@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import logging
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.backstepping import (
     COMPENSATION,
     NO_ESTIMATE,

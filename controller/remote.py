@@ -20,12 +20,13 @@ import time
 
 import zenoh
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
 from sea_hil.protocol.keys import Keys
-from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, SequenceTracker, SeqVerdict, StatePayload
+from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, StatePayload
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.zsession import publisher
 from sea_hil.runtime.clock import Clock, RealTimeClock
 from sea_hil.runtime.node import Node
@@ -79,7 +80,7 @@ class RemoteController(Node):
         return True
 
     def finished(self) -> bool:
-        return self.done
+        return bool(self.done)
 
     def _close(self) -> None:
         self.source.close()

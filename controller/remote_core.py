@@ -16,7 +16,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_events import tracking_record
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.config import TrajectoryConfig
+from sea_hil.config.model import TrajectoryConfig
 from sea_hil.errors import TrajectoryError
 
 # (offset, [(amplitude, harmonic, phase)]) per joint, angles in rad

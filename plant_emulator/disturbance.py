@@ -6,8 +6,7 @@ import math
 import random
 from collections.abc import Callable
 
-from sea_hil.config import DisturbanceConfig
-from sea_hil.config.model import JointDisturbanceConfig
+from sea_hil.config.model import DisturbanceConfig, JointDisturbanceConfig
 
 JointTorque = Callable[[float], float]
 

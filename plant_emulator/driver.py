@@ -16,8 +16,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+from sea_hil.dynamics import State, deflections, initial_state, saturate
 from sea_hil.mechanics import LimbParams
-from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, saturate
 from sea_hil.plant_emulator.integrator import Disturbance, advance
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_frames import (

@@ -83,11 +83,13 @@ def advance(t: float, x: State, u: tuple[float, float], dt: float, substeps: int
         values += (*dist(ti), *dist(ti + hh), *dist(ti + h))
     dist_values = np.array(values)   # an array: one signature for any sub-step count
     if type(substeps) is int and len(x) == 8 and all(type(v) is float for v in (t, dt, *x, *u)):
-        return _entry(kernel, p)(t, x, u, dt, substeps, p, dist_values)
-    return kernel(t, x, u, dt, substeps, p, dist_values)
+        out: State = _entry(kernel, p)(t, x, u, dt, substeps, p, dist_values)
+    else:
+        out = kernel(t, x, u, dt, substeps, p, dist_values)
+    return out
 
 
-_ENTRIES: dict[tuple[int, int], tuple[Any, LimbParams, Any]] = {}   # (id(kernel), id(params)) -> entry: a cache
+_ENTRIES: dict[tuple[int, int], tuple[Any, LimbParams, Callable[..., Any]]] = {}   # (id(kernel), id(params)) -> entry: a cache
 _ENTRIES_MAX = 64
 
 
@@ -106,7 +108,7 @@ def _advance_signature(p_type: Any) -> tuple[Any, ...]:
     return (f64, types.UniTuple(f64, 8), types.UniTuple(f64, 2), f64, types.int64, p_type, types.Array(f64, 1, "C"))
 
 
-def entry_point(kernel: Any, p: LimbParams, signature: Callable[[Any], tuple[Any, ...]]) -> Any:
+def entry_point(kernel: Any, p: LimbParams, signature: Callable[[Any], tuple[Any, ...]]) -> Callable[..., Any]:
     """The entry point of `kernel`'s overload for the numba argument types `signature(numba.typeof(p))` (compiled,
     or loaded from numba's cache, when it is not there yet), cached per kernel and parameter object: a hit costs
     one dict lookup."""
@@ -121,6 +123,6 @@ def entry_point(kernel: Any, p: LimbParams, signature: Callable[[Any], tuple[Any
         kernel.compile(sig)
     if len(_ENTRIES) >= _ENTRIES_MAX:
         _ENTRIES.clear()
-    entry = kernel.overloads[sig].entry_point
+    entry: Callable[..., Any] = kernel.overloads[sig].entry_point
     _ENTRIES[key] = (kernel, p, entry)
     return entry

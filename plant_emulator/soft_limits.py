@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-from sea_hil.config import DriveLimitsConfig
+from sea_hil.config.safety import DriveLimitsConfig
 from sea_hil.mechanics import LimbParams
 from sea_hil.protocol.can_frames import ErrorFlags
 

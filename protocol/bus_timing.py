@@ -24,6 +24,9 @@ from typing import Any, NamedTuple
 
 import can
 
+from sea_hil.config.comms import CanConfig
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat, VoltageCmd
 from sea_hil.stats.can_bits import NS_PER_S, frame_time_ns
 from sea_hil.stats.histogram import LogHistogram
 
@@ -143,11 +146,9 @@ class BusArbiter:
         return out
 
 
-def planned_load_pct(can_cfg: Any, node_ids: Iterable[int]) -> float:
+def planned_load_pct(can_cfg: CanConfig, node_ids: Iterable[int]) -> float:
     """Bus load (%) the configured profile plans for `node_ids` on one bus: per node and sample its feedback and
     its voltage frame at `feedback_rate_hz`, its heartbeat at `heartbeat_rate_hz` (worst-case stuffing)."""
-    from sea_hil.protocol.can_codec import Feedback, Heartbeat, SeaCodec, VoltageCmd
-    from sea_hil.protocol.can_frames import DriverState, ErrorFlags
     codec, rates, z = SeaCodec.for_bus(can_cfg), BusRates.of(can_cfg), (0.0, 0.0)
     sample = codec.encode_feedback(Feedback(1, 0, 0, z, z, z, z)) + [codec.encode(VoltageCmd(1, z, 0))]
     per_node_ns = (sum(rates.frame_ns(m) for m in sample) * can_cfg.feedback_rate_hz

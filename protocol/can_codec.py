@@ -24,42 +24,22 @@ import cantools
 from cantools.database import EncodeError
 
 from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
 from sea_hil.protocol.can_frames import (
     CMD_BITS,
     CMD_MASK,
-    FEEDBACK_PARTS,
-    FRAME_TYPES,
     NODE_ID_MAX,
     NODE_ID_MIN,
     ROLLING,
-    SEQ_MODULUS,
-    T_US_MODULUS,
-    ClearErrors,
-    DeflectionSetpoint,
-    DriverState,
-    ErrorFlags,
-    EStop,
     Feedback,
-    FeedbackAngle,
-    FeedbackJoint1,
-    FeedbackJoint2,
     Frame,
-    Heartbeat,
-    Pair,
     SignalBinding,
-    VoltageCmd,
     binding_of,
-    can_id_of,
     check_node_id,
     profile_messages,
 )
 from sea_hil.protocol.frame_plan import FramePlan
 
-__all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",
-           "T_US_MODULUS", "ClearErrors", "DeflectionSetpoint", "DriverState", "ErrorFlags", "EStop", "Feedback",
-           "FeedbackAngle", "FeedbackAssembler", "FeedbackJoint1", "FeedbackJoint2", "Frame", "Heartbeat",
-           "Pair", "SeaCodec", "VoltageCmd", "can_id_of", "check_node_id", "load_database", "seq_gap", "unwrap_us"]
+__all__ = ["SeaCodec", "load_database"]
 
 
 def load_database() -> cantools.database.can.Database:

@@ -14,12 +14,10 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Protocol
 
+from sea_hil.config.wire_names import validate_limb, validate_prefix
 from sea_hil.errors import ConfigError
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
-_FORBIDDEN = frozenset("*$#?")
-
-
 class _KeyedConfig(Protocol):
     """What `Keys.from_config` reads (a `ZenohConfig`; the wire layer does not import the config)."""
 
@@ -28,35 +26,6 @@ class _KeyedConfig(Protocol):
 
     @property
     def limb(self) -> str: ...
-
-
-def _check_chunk(what: str, chunk: str, full: str) -> None:
-    if not chunk:
-        raise ConfigError(f"zenoh {what} {full!r} has an empty chunk (leading, trailing or double '/')")
-    bad = sorted(set(chunk) & _FORBIDDEN)
-    if bad:
-        raise ConfigError(f"zenoh {what} {full!r} contains forbidden character(s) {''.join(bad)!r}")
-    if any(c.isspace() for c in chunk):
-        raise ConfigError(f"zenoh {what} {full!r} contains whitespace")
-
-
-def validate_prefix(prefix: str) -> str:
-    """A prefix is one or more '/'-separated chunks without wildcards (`*`, `$`), `#`, `?` or whitespace."""
-    if not isinstance(prefix, str) or not prefix:
-        raise ConfigError("zenoh prefix must be a non-empty string")
-    for chunk in prefix.split("/"):
-        _check_chunk("prefix", chunk, prefix)
-    return prefix
-
-
-def validate_limb(limb: str) -> str:
-    """A limb name is exactly one chunk: like a prefix chunk and additionally without '/'."""
-    if not isinstance(limb, str) or not limb:
-        raise ConfigError("zenoh limb must be a non-empty string")
-    if "/" in limb:
-        raise ConfigError(f"zenoh limb {limb!r} must not contain '/'")
-    _check_chunk("limb", limb, limb)
-    return limb
 
 
 @dataclass(frozen=True)

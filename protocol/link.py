@@ -28,7 +28,7 @@ from typing import Generic, TypeVar
 
 from pydantic import ValidationError
 
-from sea_hil.config import LinkConfig, LinkDirectionConfig
+from sea_hil.config.comms import LinkConfig, LinkDirectionConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link_trace import load_trace
 
@@ -203,11 +203,11 @@ def _probability(text: str, what: str) -> float:
     return v
 
 
-def parse_link_spec(spec: str) -> dict[str, object]:
+def parse_link_spec(spec: str) -> dict[str, float | str | bool]:
     """`"delay=20ms,jitter=5ms,dist=normal,loss=1%,ge=0.01/0.3/0.8,rate=1Mbps,qlimit=50ms,reorder=on"` ->
     `LinkDirectionConfig` field overrides (validated). `ge=p_good_to_bad/p_bad_to_good[/loss_bad]`;
     `trace=FILE.csv` replays a per-packet trace (`sea_hil.protocol.link_trace`), optionally with rate/qlimit/reorder."""
-    out: dict[str, object] = {}
+    out: dict[str, float | str | bool] = {}
     for item in (s.strip() for s in spec.split(",")):
         if not item:
             continue

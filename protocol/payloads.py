@@ -27,13 +27,8 @@ from math import isfinite
 from typing import Any, ClassVar
 
 from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field, uint_field
-from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
-from sea_hil.protocol.wire_size import estimate_wire_bytes
 
-__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",
-           "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected",
-           "RejectReason", "SeqVerdict", "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason",
-           "VoltagePayload", "decode", "encode", "estimate_wire_bytes"]
+__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "VERSION", "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "SetpointPayload", "StatePayload", "TriggerReason", "VoltagePayload", "decode", "encode"]
 
 _log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"

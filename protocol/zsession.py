@@ -15,10 +15,10 @@ from typing import Any, Protocol
 
 import zenoh
 
-from sea_hil.config import ZenohConfig
+from sea_hil.config.comms import ZenohConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import estimate_wire_bytes
+from sea_hil.protocol.wire_size import estimate_wire_bytes
 from sea_hil.protocol.zsecurity import check_tls_files, security_settings
 
 _ENDPOINT = re.compile(r"^[a-z0-9\-]+/\S+$")

@@ -21,10 +21,14 @@ from typing import Any
 
 import can
 
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import SeaHilError
+from sea_hil.runtime.processes import end_process
+from sea_hil.session.builder import SessionBuilder
+from sea_hil.session.run import RunOptions, run_session
 
-__all__ = ["DriveSnapshot", "EmulatedDriver", "SeaHilConfig", "SeaHilError", "Session", "load_config"]
+__all__ = ["DriveSnapshot", "EmulatedDriver", "Session"]
 
 
 def _config(config: SeaHilConfig | str | Path | None) -> SeaHilConfig:
@@ -64,7 +68,6 @@ class EmulatedDriver:
 
     def __init__(self, bus: str | can.BusABC = "virtual:sea-hil", node_ids: int | Sequence[int] = 1, *,
                  config: SeaHilConfig | str | Path | None = None, lockstep: bool = False) -> None:
-        from sea_hil.session.builder import SessionBuilder
         self.config = _config(config)
         self.node_ids = (node_ids,) if isinstance(node_ids, int) else tuple(node_ids)
         self.lockstep = lockstep
@@ -129,7 +132,6 @@ class Session:
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
                  progress: bool = False) -> None:
-        from sea_hil.session.run import RunOptions
         if controller not in ("et", "tt"):
             raise SeaHilError(f"controller must be 'et' or 'tt', not {controller!r}")
         if cycles < 1:
@@ -152,7 +154,6 @@ class Session:
 
     def run(self) -> dict[str, Any]:
         """Run the session to its end in this thread; its summary."""
-        from sea_hil.session.run import run_session
         try:
             self.summary = run_session(self.config, self._opts, log=lambda _msg: None)
         except SeaHilError as err:
@@ -208,7 +209,6 @@ class Session:
         if self._thread is not None and self._thread.is_alive():
             self._ready.wait(60.0)        # nodes still being built: stop it once they are
             if self._parts is not None:
-                from sea_hil.session.processes import end_process
                 end_process(self._parts[2])   # the controller ends: the session stops, the recording is closed
         if self._thread is not None:
             self._thread.join(120.0)

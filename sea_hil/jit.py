@@ -76,6 +76,7 @@ def _dispatcher(factory: Callable[[str], Callable[..., Any]]) -> Any:
     from numba.extending import register_jitable
 
     probe = factory("")
+    assert isinstance(probe, types.FunctionType), f"{factory.__qualname__} must return a plain function"
     callees = project_callees(probe)
     for fn in callees:
         register_jitable(fn)

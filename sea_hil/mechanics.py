@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from sea_hil.config import PlantConfig
+from sea_hil.config.model import PlantConfig
 
 
 class LimbParams(NamedTuple):

@@ -10,7 +10,7 @@ import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.disturbance import make_disturbance

@@ -10,7 +10,7 @@ from itertools import pairwise
 import can
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.bus_timing import BusArbiter, BusRates, planned_load_pct, warn_if_overloaded
 from sea_hil.protocol.canbus import open_bus

@@ -13,10 +13,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from sea_hil.errors import MalformedFrame
-from sea_hil.protocol.can_codec import (
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import (
     FEEDBACK_PARTS,
     FRAME_TYPES,
     SEQ_MODULUS,
+    T_US_MODULUS,
     ClearErrors,
     DeflectionSetpoint,
     DriverState,
@@ -27,12 +29,9 @@ from sea_hil.protocol.can_codec import (
     FeedbackJoint1,
     FeedbackJoint2,
     Heartbeat,
-    SeaCodec,
     VoltageCmd,
     can_id_of,
-    load_database,
 )
-from sea_hil.protocol.can_frames import T_US_MODULUS
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -8,10 +8,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import MalformedFrame
-from sea_hil.protocol.can_codec import EStop, Feedback, FeedbackAngle, Heartbeat, SeaCodec, VoltageCmd, load_database
-from sea_hil.protocol.can_frames import DriverState, ErrorFlags, profile_messages
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import (
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Feedback,
+    FeedbackAngle,
+    Heartbeat,
+    VoltageCmd,
+    profile_messages,
+)
 
 
 @pytest.fixture(scope="module")

@@ -14,7 +14,7 @@ from paper_scheme import paper
 from recovery_rig import RecoveryRig
 from test_udp_multicast import require_netns
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.trajectory import LeadIn, lead_in_duration_s, make_trajectory
 from sea_hil.session.builder import SessionBuilder
 

@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 from test_udp_multicast import require_netns
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.report.summary import deterministic as summary_deterministic
 from sea_hil.session.run import RunOptions, run_session
 

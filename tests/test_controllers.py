@@ -6,15 +6,17 @@ import math
 import numpy as np
 import pytest
 
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.backstepping import InnerGains, backstepping_voltage, cross_term_weight
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.smc import JointState, sliding_surface, smc_deflection, switching, tracking_errors
 from sea_hil.controller.trajectory import DesiredSample, GaitTrajectory
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, epsilon, error_threshold
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, epsilon, error_threshold
+from sea_hil.dynamics import deflections, f, initial_state
 from sea_hil.mechanics import LimbParams, fx_gx, limb_params, mass_matrix, sea_geometry, sea_lengths
-from sea_hil.plant_emulator.dynamics import deflections, f, initial_state
+from sea_hil.protocol.payloads import TriggerReason
 
 S = 1_000_000_000
 

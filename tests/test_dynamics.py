@@ -7,10 +7,11 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sea_hil.config import DisturbanceConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.model import DisturbanceConfig
+from sea_hil.dynamics import deflections, f, initial_state, is_finite, saturate
 from sea_hil.mechanics import LimbParams, energy, limb_params, sea_lengths
 from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import deflections, f, initial_state, is_finite, saturate
 from sea_hil.plant_emulator.integrator import advance
 
 

@@ -8,7 +8,8 @@ import pandas as pd
 import pytest
 
 from sea_hil.cli import main
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
 from sea_hil.protocol.payloads import StatePayload, encode
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.export import BASE_COLUMNS, csv_name, export_can

@@ -14,22 +14,22 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from paper_scheme import paper
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
 from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.payload_fields import U32_MAX, PayloadRejected
 from sea_hil.protocol.payloads import (
     MAGIC,
     PAYLOAD_SIZE,
-    U32_MAX,
     VERSION,
     AckPayload,
     MsgType,
-    PayloadRejected,
     SetpointPayload,
     StatePayload,
     TriggerReason,

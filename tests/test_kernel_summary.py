@@ -7,7 +7,7 @@ from __future__ import annotations
 import pytest
 from test_session_kernel import CASES, _cfg
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline import session_engine
 from sea_hil.offline.session_engine import engine_summary, run_engine
 from sea_hil.protocol.link import parse_link_spec

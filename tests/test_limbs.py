@@ -11,11 +11,12 @@ from pathlib import Path
 import can
 import pytest
 
-from sea_hil.config import config_to_toml, load_config
+from sea_hil.config.loader import config_to_toml, load_config
 from sea_hil.controller.edge_mux import EdgeMux
 from sea_hil.errors import ConfigError
 from sea_hil.offline.session_engine import run_engine
-from sea_hil.protocol.can_codec import Feedback, SeaCodec
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic
 from sea_hil.session.limbs import (

@@ -11,7 +11,7 @@ from itertools import pairwise
 
 import pytest
 
-from sea_hil.config import LinkConfig, LinkDirectionConfig
+from sea_hil.config.comms import LinkConfig, LinkDirectionConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import DelayQueue, LinkEmulator, link_pair, parse_link_spec
 

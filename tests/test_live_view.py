@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import LiveConfig, load_config
+from sea_hil.config.live import LiveConfig
+from sea_hil.config.loader import load_config
 from sea_hil.live import layout
 from sea_hil.live.channels import CHANNELS, LOG_LEVELS
 from sea_hil.live.cli import add_live_args, live_overrides

@@ -6,7 +6,7 @@ import math
 import numpy as np
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.trajectory import GaitTrajectory
 from sea_hil.mechanics import (
     LimbParams,

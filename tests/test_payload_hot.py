@@ -8,16 +8,9 @@ import struct
 import numpy as np
 import pytest
 
+from sea_hil.protocol.payload_fields import PayloadRejected
 from sea_hil.protocol.payload_hot import encode_setpoint, encode_state
-from sea_hil.protocol.payloads import (
-    EventStatePayload,
-    PayloadRejected,
-    SetpointPayload,
-    StatePayload,
-    TriggerReason,
-    decode,
-    encode,
-)
+from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, TriggerReason, decode, encode
 
 GOOD = (0.1, -0.2)
 PAIRS = [GOOD, [1, 2], (np.float64(0.5), np.float32(0.25)), np.array([0.3, 0.4]), (True, False), (1e308, 1e308),

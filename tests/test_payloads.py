@@ -10,6 +10,7 @@ from hypothesis import strategies as st
 
 from sea_hil.errors import ConfigError, MalformedPayload
 from sea_hil.protocol.keys import Keys, any_limb
+from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason
 from sea_hil.protocol.payloads import (
     HEADER_SIZE,
     MAGIC,
@@ -17,18 +18,15 @@ from sea_hil.protocol.payloads import (
     AckPayload,
     MsgType,
     PayloadCounters,
-    PayloadRejected,
-    RejectReason,
-    SequenceTracker,
-    SeqVerdict,
     SetpointPayload,
     StatePayload,
     TriggerReason,
     VoltagePayload,
     decode,
     encode,
-    estimate_wire_bytes,
 )
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
+from sea_hil.protocol.wire_size import estimate_wire_bytes
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
 pair = st.tuples(finite, finite)

@@ -18,24 +18,24 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.dynamics import initial_state
 from sea_hil.errors import MalformedFrame
 from sea_hil.mechanics import limb_params
-from sea_hil.plant_emulator.dynamics import initial_state
 from sea_hil.plant_emulator.integrator import advance
 from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.can_codec import (
+from sea_hil.protocol.can_assembly import FeedbackAssembler
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import (
     FEEDBACK_PARTS,
     ClearErrors,
     DriverState,
     ErrorFlags,
     Feedback,
     FeedbackAngle,
-    FeedbackAssembler,
     Heartbeat,
-    SeaCodec,
     VoltageCmd,
-    load_database,
 )
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.session.builder import SessionBuilder

@@ -11,7 +11,7 @@ import numpy as np
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.closed_loop import simulate
 from sea_hil.offline.wire_quantiser import WireQuantiser, dbc_resolutions, quantised
 from sea_hil.protocol.can_codec import load_database

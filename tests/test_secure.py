@@ -21,9 +21,12 @@ import zenoh
 from paper_scheme import paper
 
 from sea_hil.commands.certs import register
-from sea_hil.config import ZenohConfig, load_config
+from sea_hil.config.comms import ZenohConfig
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError
-from sea_hil.protocol.can_codec import FEEDBACK_PARTS, FeedbackAssembler, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_assembly import FeedbackAssembler
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import FEEDBACK_PARTS, VoltageCmd
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
 from sea_hil.protocol.zcerts import CertSet, make_certs, node_cn

@@ -8,9 +8,10 @@ import logging
 import pytest
 from paper_scheme import paper
 
-from sea_hil.config import load_config
-from sea_hil.offline.session_engine import EngineOptions, driver_disturbance_table, run_engine
+from sea_hil.config.loader import load_config
+from sea_hil.offline.session_engine import driver_disturbance_table, run_engine
 from sea_hil.offline.session_fast import delivery_offsets, unsupported
+from sea_hil.offline.session_loop import EngineOptions
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.link import LinkEmulator, parse_link_spec
 

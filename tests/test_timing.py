@@ -12,7 +12,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.config.timing import TimingConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason, pair_field, uint_field

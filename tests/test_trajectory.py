@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from sea_hil.config import TrajectoryConfig
+from sea_hil.config.model import TrajectoryConfig
 from sea_hil.controller.trajectory import CsvTrajectory, GaitTrajectory, LeadIn, make_trajectory
 from sea_hil.errors import TrajectoryError
 

@@ -4,6 +4,10 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sea_hil.errors import ConfigError
+from sea_hil.recorder.export import export_can, export_csv
+from sea_hil.recorder.reader import read_session
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="export a recording: CAN frames to candump -L / ASC, channels to CSV",
@@ -19,9 +23,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.errors import ConfigError
-    from sea_hil.recorder.export import export_can, export_csv
-    from sea_hil.recorder.reader import read_session
     if not (args.candump or args.asc or args.csv):
         raise ConfigError("nothing to export: give --candump FILE, --asc FILE and/or --csv DIR")
     data = read_session(args.mcap)

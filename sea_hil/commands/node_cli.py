@@ -9,7 +9,10 @@ from contextlib import contextmanager
 from typing import Any
 
 from sea_hil.commands.common import add_config_args, add_link_args, add_scheme_args, add_zenoh_args, config_from_args
+from sea_hil.live.child import attach_live_child
 from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.runtime.realtime import node_priority, raise_node_process
+from sea_hil.session.builder import SessionBuilder
 
 
 def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
@@ -32,9 +35,6 @@ def node_session(args: argparse.Namespace, role: str) -> Iterator[tuple[Any, Any
     live-view recorder child also records its CAN bus. A real-time controller of its own (the compose topology;
     `sea-hil run` sets it for its children) takes SCHED_FIFO two below the driver after its start-up
     (`node_priority`, `RealTimeControllerSync.state_source`); the edge raises its loop once built (`raise_node`)."""
-    from sea_hil.live.child import attach_live_child
-    from sea_hil.runtime.realtime import node_priority
-    from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
     if role == "controller" and not args.lockstep and not cfg.timing.controller_priority:
         priority = node_priority(cfg.timing, role)
@@ -50,5 +50,4 @@ def raise_node(args: argparse.Namespace, node: Any, cfg: Any, role: str) -> None
     """A real-time node process of its own (the compose topology): [timing] SCHED_FIFO for its loop, one below the
     driver for the edge (`raise_node_process`)."""
     if not args.lockstep:
-        from sea_hil.runtime.realtime import raise_node_process
         raise_node_process(node, cfg.timing, role)

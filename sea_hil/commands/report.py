@@ -5,6 +5,9 @@ import argparse
 import json
 from pathlib import Path
 
+from sea_hil.errors import RecordingError
+from sea_hil.report.writer import run_report
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="figures and report.md from a session recording (MCAP)")
@@ -14,8 +17,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.errors import RecordingError
-    from sea_hil.report.writer import run_report
     if not args.recording.is_file():
         raise RecordingError(f"no such recording: {args.recording}")
     print(json.dumps(run_report(args.recording, args.out), indent=2, sort_keys=True))

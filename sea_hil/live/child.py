@@ -20,9 +20,9 @@ import threading
 from collections.abc import Callable
 from typing import IO, Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
-from sea_hil.session.processes import end_process
+from sea_hil.runtime.processes import end_process
 
 PR_SET_PDEATHSIG = 1
 PARENT_ENV = "SEA_HIL_LIVE_PARENT_PID"

@@ -15,20 +15,21 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sea_hil.config import DisturbanceConfig, SeaHilConfig
+from sea_hil.config.model import DisturbanceConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop, inner_step
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.observer import ObserverState
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import make_trajectory
+from sea_hil.dynamics import State, deflections, initial_state, is_finite, rk4_core
 from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.wire_quantiser import EXACT, dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, is_finite
-from sea_hil.plant_emulator.integrator import Disturbance, rk4_core
+from sea_hil.plant_emulator.integrator import Disturbance
 
 
 @dataclass

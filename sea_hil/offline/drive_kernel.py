@@ -9,9 +9,8 @@ from collections.abc import Callable
 from typing import Any
 
 from sea_hil.controller.inner import inner_step
+from sea_hil.dynamics import State, deflections, is_finite, rk4_core, saturate
 from sea_hil.offline.wire_quantiser import quantised
-from sea_hil.plant_emulator.dynamics import State, deflections, is_finite, saturate
-from sea_hil.plant_emulator.integrator import rk4_core
 
 
 def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float, float]

@@ -11,7 +11,9 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from sea_hil.config import LinkDirectionConfig, SeaHilConfig
+from sea_hil.config.comms import LinkDirectionConfig
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.edge_events import tracking_fields
 from sea_hil.controller.trajectory import GaitTrajectory
 from sea_hil.controller.trigger import NO_EVENT, EventTrigger
 from sea_hil.errors import SeaHilError
@@ -27,7 +29,7 @@ from sea_hil.offline.session_kernel import (
     make_session_kernel,
     new_records,
 )
-from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, tracking_fields
+from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason
 from sea_hil.recorder.reader import RecordedMessage, SessionData

@@ -7,7 +7,7 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.offline.closed_loop import SimResult, simulate
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, TriggerReason
 from sea_hil.report.figures import inter_event_figure, tracking_figure

@@ -28,11 +28,11 @@ from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
+from sea_hil.recorder.zenoh_tap import ZenohTap
 from sea_hil.runtime.node import Node
 from sea_hil.stats.schema import StatsError
 
-__all__ = ["RecorderNode", "enlarge_rx_buffer", "zenoh_record"]
+__all__ = ["RecorderNode", "enlarge_rx_buffer"]
 
 log = logging.getLogger("sea_hil.record")
 SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it

@@ -14,27 +14,21 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from typing import Any
+from typing import IO, Any, cast
 
 from mcap.writer import CompressionType, Writer
 
-from sea_hil.config import RecordConfig, SeaHilConfig
+from sea_hil.config.comms import RecordConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
 from sea_hil.recorder.meta import (
-    CONFIG_ATTACHMENT,
-    META_CONFIG,
     META_FINAL,
-    META_SESSION,
     encode_payload,
-    session_metadata,
     write_session_header,
 )
-from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
 from sea_hil.recorder.schemas import TOPICS, schema_bytes, schema_name, validate_payload
 
-__all__ = ["CONFIG_ATTACHMENT", "META_CONFIG", "META_FINAL", "META_SESSION", "RecordedMessage", "SessionData",
-           "SessionRecorder", "encode_payload", "install_finalizer", "read_session", "session_metadata",
-           "write_session_header"]
+__all__ = ["SessionRecorder", "install_finalizer"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _STOP = object()
 
@@ -79,7 +73,8 @@ class SessionRecorder:
         except OSError as err:
             raise RecordingError(f"cannot create recording {path}: {err}") from err
         self.path = os.fspath(path)
-        self._writer = Writer(self._sink, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
+        self._writer = Writer(cast(IO[bytes], self._sink),   # a file to the writer (write, tell, flush, close)
+                              chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
         self._writer.start(profile="", library="sea-hil")
         self._channels: dict[str, int] = {}
         schema_ids: dict[tuple[str, bytes], int] = {}   # one schema record per distinct schema

@@ -20,7 +20,7 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.recorder.writer import SessionData
+from sea_hil.recorder.reader import SessionData
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 

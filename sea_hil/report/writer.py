@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.recorder.writer import SessionData, read_session
+from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
 from sea_hil.report.session_summary import session_summary, tracking_arrays
@@ -89,7 +89,8 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
     tb = np.zeros(0)
     for bus in dict.fromkeys(bus_of.values()):   # every bus (frames of unknown node ids: the first bus)
         first = bus == next(iter(bus_of.values()))
-        msgs = [m for m in raw if bus_of.get(m.payload.get("node_id"), bus if first else None) == bus]
+        msgs = [m for m in raw
+                if (bus_of[n] if (n := m.payload.get("node_id")) in bus_of else bus if first else None) == bus]
         t_i, bits = _bins(msgs, lambda p: nominal_bits(int(p["dlc"]), fd=bool(p.get("is_fd")), bitrate_bps=bitrate,
                                                        data_bitrate_bps=data_rate), t0)
         tb = t_i if len(t_i) > len(tb) else tb

@@ -7,7 +7,8 @@
 - `LockstepClock` (`sea_hil.runtime.lockstep`, the one module with all lockstep logic: ACKs, waits, re-sends):
   simulated time advances only when every node has handled the step; deterministic, as fast as possible.
 
-`clock_for(lockstep)` is the one place the choice is made from an option.
+`clock_for(lockstep)` (`sea_hil.runtime.lockstep`, beside the clock it may pick) is the one place the choice is made
+from an option.
 """
 from __future__ import annotations
 
@@ -49,11 +50,6 @@ class RealTimeClock(Clock):
 
     def controller(self, node: Any) -> RealTimeControllerSync:
         return RealTimeControllerSync(node)
-
-
-def clock_for(lockstep: bool) -> Clock:
-    from sea_hil.runtime.lockstep import LockstepClock
-    return LockstepClock() if lockstep else RealTimeClock()
 
 
 class RealTimePacer:

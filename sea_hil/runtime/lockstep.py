@@ -25,10 +25,11 @@ import zenoh
 
 from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.link import DelayQueue
-from sea_hil.protocol.payloads import AckPayload, SeqVerdict, encode
+from sea_hil.protocol.payloads import AckPayload, encode
+from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zsession import publisher
 from sea_hil.queues import timed_get
-from sea_hil.runtime.clock import Clock, control_payload
+from sea_hil.runtime.clock import Clock, RealTimeClock, control_payload
 
 
 class LockstepClock(Clock):
@@ -45,6 +46,11 @@ class LockstepClock(Clock):
 
     def controller(self, node: Any) -> LockstepControllerSync:
         return LockstepControllerSync(node)
+
+
+def clock_for(lockstep: bool) -> Clock:
+    """The clock of a session: lockstep (simulated time) or real time."""
+    return LockstepClock() if lockstep else RealTimeClock()
 
 
 class LockstepPacer:

@@ -15,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from sea_hil.sweep.frontier import OutsideBaseline, dominates  # noqa: E402
-from sea_hil.sweep.output import LINK_KEYS, link_label  # noqa: E402
+from sea_hil.sweep.grid import LINK_KEYS, link_label  # noqa: E402
 from sea_hil.sweep.seeds import fold_seeds  # noqa: E402
 
 
