@@ -19,6 +19,7 @@ not held (counted).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -95,11 +96,14 @@ class EdgeEvents:
         outer = k % self.outer_every == 0
         if not (outer or self.every_sample):
             return None
-        ahead = None
+        ahead: Callable[[int], JointState] | None = None
         if self.model is not None:
             model, held = self.model, self.inner
             hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
-            ahead = lambda h_ns: model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)  # noqa: E731
+
+            def model_ahead(h_ns: int) -> JointState:
+                return model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)
+            ahead = model_ahead
         js = JointState(fb[0], fb[1])
         t_ns, ds, reason = self.generator.on_sample(sample_ns, js, ahead)
         seq = k + 1

@@ -84,7 +84,7 @@ class EdgeEventGenerator:
         anchor = self._needs_anchor(sample_ns)
         if anchor:
             self._anchor(sample_ns, js)
-        t_ns = sample_ns - self.t0_ns  # type: ignore[operator]
+        t_ns = self.time_of(sample_ns)
         ds = self.desired(t_ns)
         js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds, ahead)
         eps = epsilon(tracking_errors(js_eval, ds_eval), ds_eval.theta_rad, ds_eval.omega_rad_s)

@@ -28,7 +28,7 @@ class SetpointEnvelope(NamedTuple):
     @classmethod
     def from_config(cls, cfg: SetpointEnvelopeConfig) -> SetpointEnvelope:
         """The configured envelope; with `enabled = false` only non-finite setpoints are rejected."""
-        return cls(tuple(cfg.deflection_max_m) if cfg.enabled else (INF, INF))   # type: ignore[arg-type]
+        return cls(cfg.deflection_max_m if cfg.enabled else (INF, INF))
 
     def check(self, deflection_m: tuple[float, float]) -> Verdict:
         if admissible(deflection_m, self.deflection_max_m):

@@ -77,7 +77,9 @@ class ControllerCore:
                 return Answer([], None, None)
         elif self.t0_ns is None:    # the paper's placement: t counts from the first state handled
             self._anchor(p)
-        t_ns = p.sample_t_ns - self.t0_ns  # type: ignore[operator]
+        t0_ns = self.t0_ns
+        assert t0_ns is not None   # anchored above
+        t_ns = p.sample_t_ns - t0_ns
         self.last_t_ns = t_ns
         if t_ns > self.duration_ns:
             self.done = True
@@ -128,7 +130,7 @@ class ControllerCore:
             apply_ns = self.predictor.apply_time_ns(now)
             js = self.predictor.predict((p.theta_rad, p.omega_rad_s, p.delta_m, p.nut_vel_m_s), p.sample_t_ns,
                                         apply_ns)
-            t_eval = apply_ns - self.t0_ns  # type: ignore[operator]
+            t_eval = t_ns + (apply_ns - p.sample_t_ns)   # = apply_ns - t0_ns
         ds_eval = self.desired(t_eval)
         if not self.edge_trigger:
             return self.outer.step(t_eval, p.seq, js, ds_eval), now

@@ -25,7 +25,7 @@ def epsilon(xt: tuple[float, float, float, float], xd: tuple[float, float], xd_d
 def _distance(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     """Euclidean distance, summed left to right (the hot path of `EventTrigger.update`)."""
     acc = 0.0
-    for u, v in zip(a, b, strict=True):
+    for u, v in zip(a, b):  # noqa: B905 - numba compiles this (its zip takes no strict=); a, b: 8 floats each
         d = u - v
         acc += d * d
     return math.sqrt(acc)

@@ -138,7 +138,7 @@ class Session:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
         self.config = _config(config)
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
-        self.out = Path(out) if out is not None else Path(self._tmp.name)   # type: ignore[union-attr]
+        self.out = Path(out) if out is not None else Path(self._tmp.name) if self._tmp is not None else Path()
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,
                                 progress=progress, on_nodes=self._on_nodes)
         self.summary: dict[str, Any] | None = None

@@ -230,8 +230,11 @@ def test_quantisation_error_bounds(codec: SeaCodec) -> None:
     rng = random.Random(7)
     half_lsb = {"voltage_v": 0.5e-3, "deflection_m": 0.5e-6, "theta_rad": 0.5e-5, "omega_rad_s": 1.25e-4,
                 "delta_m": 0.625e-7, "nut_vel_m_s": 1.25e-6}
+
+    def u(lim: float) -> tuple[float, float]:
+        return (rng.uniform(-lim, lim), rng.uniform(-lim, lim))
+
     for _ in range(300):
-        u = lambda lim: (rng.uniform(-lim, lim), rng.uniform(-lim, lim))  # noqa: E731
         objs = [VoltageCmd(1, u(30.0), 1), DeflectionSetpoint(1, u(0.03), 1),
                 *Feedback(1, 9, 77, u(3.2), u(30.0), u(0.03), u(0.6)).parts()]
         for obj in objs:

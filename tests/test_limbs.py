@@ -108,7 +108,10 @@ class _Core:
 def test_edge_mux_dispatches_by_node_id() -> None:
     a, b = _Core(1), _Core(2)
     mux = EdgeMux(None, [a, b])  # type: ignore[arg-type,list-item]
-    frame = lambda can_id, n=8: can.Message(arbitration_id=can_id, data=bytes(n), is_extended_id=False)  # noqa: E731
+
+    def frame(can_id: int, n: int = 8) -> can.Message:
+        return can.Message(arbitration_id=can_id, data=bytes(n), is_extended_id=False)
+
     for can_id in (1 << 5 | 0x01, 2 << 5 | 0x01, 2 << 5 | 0x02):
         mux.dispatch(frame(can_id), 0)
     zero = (0.0, 0.0)

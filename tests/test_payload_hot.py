@@ -52,10 +52,10 @@ def test_encode_state_matches_the_constructor_for_every_integer(field: str, valu
 def test_encode_setpoint_matches_the_constructor(pair: object, reason: object) -> None:
     for args in ((5, 6, 7, pair, GOOD, reason), (5, 6, 7, GOOD, pair, reason)):
         hot = _outcome(encode_setpoint, *args, epoch=8)
-        assert hot == _outcome(lambda: encode(SetpointPayload(*args, epoch=8)))   # noqa: B023
+        assert hot == _outcome(lambda args=args: encode(SetpointPayload(*args, epoch=8)))
     for value in INTS:
         args = (5, value, 7, GOOD, GOOD, reason)
-        assert _outcome(encode_setpoint, *args) == _outcome(lambda: encode(SetpointPayload(*args)))  # noqa: B023
+        assert _outcome(encode_setpoint, *args) == _outcome(lambda args=args: encode(SetpointPayload(*args)))
 
 
 def test_one_call_decode_equals_the_general_payloads() -> None:

@@ -136,7 +136,10 @@ def _main(args: argparse.Namespace) -> int:
                         mismatch=args.mismatch)
     configs = build_configs(points, opts)
     command = _command_line(args)
-    log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+
+    def log(s: str) -> None:
+        print(s, file=sys.stderr, flush=True)
+
     where = f"cluster {args.scheduler}" if args.scheduler else f"{args.jobs} local jobs"
     log(f"sweep: {len(points)} points ({sum(p.controller == 'et' for p in points)} ET + "
         f"{sum(p.controller == 'tt' for p in points)} TT references), {where}, engine {args.engine} -> {args.out}")

@@ -53,7 +53,7 @@ def inner_ratio(cfg: SeaHilConfig) -> int:
 def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, int, ObserverState]]:
     """The inner-step kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, pn, gains, obs, limit_v,  # noqa
+    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, pn, gains, obs, limit_v,
                     dist_tab, volts, lsb):
         """Inner steps k0 .. k0 + n_steps - 1: measurement of plant x (truth p) -> the edge's inner step on the
         nominal model pn (observer state obs, limited backstepping voltage written to volts[k]) -> `substeps` RK4

@@ -22,7 +22,7 @@ def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float
             quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
 
 
-def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
+def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,
                       limit_v, dist_tab, lsb, lim, faulted):
     """Sample k from the plant state x and its decoded feedback m: the edge's inner step on its nominal model pn
     (`inner_step`: disturbance observer state obs, backstepping voltage) -> quantised, saturated VOLTAGE_CMD -> one
@@ -54,7 +54,7 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
 def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
     """The per-run kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
+    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,
                       limit_v, dist_tab, lsb, lim, faulted):
         """Samples k0 .. k0 + n_steps - 1 (`edge_drive_sample`) from the state x of sample k0. Returns (x, m of the
         new x, saturated steps, max |u1|, max |u2| commanded, first non-finite sample or -1, obs, faulted)."""

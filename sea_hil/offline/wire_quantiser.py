@@ -28,8 +28,9 @@ def dbc_resolutions(fd: bool = False) -> Resolutions:
     """(theta rad, omega rad/s, delta m, nut velocity m/s, voltage V) per LSB of the classic (`fd` False) or the CAN
     FD profile, from the DBC; joint 2 signals share joint 1's scale (checked by tests/test_quantisation.py)."""
     db = load_database()
-    res = tuple(float(db.get_message_by_name(msg).get_signal_by_name(sig).scale) for msg, sig in _SIGNALS[bool(fd)])
-    return res  # type: ignore[return-value]
+    theta, omega, delta, nut_vel, voltage = (float(db.get_message_by_name(msg).get_signal_by_name(sig).scale)
+                                             for msg, sig in _SIGNALS[bool(fd)])
+    return theta, omega, delta, nut_vel, voltage
 
 
 def quantised(value: float, lsb: float) -> float:

@@ -57,7 +57,7 @@ def _limb_figures(data: SessionData, out: Path) -> list[Path]:
                              f"{title}: closed-loop latency")
         files += names
     if len(limbs) > 1:   # the 1-limb names: the first limb's figures
-        for stem, src in zip(FIGURES, files, strict=True):
+        for stem, src in zip(FIGURES, files, strict=False):   # the first limb's figures
             shutil.copyfile(src, out / f"{stem}.png")
             files.append(out / f"{stem}.png")
     return files
