@@ -45,7 +45,7 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import PayloadCounters
 from sea_hil.protocol.zsession import LinkedPublisher, publisher
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.clock import Clock, EdgeSync, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.edge")
@@ -75,7 +75,7 @@ class EdgeNode(Node):
         self.counters = EdgeCounters()
         self.payloads = PayloadCounters()
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
-        self.sync = (clock or RealTimeClock()).edge(self)
+        self.sync: EdgeSync = (clock or RealTimeClock()).edge(self)
         seed = cfg.link.seed
         self.publisher = StatePublisher(
             LinkedPublisher(publisher(session, self.keys.state, congestion_control=self.sync.congestion_control),
@@ -135,7 +135,7 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-        elif isinstance(frame, Feedback | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # FD, or the 3 classic parts
+        elif isinstance(frame, Feedback | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # FD, or 3 classic
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:
                 with self.lock:

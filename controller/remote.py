@@ -28,7 +28,7 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, StatePayload
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.zsession import publisher
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.clock import Clock, ControllerSync, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.controller")
@@ -47,7 +47,7 @@ class RemoteController(Node):
         self.core = ControllerCore(cfg, mode, inner, cycles, self.epoch)   # the pure part: state in, messages out
         self.edge_trigger, self.trajectory_id = self.core.edge_trigger, self.core.trajectory_id
         self.trajectory_mismatches = 0
-        self.sync = (clock or RealTimeClock()).controller(self)
+        self.sync: ControllerSync = (clock or RealTimeClock()).controller(self)
         self.source = self.sync.state_source(session, self.keys.state)
         self.sp_pub = publisher(session, self.keys.setpoint, congestion_control=self.sync.congestion_control)
         self.v_pub = publisher(session, self.keys.voltage, congestion_control=self.sync.congestion_control)

@@ -89,7 +89,8 @@ def advance(t: float, x: State, u: tuple[float, float], dt: float, substeps: int
     return out
 
 
-_ENTRIES: dict[tuple[int, int], tuple[Any, LimbParams, Callable[..., Any]]] = {}   # (id(kernel), id(params)) -> entry: a cache
+# (id(kernel), id(params)) -> (kernel, params, entry): a cache
+_ENTRIES: dict[tuple[int, int], tuple[Any, LimbParams, Callable[..., Any]]] = {}
 _ENTRIES_MAX = 64
 
 

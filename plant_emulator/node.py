@@ -29,7 +29,7 @@ from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback
 from sea_hil.protocol.canbus import CanHandle, send_with_retry
 from sea_hil.protocol.timed_bus import TimedBus
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.clock import Clock, Pacer, RealTimeClock
 from sea_hil.runtime.node import Node
 from sea_hil.stats.histogram import LogHistogram
 
@@ -85,7 +85,7 @@ class PlantNode(Node):
         self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
         self.lateness = LogHistogram()
         self.stats = TickStats()
-        self.pacer = (clock or RealTimeClock()).plant(self)
+        self.pacer: Pacer = (clock or RealTimeClock()).plant(self)
 
     # ---- frames -------------------------------------------------------------------------------------------------
     def _on_message(self, msg: can.Message, now_ns: int) -> None:

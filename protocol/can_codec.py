@@ -191,7 +191,8 @@ class SeaCodec:
                                  f"expected {lay.dlc}")
         if int.from_bytes(data, "little") & ~lay.used_mask:
             raise MalformedFrame(f"{lay.message.name} node {node_id}: reserved bits set in {data.hex()}")
-        vals: Sequence[Any] | None = lay.frame.unpack_plain(data)   # = cantools decode (tests/test_frame_plan), all values in range
+        # = cantools decode (tests/test_frame_plan), all values in range
+        vals: Sequence[Any] | None = lay.frame.unpack_plain(data)
         if vals is None:                      # some value outside its DBC range: clamp within tolerance, or reject
             vals = [(int(v) if is_int else min(max(float(v), lo), hi))
                     if plain and lo_tol <= v <= hi_tol   # finite (NaN and inf fail the comparison) and in range

@@ -28,7 +28,9 @@ from typing import Any, ClassVar
 
 from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field, uint_field
 
-__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "VERSION", "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "SetpointPayload", "StatePayload", "TriggerReason", "VoltagePayload", "decode", "encode"]
+__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "VERSION", "AckPayload", "EventStatePayload",
+           "MsgType", "Payload", "PayloadCounters", "SetpointPayload", "StatePayload", "TriggerReason",
+           "VoltagePayload", "decode", "encode"]
 
 _log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"

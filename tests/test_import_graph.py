@@ -8,6 +8,8 @@ of dependencies, whether or not Python would trip over it at import time."""
 from __future__ import annotations
 
 import ast
+import subprocess
+import sys
 import tomllib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
@@ -360,6 +362,15 @@ def test_one_import_path_per_name(modules: dict[str, Module]) -> None:
     found = reexports(modules)
     assert not found, "names imported from a module that does not define them (import from the defining " \
                       "module):\n" + "\n".join(found)
+
+
+def test_a_node_command_loads_only_what_its_node_needs() -> None:
+    """With the imports at module level, the CLI imports only the module of the command being run: a session's
+    controller child (`sea-hil controller`) loads neither the sweep's Dask nor matplotlib nor scipy."""
+    code = ("import sys; from sea_hil.cli import build_parser; build_parser('controller'); "
+            "print(sorted({m.split('.')[0] for m in sys.modules} & {'distributed', 'dask', 'matplotlib', 'scipy'}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 def test_the_checks_catch_a_cycle_and_a_facade(tmp_path: Path) -> None:

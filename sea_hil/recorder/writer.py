@@ -1,7 +1,9 @@
 """MCAP session recording: a thread-safe JSON/jsonschema writer with a bounded queue and a signal-safe finaliser.
 
-Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader` (both
-re-exported here). See docs/recording.md for channels, metadata names, drop policy and recovery.
+Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader`. `RecordSink` is
+what a session needs of a recorder: this `SessionRecorder`, or `sea_hil.recorder.process.RecorderProcess` (the
+same calls, written by a child process). See docs/recording.md for channels, metadata names, drop policy and
+recovery.
 """
 from __future__ import annotations
 
@@ -14,7 +16,7 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from typing import IO, Any, cast
+from typing import IO, Any, Protocol, cast
 
 from mcap.writer import CompressionType, Writer
 
@@ -57,6 +59,26 @@ class _Sink:
     def close(self) -> None:
         self._f.close()
 
+
+
+class RecordSink(Protocol):
+    """Where a session's messages go (`SessionRecorder`, `RecorderProcess`): validated at the call, written in
+    order; `submit` may drop (counted) when the writer falls behind, `record` does not."""
+
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> None: ...
+
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> bool: ...
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None: ...
+
+    def write_session_header(self, config: SeaHilConfig | None = None, *, seed: int | None = None,
+                             argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None: ...
+
+    def counters(self) -> dict[str, int]: ...
+
+    def close(self, final_stats: Mapping[str, Any] | None = None) -> None: ...
 
 
 class SessionRecorder:

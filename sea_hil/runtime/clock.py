@@ -14,33 +14,102 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 
 from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.payloads import AckPayload
+from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zlatest import LatestSubscriber
 from sea_hil.runtime.realtime import ThreadPolicy
 
 
-class Clock:
-    """Factory of the per-node parts of one pacing scheme."""
+class Pacer(Protocol):
+    """The driver's schedule (`Clock.plant`): real-time deadlines, or one lockstep step per tick."""
 
-    name = "clock"
+    done: bool
 
-    def plant(self, node: Any) -> Any:
-        raise NotImplementedError
+    def start(self, duration_s: float | None) -> None: ...
 
-    def edge(self, node: Any) -> Any:
-        raise NotImplementedError
+    def tick(self) -> None: ...
 
-    def controller(self, node: Any) -> Any:
-        raise NotImplementedError
+    def on_command(self, frame: object, drv: Any) -> None:
+        """A command the driver accepted (lockstep: the step's answer from that drive)."""
+
+
+class EdgeSync(Protocol):
+    """How the edge meets its peers (`Clock.edge`): when a setpoint applies, what a state is stamped with, whether
+    the edge waits for the controller."""
+
+    congestion_control: zenoh.CongestionControl
+
+    def downlink_callback(self) -> Callable[[zenoh.Sample], None]: ...
+
+    def control_callback(self) -> Callable[[zenoh.Sample], None]: ...
+
+    def on_ack(self, data: bytes) -> bool: ...
+
+    def repeat_feedback(self, fb: Any) -> bool: ...
+
+    def state_sent(self, at_ns: int, seq: int, data: bytes) -> None: ...
+
+    def state_stamp(self, at_ns: int) -> int: ...
+
+    def sync(self, now_ns: int) -> None: ...
+
+    def drain(self) -> bool: ...
+
+    def gate(self, fresh: bool) -> tuple[bool, bool]: ...
+
+    def late(self, rx_ns: int) -> bool: ...
+
+    def restart_possible(self, timed_out: bool) -> bool: ...
+
+
+class StateSource(Protocol):
+    """The controller's incoming states: the newest only (real time) or every one in order (lockstep)."""
+
+    def recv(self, timeout_s: float) -> bytes | None: ...
+
+    def close(self) -> None: ...
+
+
+class ControllerSync(Protocol):
+    """How the remote controller meets the edge (`Clock.controller`): its state source, re-answers, ACKs."""
+
+    congestion_control: zenoh.CongestionControl
+
+    def state_source(self, session: zenoh.Session, key: str) -> StateSource: ...
+
+    def repeat_state(self, verdict: SeqVerdict, seq: int) -> bool: ...
+
+    def answer_extra(self, state_seq: int, setpoint_seq: int, sent: bool) -> list[tuple[Any, bytes]]: ...
+
+    def answered(self, seq: int, answer: list[tuple[Any, bytes]]) -> None: ...
+
+    def arrival_ns(self, p: Any) -> int: ...
+
+    def restart_possible(self, silent: bool) -> bool: ...
+
+    def close(self) -> None: ...
+
+
+class Clock(Protocol):
+    """Factory of the per-node parts of one pacing scheme (`RealTimeClock`, `sea_hil.runtime.lockstep.LockstepClock`).
+    """
+
+    name: str
+
+    def plant(self, node: Any) -> Pacer: ...
+
+    def edge(self, node: Any) -> EdgeSync: ...
+
+    def controller(self, node: Any) -> ControllerSync: ...
 
 
 class RealTimeClock(Clock):
-    name = "realtime"
+    name: str = "realtime"
 
     def plant(self, node: Any) -> RealTimePacer:
         return RealTimePacer(node)

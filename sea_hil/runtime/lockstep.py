@@ -33,7 +33,7 @@ from sea_hil.runtime.clock import Clock, RealTimeClock, control_payload
 
 
 class LockstepClock(Clock):
-    name = "lockstep"
+    name: str = "lockstep"
 
     def __init__(self, plant_resend_s: float = 0.05, edge_resend_s: float = 0.1) -> None:
         self.plant_resend_s, self.edge_resend_s = plant_resend_s, edge_resend_s

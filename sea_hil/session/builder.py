@@ -28,6 +28,8 @@ from sea_hil.protocol.canbus import CanHandle, open_bus
 from sea_hil.protocol.timed_bus import TimedBus, make_timeline
 from sea_hil.protocol.zsession import open_session
 from sea_hil.recorder.node import RecorderNode
+from sea_hil.recorder.process import RecorderProcess
+from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.runtime.lockstep import clock_for
 from sea_hil.runtime.node import Node
 
@@ -99,7 +101,8 @@ class SessionBuilder:
     def controller(self, session: ZenohSession, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
         return self.add(RemoteController(self.cfg, session, mode, inner=inner, clock=self.clock, cycles=cycles))
 
-    def recorder(self, rec: Any, session: ZenohSession | None, bus: can.BusABC | None = None,
+    def recorder(self, rec: SessionRecorder | RecorderProcess, session: ZenohSession | None,
+                 bus: can.BusABC | None = None,
                  **kw: Any) -> Any:
         if isinstance(bus, TimedBus):
             bus.listen_only = True   # the bus-timing model does not wait for a recorder (it never answers)

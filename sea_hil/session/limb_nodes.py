@@ -13,6 +13,7 @@ from typing import Any
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_mux import EdgeMux
 from sea_hil.protocol.merged_bus import MergedBus, can_merge
+from sea_hil.recorder.writer import RecordSink
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.limbs import Limb, buses_of, limb_config
 
@@ -97,7 +98,7 @@ def stop_and_join(nodes: LimbNodes) -> None:
         node.join()
 
 
-def record_edge_finals(rec: Any, nodes: LimbNodes, lockstep: bool) -> None:
+def record_edge_finals(rec: RecordSink, nodes: LimbNodes, lockstep: bool) -> None:
     """Each limb's final edge stats on `/stats` (they carry its `node_id`; in lockstep at its sample time) and as metadata
     (`sea-hil.edge` for the first limb, the 1-limb name; `sea-hil.edge.<limb>` for the others)."""
     for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges, strict=True)):
