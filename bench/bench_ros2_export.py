@@ -19,6 +19,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import REPO, bench_args, emit, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
+
 from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.recorder.reader import read_session  # noqa: E402
 

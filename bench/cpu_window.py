@@ -17,7 +17,7 @@ from pathlib import Path
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-from sea_hil.session.processes import end_process  # noqa: E402
+from sea_hil.runtime.processes import end_process  # noqa: E402
 
 PROGRESS = re.compile(r"sim\s+([\d.]+)/[\d.]+ s .*setpoints (\d+)\s+states (\d+)")
 PYSPY_TID = re.compile(r'^Thread (\d+) \([^)]*\): "([^"]*)"', re.M)
@@ -170,7 +170,7 @@ class _Progress:
                     raise RuntimeError("session ended before the window closed (lengthen --cycles or shorten "
                                        "it); its last lines:\n" + "".join(self.tail))
                 if self.first_setpoint_t is not None and time.monotonic() >= after_t:
-                    self.cond.wait_for(lambda: self.n != seen)
+                    self.cond.wait_for(lambda seen=seen: self.n != seen)
                     if self.n < 0:
                         continue
                     return self.sim_s

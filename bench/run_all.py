@@ -21,8 +21,9 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import REPO, now_iso, record  # noqa: E402
-from sea_hil.errors import SeaHilError  # noqa: E402
 from report_md import render  # noqa: E402
+
+from sea_hil.errors import SeaHilError  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 # name, figure, full arguments, quick arguments, rough full-mode seconds

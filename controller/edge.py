@@ -26,24 +26,26 @@ import time
 import can
 import zenoh
 
-from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_command import CommandPath
 from sea_hil.controller.edge_downlink import SetpointIntake
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.edge_stats import EdgeCounters, edge_stats, receive_stamped
 from sea_hil.controller.edge_uplink import StatePublisher
+from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
-                                        unwrap_us)
-from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Heartbeat
+from sea_hil.protocol.canbus import CanHandle
 from sea_hil.protocol.epoch import new_epoch
+from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import PayloadCounters
 from sea_hil.protocol.zsession import LinkedPublisher, publisher
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.clock import Clock, EdgeSync, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.edge")
@@ -53,7 +55,7 @@ SAFE_STATES = (DriverState.FAULT, DriverState.ESTOP)
 class EdgeNode(Node):
     kind = "edge"
 
-    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, session: zenoh.Session, node_id: int, *,
+    def __init__(self, cfg: SeaHilConfig, bus: CanHandle, session: zenoh.Session, node_id: int, *,
                  inner: str = "edge", clock: Clock | None = None, mode: str = "et") -> None:
         if inner not in ("edge", "remote"):
             raise ValueError("inner must be 'edge' or 'remote'")
@@ -64,7 +66,7 @@ class EdgeNode(Node):
         self.codec = SeaCodec.for_bus(cfg.can, [node_id])
         self.assembler = FeedbackAssembler()
         self.keys = Keys.from_config(cfg.zenoh)
-        self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
+        self.inner = InnerLoop(cfg, nominal_params(cfg), cfg.plant.initial_theta_rad,
                                1.0 / cfg.can.feedback_rate_hz)
         self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
@@ -73,7 +75,7 @@ class EdgeNode(Node):
         self.counters = EdgeCounters()
         self.payloads = PayloadCounters()
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
-        self.sync = (clock or RealTimeClock()).edge(self)
+        self.sync: EdgeSync = (clock or RealTimeClock()).edge(self)
         seed = cfg.link.seed
         self.publisher = StatePublisher(
             LinkedPublisher(publisher(session, self.keys.state, congestion_control=self.sync.congestion_control),
@@ -133,7 +135,7 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-        elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
+        elif isinstance(frame, Feedback | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # FD, or 3 classic
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:
                 with self.lock:

@@ -7,19 +7,19 @@ from typing import Any
 
 import can
 
+from sea_hil.controller.edge_downlink import SETPOINT_BYTES
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.errors import BusError
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, Feedback, SeaCodec, VoltageCmd
-from sea_hil.protocol.can_frames import LIMIT_FLAGS, ErrorFlags
-from sea_hil.protocol.canbus import send_with_retry
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, ClearErrors, DriverState, ErrorFlags, Feedback, VoltageCmd
+from sea_hil.protocol.canbus import CanHandle, send_with_retry
 from sea_hil.protocol.payloads import SetpointPayload
-from sea_hil.controller.edge_downlink import SETPOINT_BYTES
 
 log = logging.getLogger("sea_hil.edge")
 
 
 class CommandPath:
-    def __init__(self, bus: can.BusABC, codec: SeaCodec, node_id: int, inner: InnerLoop, inner_mode: str,
+    def __init__(self, bus: CanHandle, codec: SeaCodec, node_id: int, inner: InnerLoop, inner_mode: str,
                  send_retries: int, counters: Any) -> None:
         self.bus, self.codec, self.node_id = bus, codec, node_id
         self.inner, self.inner_mode = inner, inner_mode
@@ -50,7 +50,7 @@ class CommandPath:
     def step_only(self, fb: Feedback) -> None:
         """Run the inner loop on `fb` (observer, resume ramp) without sending: a sample too late to answer."""
         if self.inner_mode != "remote":
-            self.inner.voltage((*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s))  # type: ignore[arg-type]
+            self.inner.voltage((*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s))
 
     def answer(self, fb: Feedback, command: bool, clear: bool) -> bool:
         """Compute and send the VOLTAGE_CMD answering `fb` (False: not commanding). `command`/`clear` come from the
@@ -66,7 +66,7 @@ class CommandPath:
             u = self.voltage if self.voltage is not None else (0.0, 0.0)
         else:
             m = (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s)
-            u = self.inner.voltage(m)  # type: ignore[arg-type]
+            u = self.inner.voltage(m)
         self.last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
         self.send(self.last_cmd)
         return True

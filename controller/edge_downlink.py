@@ -12,8 +12,9 @@ from typing import Any
 
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SequenceTracker, SeqVerdict,
-                                       SetpointPayload, VoltagePayload)
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload, VoltagePayload
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
+from sea_hil.runtime.clock import EdgeSync
 
 log = logging.getLogger("sea_hil.edge")
 SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]
@@ -21,7 +22,7 @@ SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]
 
 class SetpointIntake:
     def __init__(self, downlink: LinkEmulator, counters: Any, payloads: PayloadCounters, timeout_ns: int,
-                 sync: Any, envelope: Any = None, max_answer_age_ns: int = 0) -> None:
+                 sync: EdgeSync, envelope: Any = None, max_answer_age_ns: int = 0) -> None:
         self.downlink = downlink
         self.counters = counters
         self.payloads = payloads

@@ -19,17 +19,19 @@ not held (counted).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.envelope import SetpointEnvelope, admissible
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import make_trajectory, trajectory_id
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, error_threshold
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass(frozen=True)
@@ -72,7 +74,7 @@ class EdgeEvents:
         self.model: Predictor | None = None
         if model:
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
-            self.model.warm(tuple(cfg.plant.initial_theta_rad))
+            self.model.warm(cfg.plant.initial_theta_rad)
         self.events = 0
         self.resume_anchors = 0
         self.sampled_at: dict[int, int] = {}
@@ -88,17 +90,20 @@ class EdgeEvents:
         self.max_stale_excess_ns = 0      # ... beyond the answer timeout at that sample
         self._last_hold_ns: int | None = None   # the sample the held setpoint was computed for (answered or local)
 
-    def on_sample(self, sample_ns: int, fb: tuple) -> EdgeDecision | None:
+    def on_sample(self, sample_ns: int, fb: tuple[tuple[float, float], ...]) -> EdgeDecision | None:
         """fb = (theta, omega, delta, nut velocity) pairs of the sample at `sample_ns`; None: not checked."""
         k = round(sample_ns / self.period_ns)
         outer = k % self.outer_every == 0
         if not (outer or self.every_sample):
             return None
-        ahead = None
+        ahead: Callable[[int], JointState] | None = None
         if self.model is not None:
             model, held = self.model, self.inner
             hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
-            ahead = lambda h_ns: model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)  # noqa: E731
+
+            def model_ahead(h_ns: int) -> JointState:
+                return model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)
+            ahead = model_ahead
         js = JointState(fb[0], fb[1])
         t_ns, ds, reason = self.generator.on_sample(sample_ns, js, ahead)
         seq = k + 1

@@ -54,7 +54,7 @@ def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int
 def percentiles_us(name: str, h: LogHistogram, keys: tuple[str, ...]) -> dict[str, float]:
     """`{name}_us_{key}` in microseconds (-1 when empty) for keys of `LogHistogram.to_dict` (min, p50, p99, max)."""
     d = h.to_dict()
-    return {f"{name}_us_{k}": float(d[k]) * 1e6 if d[k] is not None else -1.0 for k in keys}
+    return {f"{name}_us_{k}": float(v) * 1e6 if (v := d[k]) is not None else -1.0 for k in keys}
 
 
 def edge_stats(edge: Any) -> dict[str, float]:

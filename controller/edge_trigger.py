@@ -31,7 +31,8 @@ from dataclasses import dataclass, field
 
 from sea_hil.controller.smc import JointState, tracking_errors
 from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn, anchored_lead_in
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, _distance, epsilon
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, _distance, epsilon
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass
@@ -83,7 +84,7 @@ class EdgeEventGenerator:
         anchor = self._needs_anchor(sample_ns)
         if anchor:
             self._anchor(sample_ns, js)
-        t_ns = sample_ns - self.t0_ns  # type: ignore[operator]
+        t_ns = self.time_of(sample_ns)
         ds = self.desired(t_ns)
         js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds, ahead)
         eps = epsilon(tracking_errors(js_eval, ds_eval), ds_eval.theta_rad, ds_eval.omega_rad_s)
@@ -134,7 +135,7 @@ class EdgeEventGenerator:
         measured velocity and a smoothed acceleration (finite differences of the 1 kHz or outer samples)."""
         if self._prev is not None and sample_ns > self._prev[0]:
             dt = (sample_ns - self._prev[0]) * 1e-9
-            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1]))
+            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1], strict=True))
             self._alpha = (0.8 * self._alpha[0] + 0.2 * a[0], 0.8 * self._alpha[1] + 0.2 * a[1])
         self._prev = (sample_ns, js.omega_rad_s)
         if not self.lookahead or not self.rtt_ns:
@@ -143,8 +144,9 @@ class EdgeEventGenerator:
         if model is not None:
             return model(int(self.rtt_ns)), t_eval, self.desired(t_eval)
         h = self.rtt_ns * 1e-9
-        th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha))
-        om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha))
+        (q1, q2), (w1, w2), (a1, a2) = js.theta_rad, js.omega_rad_s, self._alpha
+        th = (q1 + w1 * h + 0.5 * a1 * h * h, q2 + w2 * h + 0.5 * a2 * h * h)
+        om = (w1 + a1 * h, w2 + a2 * h)
         return JointState(th, om), t_eval, self.desired(t_eval)
 
     def overdue(self, sample_ns: int) -> bool:

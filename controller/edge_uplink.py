@@ -6,7 +6,8 @@ simulated clock in lockstep (so the controller measures the uplink delay of ever
 from __future__ import annotations
 
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sea_hil.protocol.can_frames import Feedback
 from sea_hil.protocol.payload_hot import encode_state

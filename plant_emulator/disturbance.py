@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import math
 import random
-from typing import Callable
+from collections.abc import Callable
 
-from sea_hil.config import DisturbanceConfig
-from sea_hil.config.model import JointDisturbanceConfig
+from sea_hil.config.model import DisturbanceConfig, JointDisturbanceConfig
 
 JointTorque = Callable[[float], float]
 

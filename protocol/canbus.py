@@ -10,24 +10,31 @@ the kernel drops datagrams silently when the buffer is full, so the readers coun
 from __future__ import annotations
 
 import errno
-import ipaddress
 import logging
 import queue
-import re
 import socket
 import time
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any, Protocol
 
 import can
 from can.interfaces.virtual import VirtualBus, channels_lock
 
+from sea_hil.config.wire_names import parse_can_spec
 from sea_hil.errors import BusError, ConfigError
 from sea_hil.queues import timed_get
 
-INTERFACES = ("socketcan", "virtual", "udp_multicast")
-_IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")  # Linux IFNAMSIZ (16) minus the NUL
+
+class CanHandle(Protocol):
+    """What a node needs of its CAN bus: a python-can bus, or a handle built on one (the bus-timing model's
+    `TimedBus`, several buses' `MergedBus`)."""
+
+    def send(self, msg: can.Message, timeout: float | None = None) -> None: ...
+
+    def recv(self, timeout: float | None = None) -> can.Message | None: ...
+
+
 _CAN_LOG = logging.getLogger("can.bus")   # python-can's receive log (BusABC.recv)
-_USAGE = "expected 'socketcan:IFNAME', 'virtual:NAME' or 'udp_multicast:GROUP'"
 _LOG = logging.getLogger("sea_hil.canbus")
 SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it
 RX_BUFFER_BYTES = 8 << 20   # the kernel doubles it: ~21k queued frames at ~770 B each, ~5 s of one 1 kHz limb
@@ -61,30 +68,6 @@ def enlarge_rx_buffer(bus: Any, size_bytes: int = RX_BUFFER_BYTES) -> int | None
         _LOG.warning("CAN receive buffer is %d bytes (asked for %d; raise net.core.rmem_max): frames may be "
                      "dropped by the kernel", granted, size_bytes)
     return granted
-
-
-def parse_can_spec(spec: str) -> tuple[str, str]:
-    """``"socketcan:vcan0"`` -> ``("socketcan", "vcan0")``; `ConfigError` for anything malformed."""
-    if not isinstance(spec, str) or ":" not in spec:
-        raise ConfigError(f"bad CAN spec {spec!r}: {_USAGE}")
-    interface, _, channel = spec.partition(":")
-    if interface not in INTERFACES:
-        raise ConfigError(f"bad CAN spec {spec!r}: unknown interface {interface!r}; {_USAGE}")
-    if interface == "socketcan" and not _IFNAME.fullmatch(channel):
-        raise ConfigError(f"bad CAN spec {spec!r}: {channel!r} is not a network interface name "
-                          "(1-15 characters of A-Z a-z 0-9 _ . -)")
-    if interface == "virtual" and (not channel or channel != channel.strip()):
-        raise ConfigError(f"bad CAN spec {spec!r}: virtual channel name must be non-empty without "
-                          "surrounding spaces")
-    if interface == "udp_multicast":
-        try:
-            group = ipaddress.ip_address(channel)
-        except ValueError:
-            group = None
-        if group is None or not group.is_multicast:
-            raise ConfigError(f"bad CAN spec {spec!r}: udp_multicast needs an IPv4/IPv6 multicast group "
-                              "address, e.g. udp_multicast:239.74.163.2")
-    return interface, channel
 
 
 def open_bus(spec: str, *, receive_own_messages: bool = False, fd: bool = False) -> can.BusABC:
@@ -122,7 +105,7 @@ class FastVirtualBus(VirtualBus):
         if rx_queue_size == 0:
             with channels_lock:
                 i = next(i for i, q in enumerate(self.channel) if q is self.queue)
-                self.queue = self.channel[i] = queue.SimpleQueue()  # type: ignore[assignment]
+                self.queue = self.channel[i] = queue.SimpleQueue()  # type: ignore[assignment,call-overload]
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """`BusABC.recv` without its generic filter loop when no filters are set (a plain queue read)."""
@@ -189,7 +172,7 @@ def is_buffer_full(err: BaseException) -> bool:
     return isinstance(err, can.CanOperationError) and "buffer full" in str(err).lower()
 
 
-def send_with_retry(bus: can.BusABC, msg: can.Message, retries: int, backoff_s: float, *,
+def send_with_retry(bus: CanHandle, msg: can.Message, retries: int, backoff_s: float, *,
                     timeout_s: float | None = None, sleep: Callable[[float], None] = time.sleep) -> int:
     """Send `msg`, retrying up to `retries` times (sleeping `backoff_s` in between) while the transmit queue is full.
 

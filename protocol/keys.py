@@ -12,40 +12,20 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
+from sea_hil.config.wire_names import validate_limb, validate_prefix
 from sea_hil.errors import ConfigError
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
-_FORBIDDEN = frozenset("*$#?")
+class _KeyedConfig(Protocol):
+    """What `Keys.from_config` reads (a `ZenohConfig`; the wire layer does not import the config)."""
 
+    @property
+    def prefix(self) -> str: ...
 
-def _check_chunk(what: str, chunk: str, full: str) -> None:
-    if not chunk:
-        raise ConfigError(f"zenoh {what} {full!r} has an empty chunk (leading, trailing or double '/')")
-    bad = sorted(set(chunk) & _FORBIDDEN)
-    if bad:
-        raise ConfigError(f"zenoh {what} {full!r} contains forbidden character(s) {''.join(bad)!r}")
-    if any(c.isspace() for c in chunk):
-        raise ConfigError(f"zenoh {what} {full!r} contains whitespace")
-
-
-def validate_prefix(prefix: str) -> str:
-    """A prefix is one or more '/'-separated chunks without wildcards (`*`, `$`), `#`, `?` or whitespace."""
-    if not isinstance(prefix, str) or not prefix:
-        raise ConfigError("zenoh prefix must be a non-empty string")
-    for chunk in prefix.split("/"):
-        _check_chunk("prefix", chunk, prefix)
-    return prefix
-
-
-def validate_limb(limb: str) -> str:
-    """A limb name is exactly one chunk: like a prefix chunk and additionally without '/'."""
-    if not isinstance(limb, str) or not limb:
-        raise ConfigError("zenoh limb must be a non-empty string")
-    if "/" in limb:
-        raise ConfigError(f"zenoh limb {limb!r} must not contain '/'")
-    _check_chunk("limb", limb, limb)
-    return limb
+    @property
+    def limb(self) -> str: ...
 
 
 @dataclass(frozen=True)
@@ -68,9 +48,9 @@ class Keys:
         return cls(prefix, limb, **{ch: f"{base}/{ch}" for ch in CHANNELS})
 
     @classmethod
-    def from_config(cls, zenoh_cfg: object) -> Keys:
+    def from_config(cls, zenoh_cfg: _KeyedConfig) -> Keys:
         """From a `sea_hil.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
-        return cls.make(getattr(zenoh_cfg, "prefix"), getattr(zenoh_cfg, "limb"))
+        return cls.make(zenoh_cfg.prefix, zenoh_cfg.limb)
 
     def all(self) -> dict[str, str]:
         """Channel name -> key expression."""

@@ -20,21 +20,17 @@ from __future__ import annotations
 
 import logging
 import struct
-from math import isfinite
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import ClassVar, Union
+from math import isfinite
+from typing import Any, ClassVar
 
-from sea_hil.protocol.payload_fields import (U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field,
-                                             uint_field)
-from sea_hil.protocol.sequence import SeqVerdict, SequenceTracker
-from sea_hil.protocol.wire_size import estimate_wire_bytes
+from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field, uint_field
 
-__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",
-           "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected",
-           "RejectReason", "SeqVerdict", "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason",
-           "VoltagePayload", "decode", "encode", "estimate_wire_bytes"]
+__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "VERSION", "AckPayload", "EventStatePayload",
+           "MsgType", "Payload", "PayloadCounters", "SetpointPayload", "StatePayload", "TriggerReason",
+           "VoltagePayload", "decode", "encode"]
 
 _log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"
@@ -65,8 +61,8 @@ _MSG_TYPES = {int(m): m for m in MsgType}   # dict lookups in `decode`: an enum 
 _REASONS = {int(r): r for r in TriggerReason}
 
 
-def trigger_reason(v: object) -> TriggerReason:
-    """`v` as a `TriggerReason`, else PayloadRejected(ENUM)."""
+def trigger_reason(v: int) -> TriggerReason:
+    """`v` as a `TriggerReason`, else PayloadRejected(ENUM) (`v` may be anything a sender put in the field)."""
     try:
         return TriggerReason(v)
     except ValueError as err:
@@ -171,7 +167,7 @@ class AckPayload(_Payload):
         object.__setattr__(self, "sent", bool(self.sent))
 
 
-Payload = Union[StatePayload, EventStatePayload, SetpointPayload, VoltagePayload, AckPayload]
+Payload = StatePayload | EventStatePayload | SetpointPayload | VoltagePayload | AckPayload
 
 _BODY = {
     MsgType.STATE: struct.Struct("<Q8d"),
@@ -227,7 +223,7 @@ def decode(b: bytes) -> Payload:
     mt = _MSG_TYPES.get(mtype)
     if mt is None:                  # rare: the enum's own error is the cause (the fast lookup has none to keep)
         try:
-            MsgType(mtype)
+            mt = MsgType(mtype)
         except ValueError as err:
             raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from err
     if len(b) != PAYLOAD_SIZE[mt]:
@@ -247,12 +243,12 @@ def decode(b: bytes) -> Payload:
     return VoltagePayload(seq, t_ns, f[0], f[1:3], epoch=epoch)
 
 
-def _hot(f: tuple) -> Payload | None:
+def _hot(f: tuple[Any, ...]) -> Payload | None:
     """A STATE or SETPOINT from its whole-message unpack `f` without re-running the constructors' checks, when they
     cannot fail: `struct` gives in-range unsigned integers, and one `isfinite` of the floats' sum is true only if
     every float is finite (an overflowing sum of finite floats is false: the constructor then decides). None: take
     the general path (whose constructor raises the exact rejection)."""
-    obj = object.__new__(_HOT_CLASS[f[2]])
+    obj: StatePayload | SetpointPayload = object.__new__(_HOT_CLASS[f[2]])
     if f[2] == MsgType.STATE:
         if not isfinite(sum(f[7:15])):
             return None

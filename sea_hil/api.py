@@ -14,16 +14,21 @@ from __future__ import annotations
 
 import tempfile
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import can
 
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import SeaHilError
+from sea_hil.runtime.processes import end_process
+from sea_hil.session.builder import SessionBuilder
+from sea_hil.session.run import RunOptions, run_session
 
-__all__ = ["DriveSnapshot", "EmulatedDriver", "SeaHilConfig", "SeaHilError", "Session", "load_config"]
+__all__ = ["DriveSnapshot", "EmulatedDriver", "Session"]
 
 
 def _config(config: SeaHilConfig | str | Path | None) -> SeaHilConfig:
@@ -63,7 +68,6 @@ class EmulatedDriver:
 
     def __init__(self, bus: str | can.BusABC = "virtual:sea-hil", node_ids: int | Sequence[int] = 1, *,
                  config: SeaHilConfig | str | Path | None = None, lockstep: bool = False) -> None:
-        from sea_hil.session.builder import SessionBuilder
         self.config = _config(config)
         self.node_ids = (node_ids,) if isinstance(node_ids, int) else tuple(node_ids)
         self.lockstep = lockstep
@@ -128,14 +132,13 @@ class Session:
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
                  progress: bool = False) -> None:
-        from sea_hil.session.run import RunOptions
         if controller not in ("et", "tt"):
             raise SeaHilError(f"controller must be 'et' or 'tt', not {controller!r}")
         if cycles < 1:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
         self.config = _config(config)
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
-        self.out = Path(out) if out is not None else Path(self._tmp.name)   # type: ignore[union-attr]
+        self.out = Path(out) if out is not None else Path(self._tmp.name) if self._tmp is not None else Path()
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,
                                 progress=progress, on_nodes=self._on_nodes)
         self.summary: dict[str, Any] | None = None
@@ -151,7 +154,6 @@ class Session:
 
     def run(self) -> dict[str, Any]:
         """Run the session to its end in this thread; its summary."""
-        from sea_hil.session.run import run_session
         try:
             self.summary = run_session(self.config, self._opts, log=lambda _msg: None)
         except SeaHilError as err:
@@ -207,7 +209,6 @@ class Session:
         if self._thread is not None and self._thread.is_alive():
             self._ready.wait(60.0)        # nodes still being built: stop it once they are
             if self._parts is not None:
-                from sea_hil.session.processes import end_process
                 end_process(self._parts[2])   # the controller ends: the session stops, the recording is closed
         if self._thread is not None:
             self._thread.join(120.0)

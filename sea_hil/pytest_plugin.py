@@ -40,7 +40,7 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 @pytest.fixture
 def sea_config() -> Any:
-    from sea_hil.api import load_config
+    from sea_hil.config.loader import load_config
     return load_config()
 
 

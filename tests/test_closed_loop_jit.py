@@ -5,14 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import initial_state
-from sea_hil.plant_emulator.integrator import advance
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil import jit
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.dynamics import initial_state
 from sea_hil.errors import SeaHilError
 from sea_hil.mechanics import limb_params
-from sea_hil import jit
 from sea_hil.offline.closed_loop import disturbance_table, make_inner_steps, simulate
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.integrator import advance
 
 pytest.importorskip("numba")
 

@@ -4,12 +4,12 @@ four-process topologies are tests/test_compose_topology.py."""
 from __future__ import annotations
 
 import jsonschema
+from test_session_summary import _session
 
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_block
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.writer import report_markdown
-from test_session_summary import _session
 
 PUBLISHED = range(1, 176)
 EVENTS = {20, 30, 100}

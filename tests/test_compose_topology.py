@@ -22,11 +22,10 @@ from typing import Any
 
 import jsonschema
 import pytest
-
 from test_udp_multicast import require_netns
 
 from sea_hil.cli import main
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.report.node_summary import NODE_SUMMARY_SCHEMA
 from sea_hil.report.summary import deterministic as summary_deterministic
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA

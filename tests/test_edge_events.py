@@ -10,7 +10,7 @@ import uuid
 
 from paper_scheme import paper
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params

@@ -9,12 +9,10 @@ import threading
 import uuid
 
 import zenoh
-
 from faults_helpers import wait_for
+from paper_scheme import paper  # these nodes speak the paper's STATE protocol
 
-from paper_scheme import paper   # these nodes speak the paper's STATE protocol
-
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
 from sea_hil.protocol.can_frames import Feedback

@@ -23,15 +23,16 @@ import zenoh
 from can_example import CAN_EXAMPLE, load_example, run_on_virtual
 from paper_scheme import paper
 
-from sea_hil.config import config_to_toml, load_config
+from sea_hil.config.loader import config_to_toml, load_config
 from sea_hil.errors import SeaHilError
 from sea_hil.offline.session_engine import run_engine
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Heartbeat, SeaCodec
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import ClearErrors, DriverState, ErrorFlags, Heartbeat
 from sea_hil.protocol.payloads import HEADER_SIZE, AckPayload, StatePayload, decode, encode
 from sea_hil.protocol.zsession import free_tcp_port, make_config
 from sea_hil.report.session_summary import session_summary
+from sea_hil.runtime.processes import end_process
 from sea_hil.session.external import ExternalWatch
-from sea_hil.session.processes import end_process
 from sea_hil.session.run import RunOptions, run_session
 
 REPO = Path(__file__).resolve().parents[1]

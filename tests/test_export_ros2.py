@@ -18,16 +18,15 @@ from typing import Any
 
 import pytest
 import yaml
+from ros2_bag import export, t_ns
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import MalformedFrame
 from sea_hil.mechanics import limb_params, sea_geometry
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import Heartbeat
 from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.session.run import RunOptions, run_session
-
-from ros2_bag import export, t_ns
 
 JS = Path(__file__).resolve().parent / "js"
 NODE = shutil.which("node")
@@ -95,7 +94,7 @@ def test_every_message_decodes_and_matches_the_recording(one_limb):
     raw = src.messages["/can/raw"]
     frames = msgs["/from_can_bus"]
     assert len(frames) == len(raw) > 1000
-    for r, (log, pub, seq, f) in zip(raw, frames):
+    for r, (log, pub, seq, f) in zip(raw, frames, strict=True):
         p = r.payload
         assert (f.id, f.dlc, f.is_extended, f.is_rtr, f.is_error) == (p["can_id"], p["dlc"], p["is_extended"], False,
                                                                       False)
@@ -107,7 +106,7 @@ def test_every_message_decodes_and_matches_the_recording(one_limb):
     got = msgs["/joint_states"]
     assert len(got) == len(want) > 500
     params = limb_params(load_config(overrides=SHORT).plant)
-    for (_, log, pos, vel, delta), (blog, _, _, js) in zip(want, got):
+    for (_, log, pos, vel, delta), (blog, _, _, js) in zip(want, got, strict=True):
         assert (list(js.name), t_ns(js.header.stamp), blog) == (["hip", "knee"], log, log)
         assert list(js.position) == pos and list(js.velocity) == vel
         _, _, a1, a2, _, _ = sea_geometry(pos[0], pos[1], params)      # Eq. 4: tau = -k Delta a
@@ -116,13 +115,13 @@ def test_every_message_decodes_and_matches_the_recording(one_limb):
     tracking = src.messages["/tracking"]
     desired = msgs["/joint_states_desired"]
     assert len(desired) == len(tracking) > 50
-    for t, (log, _, _, js) in zip(tracking, desired):
+    for t, (log, _, _, js) in zip(tracking, desired, strict=True):
         assert list(js.position) == [t.payload["theta1_d_rad"], t.payload["theta2_d_rad"]] and log == t.log_time_ns
         assert list(js.velocity) == [] and list(js.effort) == []
 
     states = src.messages["/zenoh/state"]
     assert len(msgs["/state"]) == len(states) > 5
-    for s, (_, _, _, b) in zip(states, msgs["/state"]):
+    for s, (_, _, _, b) in zip(states, msgs["/state"], strict=True):
         p = s.payload
         assert (b.seq, b.theta1_rad, b.theta2_rad, b.delta2_m, b.reason, b.event_seq, b.trajectory_id) == \
             (p["seq"], p["theta1_rad"], p["theta2_rad"], p["delta2_m"], p["reason"], p["event_seq"],
@@ -131,7 +130,7 @@ def test_every_message_decodes_and_matches_the_recording(one_limb):
     sample_of = {s.payload["seq"]: s.payload["sample_t_ns"] for s in states}
     setpoints = src.messages["/zenoh/setpoint"]
     assert len(msgs["/setpoint"]) == len(setpoints) > 5
-    for s, (_, _, _, b) in zip(setpoints, msgs["/setpoint"]):
+    for s, (_, _, _, b) in zip(setpoints, msgs["/setpoint"], strict=True):
         p = s.payload
         assert (b.seq, b.state_seq, b.delta1_ref_m, b.delta2_ref_m, b.s1, b.reason) == \
             (p["seq"], p["state_seq"], p["delta1_ref_m"], p["delta2_ref_m"], p["s1"], p["reason"])

@@ -12,15 +12,14 @@ from typing import Any
 import can
 import pytest
 from mcap.writer import Writer
+from ros2_bag import export, t_ns
 
 from sea_hil.cli import main
 from sea_hil.errors import RecordingError
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
-from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat, VoltageCmd
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.writer import SessionRecorder
-
-from ros2_bag import export, t_ns
 
 REPO = Path(__file__).resolve().parent.parent
 T0_NS = 1_700_000_000_000_000_000
@@ -54,7 +53,7 @@ def test_a_wall_clock_recording_stamps_the_sample_time(tmp_path: Path, fd: bool)
     assert bag["channels"][topic][0] == ("ros2_socketcan_msgs/msg/FdFrame" if fd else "can_msgs/msg/Frame")
     got = msgs[topic]
     assert len(got) == len(frames)
-    for (t, m), (log, _, _, f) in zip(frames, got):
+    for (t, m), (log, _, _, f) in zip(frames, got, strict=True):
         assert log == t and f.id == m.arbitration_id
         assert bytes(f.data)[:m.dlc if not fd else None] == bytes(m.data)
         if fd:

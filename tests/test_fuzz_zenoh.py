@@ -9,23 +9,35 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+from fuzz_budget import cases
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from paper_scheme import paper
 
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
+from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import load_config
-from sea_hil.mechanics import limb_params
-from sea_hil.protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
-                               SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)
+from sea_hil.protocol.payload_fields import U32_MAX, PayloadRejected
+from sea_hil.protocol.payloads import (
+    MAGIC,
+    PAYLOAD_SIZE,
+    VERSION,
+    AckPayload,
+    MsgType,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+    VoltagePayload,
+    decode,
+    encode,
+)
 from sea_hil.protocol.zsession import make_config, open_session
-from fuzz_budget import cases
 
 CASES = cases(10_000)   # tests/fuzz_budget.py: SEA_HIL_FUZZ_SCALE=1 for the depth of docs/reliability.md
 FUZZ = settings(max_examples=CASES, deadline=None, database=None, derandomize=True,
@@ -108,7 +120,7 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
                      edge.envelope.rejected, ep.old + ep.foreign)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
-            assert sum(a - b for a, b in zip(after, before)) == (0 if ok else 1)
+            assert sum(a - b for a, b in zip(after, before, strict=True)) == (0 if ok else 1)
         run()
         pc = edge.payloads.as_dict()
         assert calls["n"] >= CASES and pc["accepted"] + pc["rejected_total"] == calls["n"]
@@ -174,7 +186,7 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
                      ctrl.states + ctrl.unusable_states)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
-            assert sum(a - b for a, b in zip(after, before)) <= 1   # at most one outcome (a late state may end it)
+            assert sum(a - b for a, b in zip(after, before, strict=True)) <= 1   # at most one outcome (a late state may end it)
         run()
         st_ = ctrl.stats_dict()
         assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"]

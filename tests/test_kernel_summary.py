@@ -5,14 +5,13 @@ grid; a session the kernel does not cover takes the message path."""
 from __future__ import annotations
 
 import pytest
+from test_session_kernel import CASES, _cfg
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline import session_engine
 from sea_hil.offline.session_engine import engine_summary, run_engine
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.report.session_summary import session_summary
-
-from test_session_kernel import CASES, _cfg
 
 
 @pytest.mark.parametrize("mode", ["et", "tt"])

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from paper_scheme import paper
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic

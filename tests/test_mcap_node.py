@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.recorder.schemas import TOPICS
 from sea_hil.session.run import RunOptions, run_session
 

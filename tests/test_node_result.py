@@ -37,7 +37,7 @@ def test_sea_hil_router_routes_between_two_clients() -> None:
     import threading
 
     from sea_hil.protocol.zsession import make_config, open_session
-    from sea_hil.session.processes import end_process
+    from sea_hil.runtime.processes import end_process
     ep = f"tcp/127.0.0.1:{free_tcp_port()}"
     proc = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "router", "--listen", ep], stdin=subprocess.DEVNULL,
                             stderr=subprocess.PIPE, text=True)
@@ -66,7 +66,7 @@ def test_a_recorder_that_only_connects_joins_as_a_client() -> None:
     """Two zenoh 1.10 peers forward each other only their own publications (docs/topologies.md): a recorder on the
     edge's endpoint is its client, unless it listens or --mode says otherwise."""
     from sea_hil.commands.record import as_observer
-    from sea_hil.config import load_config
+    from sea_hil.config.loader import load_config
     connect = {"zenoh": {"connect": ["tcp/127.0.0.1:7447"]}}
     assert as_observer(load_config(overrides=connect), None).zenoh.mode == "client"
     assert as_observer(load_config(overrides=connect), "peer").zenoh.mode == "peer"

@@ -14,12 +14,13 @@ import jsonschema
 import pytest
 from mcap.reader import make_reader
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.writer import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, SessionRecorder,
-                                install_finalizer, read_session)
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION
+from sea_hil.recorder.reader import read_session
 from sea_hil.recorder.schemas import TOPICS, schema_for
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
+from sea_hil.recorder.writer import SessionRecorder, install_finalizer
 
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20.0

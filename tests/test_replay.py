@@ -7,12 +7,11 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+from paper_scheme import paper  # these nodes speak the paper's STATE protocol
 
-from paper_scheme import paper   # these nodes speak the paper's STATE protocol
-
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
-from sea_hil.config import load_config
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
 from sea_hil.session.builder import SessionBuilder
 

@@ -10,17 +10,18 @@ import sys
 from pathlib import Path
 
 import pytest
-
 from edge_lockstep_run import run_live_edge_lockstep
 from paper_scheme import PAPER_FLAGS, paper
 from test_pre_refactor_equality import as_payload_v2, with_totals
 
-from sea_hil.config import load_config
-from sea_hil.offline.session_engine import SessionRecords, run_engine, tracking_record
+from sea_hil.config.loader import load_config
+from sea_hil.controller.edge_events import tracking_record
+from sea_hil.offline.session_engine import run_engine
+from sea_hil.offline.session_records import SessionRecords
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode
-from sea_hil.recorder.node import zenoh_record
+from sea_hil.recorder.zenoh_tap import zenoh_record
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.writer import run_report
 

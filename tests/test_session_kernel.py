@@ -6,13 +6,14 @@ from __future__ import annotations
 import logging
 
 import pytest
+from paper_scheme import paper
 
-from sea_hil.config import load_config
-from sea_hil.offline.session_engine import EngineOptions, driver_disturbance_table, run_engine
+from sea_hil.config.loader import load_config
+from sea_hil.offline.session_engine import driver_disturbance_table, run_engine
 from sea_hil.offline.session_fast import delivery_offsets, unsupported
+from sea_hil.offline.session_loop import EngineOptions
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.protocol.link import LinkEmulator, parse_link_spec
-from paper_scheme import paper
 
 SHORT = {"trajectory": {"period_s": 1.5, "lead_in_s": 0.3}}
 CASES = {
@@ -69,7 +70,7 @@ def test_delivery_offsets_are_the_emulators_own():
     offsets = delivery_offsets(cfg, "7/up", 500, 77).tolist()
     sent = [1_000_000 * i for i in range(500)]
     got = [live.submit(t, 77) for t in sent]
-    assert offsets == [-1 if a is None else a - t for a, t in zip(got, sent)]
+    assert offsets == [-1 if a is None else a - t for a, t in zip(got, sent, strict=True)]
     assert -1 in offsets and min(a for a in offsets if a >= 0) >= 0
 
 

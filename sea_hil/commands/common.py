@@ -5,7 +5,7 @@ import argparse
 import math
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import parse_link_spec

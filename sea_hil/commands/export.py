@@ -4,6 +4,11 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
+from sea_hil.errors import ConfigError
+from sea_hil.recorder.export import export_can, export_csv
+from sea_hil.recorder.reader import read_session
+from sea_hil.ros2.export import export_ros2
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("export", help="export a recording: CAN frames to candump -L / ASC, channels to CSV, "
@@ -24,13 +29,9 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.errors import ConfigError
-    from sea_hil.recorder.export import export_can, export_csv
-    from sea_hil.recorder.reader import read_session
     if not (args.candump or args.asc or args.csv or args.ros2):
         raise ConfigError("nothing to export: give --candump FILE, --asc FILE, --csv DIR and/or --ros2 DIR")
     if args.ros2:   # first: it refuses a truncated or foreign file before any output is written
-        from sea_hil.ros2.export import export_ros2
         bag = export_ros2(args.mcap, args.ros2)
         print(f"{bag.directory}: rosbag2, {bag.message_count} messages on {len(bag.counts)} topics "
               f"(ros2 bag play {bag.directory})")

@@ -4,6 +4,7 @@ from __future__ import annotations
 import argparse
 
 from sea_hil.commands.common import add_config_args, config_from_args
+from sea_hil.session.builder import SessionBuilder
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -22,7 +23,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.session.builder import SessionBuilder
     can_ov = {k: v for k, v in (("feedback_rate_hz", args.rate), ("watchdog_timeout_s", args.watchdog))
               if v is not None}
     cfg = config_from_args(args, {"can": can_ov} if can_ov else None)

@@ -2,15 +2,25 @@
 from __future__ import annotations
 
 import argparse
+import os
 import signal
+import sys
 from pathlib import Path
 from typing import Any
 
 from sea_hil.commands.common import add_config_args, add_zenoh_args, config_from_args
 from sea_hil.commands.node_cli import add_json_arg
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.errors import ConfigError
+from sea_hil.live.child import live_child_overrides
 from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.live.link import await_live
 from sea_hil.recorder.clock import TIME_BASES
+from sea_hil.recorder.process import RecorderProcess
+from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.report.completeness import completeness_block, read_for_completeness
+from sea_hil.report.node_summary import node_summary, print_node_summary
+from sea_hil.session.builder import SessionBuilder
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -39,12 +49,6 @@ def as_observer(cfg: SeaHilConfig, mode: str | None) -> SeaHilConfig:
 
 
 def _main(args: argparse.Namespace) -> int:
-    import os
-    import sys
-    from sea_hil.errors import ConfigError
-    from sea_hil.live.child import live_child_overrides
-    from sea_hil.recorder.writer import SessionRecorder
-    from sea_hil.session.builder import SessionBuilder
     # started by `edge`/`controller --foxglove`: a Zenoh client of that node, ended with it
     child = live_child_overrides()    # the live view of `edge`/`controller --foxglove`: that node prints the result
     cfg = as_observer(config_from_args(args, live_overrides(args, child)), args.mode)
@@ -55,12 +59,12 @@ def _main(args: argparse.Namespace) -> int:
         session = b.zenoh()
         bus = b.bus(args.can) if args.can else None
         if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
-            from sea_hil.live.link import await_live
-            from sea_hil.recorder.process import RecorderProcess
-            rec = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base,
-                                  live=(cfg.live, cfg.can.bitrate_bps))
-            b.callback(rec.close)      # idempotent: closes the file if waiting for the live view failed
-            await_live(rec.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
+            rec: RecorderProcess | SessionRecorder
+            rec = process = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base,
+                                            live=(cfg.live, cfg.can.bitrate_bps))
+            b.callback(process.close)      # idempotent: closes the file if waiting for the live view failed
+            assert process.live is not None   # a live config was passed
+            await_live(process.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))
         else:
             rec = SessionRecorder.from_config(out, cfg.record)
         rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv)
@@ -78,8 +82,6 @@ def _main(args: argparse.Namespace) -> int:
 def print_record_result(args: argparse.Namespace, out: Path | None, counters: dict[str, Any]) -> None:
     """The recorder's own result: its counters (from the file's final record, the writer's included) and whether
     the file is complete against the nodes' counters (`sea_hil.report.completeness`)."""
-    from sea_hil.report.completeness import completeness_block, read_for_completeness
-    from sea_hil.report.node_summary import node_summary, print_node_summary
     completeness = None
     if out is not None:
         data = read_for_completeness(out)

@@ -6,6 +6,11 @@ import json
 from pathlib import Path
 from typing import Any
 
+from sea_hil.errors import ConfigError, RecordingError
+from sea_hil.report.console import files_in, print_end_of_run
+from sea_hil.report.node_summary import KINDS
+from sea_hil.report.writer import run_report
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("report", help="figures and report.md from a session recording (MCAP)")
@@ -20,9 +25,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.errors import RecordingError
-    from sea_hil.report.console import files_in, print_end_of_run
-    from sea_hil.report.writer import run_report
     if not args.recording.is_file():
         raise RecordingError(f"no such recording: {args.recording}")
     summary = run_report(args.recording, args.out, _node_counters(args.node_summary))
@@ -37,8 +39,6 @@ def _node_counters(paths: list[Path]) -> dict[str, dict[str, Any]]:
     """node kind -> counters of each `--node-summary` file (its last line: a node's `--json` output). Checked for
     the fields used (the node's kind and numeric counters); the full schema is NODE_SUMMARY_SCHEMA (jsonschema is a
     dev dependency only)."""
-    from sea_hil.errors import ConfigError
-    from sea_hil.report.node_summary import KINDS
     out: dict[str, dict[str, Any]] = {}
     for path in paths:
         try:

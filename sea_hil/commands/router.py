@@ -8,6 +8,8 @@ import signal
 import sys
 import threading
 
+from sea_hil.protocol.zsession import make_config, open_session
+
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("router", help="a Zenoh router (zenoh-python router mode) for the nodes to connect to",
@@ -21,7 +23,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.protocol.zsession import make_config, open_session
     stop = threading.Event()
     for sig in (signal.SIGINT, signal.SIGTERM):
         signal.signal(sig, lambda *_: stop.set())

@@ -5,9 +5,18 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import (add_config_args, add_link_args, add_period_arg, add_scenario_args,
-                                     add_scheme_args, config_from_args)
+from sea_hil.commands.common import (
+    add_config_args,
+    add_link_args,
+    add_period_arg,
+    add_scenario_args,
+    add_scheme_args,
+    config_from_args,
+)
+from sea_hil.errors import ConfigError
 from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
+from sea_hil.session.run import RunOptions, print_summary, run_session
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -54,8 +63,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.session.run import RunOptions, print_summary, run_session
-    from sea_hil.errors import ConfigError
     if args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args, live_overrides(args))
@@ -64,7 +71,6 @@ def _main(args: argparse.Namespace) -> int:
                       progress=not args.quiet, seed=args.seed,
                       join_timeout_s=args.join_timeout, secure=args.secure or args.certs is not None,
                       certs=args.certs, figures=args.figures)
-    from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
     with SessionProgress(sys.stderr) as progress:
         summary = run_session(cfg, opts, log=progress)
     if args.json:

@@ -6,6 +6,9 @@ import json
 from pathlib import Path
 
 from sea_hil.commands.common import add_config_args, add_period_arg, add_scenario_args, config_from_args
+from sea_hil.errors import ConfigError
+from sea_hil.offline.simulate import run_compare, run_simulation
+from sea_hil.report.console import files_in, print_end_of_run
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -29,8 +32,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.offline.simulate import run_compare, run_simulation
-    from sea_hil.errors import ConfigError
     if args.cycles is not None and args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
     cfg = config_from_args(args)
@@ -42,7 +43,6 @@ def _main(args: argparse.Namespace) -> int:
         if args.json:
             print(json.dumps(summary, indent=2, sort_keys=True))
         else:
-            from sea_hil.report.console import files_in, print_end_of_run
-            print_end_of_run(summary, files_in(args.out), command="simulate",
+                print_end_of_run(summary, files_in(args.out), command="simulate",
                              tt_msgs=round(summary["duration_s"] / cfg.controller.sample_period_s))
     return 0

@@ -11,10 +11,21 @@ import sys
 import time
 from pathlib import Path
 
-from sea_hil.commands.common import add_scenario_args
+from sea_hil.commands.common import add_scenario_args, check_period_ms
+from sea_hil.config.shorthand import scenario_config
 from sea_hil.errors import ConfigError
-from sea_hil.sweep.grid import DIRECTIONS, expand_grid, parse_axis, seed_axis
-from sea_hil.sweep.methods import METHODS
+from sea_hil.sweep.grid import DIRECTIONS, LinkCondition, expand_grid, parse_axis, seed_axis
+from sea_hil.sweep.methods import (
+    COMPENSATIONS,
+    METHODS,
+    TRIGGERS,
+    parse_choices,
+    parse_links,
+    schemes_from_axes,
+    schemes_from_methods,
+)
+from sea_hil.sweep.output import write_outputs
+from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
 
 LINK_AXIS_DEFAULTS = {"delay-ms": "0,10", "jitter-ms": "0", "loss": "0"}
 
@@ -84,11 +95,6 @@ def _command_line(args: argparse.Namespace) -> str:
 def method_axes(args: argparse.Namespace) -> tuple[list, list, list | None]:
     """(TT schemes, ET schemes, explicit link conditions or None) from --trigger/--compensation/--period-ms,
     --methods and --links; periods checked against the base config's inner period (commands/common.py)."""
-    from sea_hil.commands.common import check_period_ms
-    from sea_hil.config.shorthand import scenario_config
-    from sea_hil.sweep.grid import LinkCondition
-    from sea_hil.sweep.methods import (COMPENSATIONS, TRIGGERS, parse_choices, parse_links, schemes_from_axes,
-                                       schemes_from_methods)
     periods = parse_axis("period-ms", args.period_ms) if args.period_ms else None
     if periods:
         base = scenario_config(args.config, {})
@@ -107,8 +113,6 @@ def method_axes(args: argparse.Namespace) -> tuple[list, list, list | None]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
-    from sea_hil.sweep.output import write_outputs
     if args.links and any(getattr(args, n.replace("-", "_")) is not None for n in LINK_AXIS_DEFAULTS):
         raise ConfigError("--links replaces --delay-ms, --jitter-ms and --loss: give one or the other")
     for name, default in LINK_AXIS_DEFAULTS.items():
@@ -132,7 +136,10 @@ def _main(args: argparse.Namespace) -> int:
                         mismatch=args.mismatch)
     configs = build_configs(points, opts)
     command = _command_line(args)
-    log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+
+    def log(s: str) -> None:
+        print(s, file=sys.stderr, flush=True)
+
     where = f"cluster {args.scheduler}" if args.scheduler else f"{args.jobs} local jobs"
     log(f"sweep: {len(points)} points ({sum(p.controller == 'et' for p in points)} ET + "
         f"{sum(p.controller == 'tt' for p in points)} TT references), {where}, engine {args.engine} -> {args.out}")

@@ -6,6 +6,7 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from sea_hil.config.base import _Frozen
+from sea_hil.config.wire_names import parse_can_spec, validate_limb, validate_prefix
 from sea_hil.errors import ConfigError
 
 
@@ -32,7 +33,6 @@ class CanConfig(_Frozen):
     @field_validator("interface")
     @classmethod
     def _spec(cls, v: str) -> str:
-        from sea_hil.protocol.canbus import parse_can_spec  # local: keeps python-can out of config import time
         try:
             parse_can_spec(v)
         except ConfigError as err:
@@ -99,7 +99,6 @@ class ZenohConfig(_Frozen):
     @field_validator("prefix", "limb")
     @classmethod
     def _key_chunk(cls, v: str, info: Any) -> str:
-        from sea_hil.protocol.keys import validate_limb, validate_prefix
         try:
             return validate_prefix(v) if info.field_name == "prefix" else validate_limb(v)
         except ConfigError as err:

@@ -9,8 +9,14 @@ from sea_hil.config.base import _Frozen
 from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfig
 from sea_hil.config.limbs import LimbConfig, check_limbs
 from sea_hil.config.live import LiveConfig
-from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
-                                  TriggerConfig)
+from sea_hil.config.model import (
+    ControllerConfig,
+    DisturbanceConfig,
+    PlantConfig,
+    SimConfig,
+    TrajectoryConfig,
+    TriggerConfig,
+)
 from sea_hil.config.safety import SafetyConfig
 from sea_hil.config.timing import TimingConfig
 

@@ -10,25 +10,26 @@ installed (sea_hil/jit.py: the same source and callees, compiled, cached on disk
 from __future__ import annotations
 
 import itertools
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
+from sea_hil.config.model import DisturbanceConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.inner import InnerLoop, inner_step
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.observer import ObserverState
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import make_trajectory
-from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, is_finite
-from sea_hil.plant_emulator.integrator import Disturbance, rk4_core
-from sea_hil.config import DisturbanceConfig, SeaHilConfig
+from sea_hil.dynamics import State, deflections, initial_state, is_finite, rk4_core
 from sea_hil.errors import SeaHilError
-from sea_hil.mechanics import limb_params
 from sea_hil.jit import compiled
+from sea_hil.mechanics import limb_params
 from sea_hil.offline.wire_quantiser import EXACT, dbc_resolutions, quantised
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.integrator import Disturbance
 
 
 @dataclass
@@ -52,7 +53,7 @@ def inner_ratio(cfg: SeaHilConfig) -> int:
 def make_inner_steps(fingerprint: str = "") -> Callable[..., tuple[State, int, int, ObserverState]]:
     """The inner-step kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, pn, gains, obs, limit_v,  # noqa
+    def inner_steps(x, k0, n_steps, dt, substeps, vx, s, hold_measured, p, pn, gains, obs, limit_v,
                     dist_tab, volts, lsb):
         """Inner steps k0 .. k0 + n_steps - 1: measurement of plant x (truth p) -> the edge's inner step on the
         nominal model pn (observer state obs, limited backstepping voltage written to volts[k]) -> `substeps` RK4

@@ -24,34 +24,35 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.config import SeaHilConfig
-from sea_hil.controller.inner import InnerLoop
-from sea_hil.controller.nominal import nominal_params
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_events import make_trigger, tracking_record
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
+from sea_hil.controller.inner import InnerLoop
+from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger
+from sea_hil.dynamics import State, initial_state
+from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
-from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
+from sea_hil.offline.gc_pause import gc_paused
+from sea_hil.offline.kernel_summary import kernel_summary
 from sea_hil.offline.session_fast import run_compiled, run_kernel, unsupported
 from sea_hil.offline.session_loop import EngineOptions, SessionLoop
 from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, SessionRecords
 from sea_hil.offline.wire_quantiser import dbc_resolutions
 from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import State, initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
-from sea_hil.errors import SeaHilError
+from sea_hil.report.session_summary import session_summary
 
-__all__ = ["EngineOptions", "EngineResult", "SessionRecords", "driver_disturbance_table", "engine_summary",
-           "run_engine", "tracking_record"]
+__all__ = ["driver_disturbance_table", "engine_summary", "run_engine"]
 
 _log = logging.getLogger("sea_hil.offline")
 
@@ -92,7 +93,7 @@ class _Env:
         self.params = nominal_params(cfg)    # the remote controller's (and the edge's) nominal model
         self.outer = OuterController(cfg, self.params, mode)
         self.nominal = nominal_params(cfg)      # the controller's model (the edge and the remote use it)
-        self.inner = InnerLoop(cfg, self.nominal, tuple(cfg.plant.initial_theta_rad), 1.0 / cfg.can.feedback_rate_hz)
+        self.inner = InnerLoop(cfg, self.nominal, cfg.plant.initial_theta_rad, 1.0 / cfg.can.feedback_rate_hz)
         seed = cfg.link.seed
         self.uplink = LinkEmulator(cfg.link.uplink, f"{seed}/up")
         self.downlink = LinkEmulator(cfg.link.downlink, f"{seed}/down")
@@ -130,8 +131,6 @@ def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, A
     collection: where the compiled kernel covers it, straight from the kernel's records
     (`sea_hil.offline.kernel_summary`, no messages built), else `session_summary` of the engine's messages; the
     same dict either way (tests/test_kernel_summary.py)."""
-    from sea_hil.offline.kernel_summary import kernel_summary
-    from sea_hil.report.session_summary import session_summary
     with gc_paused():
         opts = EngineOptions.from_config(cfg)
         env, x, p, lsb, dist_tab = _prepare(cfg, mode, cycles, True)

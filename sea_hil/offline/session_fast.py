@@ -11,14 +11,25 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from sea_hil.config import LinkDirectionConfig, SeaHilConfig
+from sea_hil.config.comms import LinkDirectionConfig
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.edge_events import tracking_fields
 from sea_hil.controller.trajectory import GaitTrajectory
 from sea_hil.controller.trigger import NO_EVENT, EventTrigger
 from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled
-from sea_hil.offline.session_kernel import (BAD_SETPOINT, DIVERGED, Controller, Drive, Edge, Links, Records,
-                                            make_session_kernel, new_records)
-from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult, tracking_fields
+from sea_hil.offline.session_kernel import (
+    BAD_SETPOINT,
+    DIVERGED,
+    Controller,
+    Drive,
+    Edge,
+    Links,
+    Records,
+    make_session_kernel,
+    new_records,
+)
+from sea_hil.offline.session_records import SETPOINT_BYTES, STATE_BYTES, EngineResult
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason
 from sea_hil.recorder.reader import RecordedMessage, SessionData
@@ -117,9 +128,9 @@ def _messages(out: Any, rec: Records, n_recv: int, sp_i: list, sp_f: list, n_tr:
     for i, now in rec.recv[:n_recv].tolist():
         f = pub_fb[i]
         out.state(i + 1, pub_ns[i], ((f[0], f[1]), (f[2], f[3]), (f[4], f[5]), (f[6], f[7])), now)
-    for j, ((now, state_seq, code), f) in enumerate(zip(sp_i, sp_f)):
+    for j, ((now, state_seq, code), f) in enumerate(zip(sp_i, sp_f, strict=True)):
         out.setpoint_fields(j + 1, now, state_seq, (f[0], f[1]), (f[2], f[3]), REASON_NAMES[code], now)
     recv_at = {i + 1: now for i, now in rec.recv[:n_recv].tolist()}
-    for (t_ns, seq, code, sp_seq), f in zip(rec.tr_i[:n_tr].tolist(), rec.tr_f[:n_tr].tolist()):
+    for (t_ns, seq, code, sp_seq), f in zip(rec.tr_i[:n_tr].tolist(), rec.tr_f[:n_tr].tolist(), strict=True):
         name = None if code == NO_EVENT else REASON_NAMES[code]
         out.tracking(tracking_fields(t_ns, seq, (f[0], f[1]), (f[2], f[3]), name, sp_seq), recv_at[seq])

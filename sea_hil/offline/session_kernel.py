@@ -16,7 +16,8 @@ count against the Python loop.
 from __future__ import annotations
 
 import math
-from typing import Any, Callable, NamedTuple
+from collections.abc import Callable
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -143,7 +144,8 @@ def make_session_kernel(fingerprint: str = "") -> Callable[..., tuple]:
         up_last = down_last = -1
         t0_ns, started = 0, False
         c_hip = c_knee = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
-        trig_started, eps_i, t_i_ns = False, (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0), 0
+        eps_i: tuple[float, ...] = (0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0)
+        trig_started, t_i_ns = False, 0
         status, k = SAMPLES_DONE, 0
         while k < dr.n_max:
             now = k * dr.period_ns

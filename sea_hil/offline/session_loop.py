@@ -34,7 +34,7 @@ class EngineOptions:
             raise ValueError(f"bad engine options {self}")
 
     @classmethod
-    def from_config(cls, cfg: Any) -> "EngineOptions":
+    def from_config(cls, cfg: Any) -> EngineOptions:
         """The options a config selects (`trigger.placement`, `trigger.edge_check`, `trigger.edge_model`,
         `controller.compensation`)."""
         t = cfg.trigger

@@ -5,13 +5,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.controller.edge_events import tracking_fields, tracking_record
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 
 STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
-__all__ = ["SETPOINT_BYTES", "STATE_BYTES", "EngineResult", "SessionRecords", "tracking_fields", "tracking_record"]
+__all__ = ["SETPOINT_BYTES", "STATE_BYTES", "EngineResult", "SessionRecords"]
 
 
 @dataclass

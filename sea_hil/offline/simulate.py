@@ -7,12 +7,18 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.offline.closed_loop import SimResult, simulate
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, TriggerReason
 from sea_hil.report.figures import inter_event_figure, tracking_figure
-from sea_hil.report.summary import (TIMING_KEY, compare_table, inter_event_block, tracking_block,
-                                    transmissions_block, write_summary)
+from sea_hil.report.summary import (
+    TIMING_KEY,
+    compare_table,
+    inter_event_block,
+    tracking_block,
+    transmissions_block,
+    write_summary,
+)
 
 
 def offline_transmissions(res: SimResult) -> dict[str, int]:
@@ -24,7 +30,7 @@ def offline_transmissions(res: SimResult) -> dict[str, int]:
 
 
 def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:
-    reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True))}
+    reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True), strict=True)}
     return {
         "controller": res.mode,
         "duration_s": res.duration_s,

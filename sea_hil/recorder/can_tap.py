@@ -19,14 +19,22 @@ from typing import Any, NamedTuple
 
 import can
 
+from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_assembly import seq_gap
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import (CMD_BITS, DriverState, ErrorFlags, Feedback, FeedbackAngle,
-                                         FeedbackJoint1, FeedbackJoint2, Heartbeat, VoltageCmd)
-from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_frames import (
+    CMD_BITS,
+    DriverState,
+    ErrorFlags,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Heartbeat,
+    VoltageCmd,
+)
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, log_message
-
 
 _FD_FIELDS = (("theta", "theta_rad", "rad"), ("omega", "omega_rad_s", "rad_s"), ("delta", "delta_m", "m"),
               ("nut_vel", "nut_vel_m_s", "m_s"))

@@ -24,15 +24,15 @@ from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.canbus import RX_BUFFER_BYTES, enlarge_rx_buffer
 from sea_hil.protocol.keys import everything
 from sea_hil.protocol.payloads import PayloadCounters
+from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.recorder.can_tap import CanTap, RawFrame
-from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
+from sea_hil.recorder.zenoh_tap import ZenohTap
 from sea_hil.runtime.node import Node
 from sea_hil.stats.schema import StatsError
 
-__all__ = ["RecorderNode", "zenoh_record"]
+__all__ = ["RecorderNode"]
 
 log = logging.getLogger("sea_hil.record")
 SHORT_PAUSE_S = 0.01         # a tap pause up to this long is a plain sleep (`RecorderNode._pause`)

@@ -20,16 +20,19 @@ import subprocess
 import sys
 import threading
 from collections.abc import Mapping
-from typing import TYPE_CHECKING, Any, BinaryIO
+from typing import IO, TYPE_CHECKING, Any, BinaryIO
 
-from sea_hil.config import LiveConfig, RecordConfig, SeaHilConfig
+from sea_hil.config.comms import RecordConfig
+from sea_hil.config.live import LiveConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.live.feed import start_live_feed
+from sea_hil.live.link import live_child_argv
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
 from sea_hil.recorder.meta import write_session_header
 from sea_hil.recorder.schemas import validate_payload
-from sea_hil.live.link import live_child_argv
+from sea_hil.recorder.writer import SessionRecorder
 
 if TYPE_CHECKING:
     from sea_hil.live.feed import LiveFeed
@@ -139,7 +142,7 @@ class RecorderProcess:
 
     # -- transport -----------------------------------------------------------------------------------------------
     @property
-    def _stdin(self) -> BinaryIO:
+    def _stdin(self) -> IO[bytes]:
         assert self._proc.stdin is not None
         return self._proc.stdin
 
@@ -236,7 +239,6 @@ def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: 
     tap = CanTap(time_base=time_base)
     live = None
     if live_json is not None:
-        from sea_hil.live.feed import start_live_feed   # the SDK is imported only when asked for
         live = start_live_feed(live_json)
     try:
         while (head := _read_exact(stream, _LEN.size)) is not None:

@@ -4,9 +4,11 @@ from __future__ import annotations
 import json
 import os
 import struct
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, BinaryIO, Callable, Iterator, NamedTuple
+from typing import Any, BinaryIO, NamedTuple
 
+import zstandard
 from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
@@ -17,13 +19,7 @@ from sea_hil.errors import RecordingError
 
 def _codec_errors() -> tuple[type[BaseException], ...]:
     """What the chunk decompressors raise on a cut or corrupt chunk (zstd: ZstdError; lz4: RuntimeError)."""
-    errors: list[type[BaseException]] = [RuntimeError]
-    try:
-        import zstandard
-        errors.append(zstandard.ZstdError)
-    except ImportError:
-        pass
-    return tuple(errors)
+    return (RuntimeError, zstandard.ZstdError)   # zstandard: a dependency of mcap
 
 
 # what the MCAP parser raises past the last good record of a torn or truncated file: end of data, a record length or

@@ -1,7 +1,9 @@
 """MCAP session recording: a thread-safe JSON/jsonschema writer with a bounded queue and a signal-safe finaliser.
 
-Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader` (both
-re-exported here). See docs/recording.md for channels, metadata names, drop policy and recovery.
+Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader`. `RecordSink` is
+what a session needs of a recorder: this `SessionRecorder`, or `sea_hil.recorder.process.RecorderProcess` (the
+same calls, written by a child process). See docs/recording.md for channels, metadata names, drop policy and
+recovery.
 """
 from __future__ import annotations
 
@@ -14,20 +16,21 @@ import signal
 import threading
 import time
 from collections.abc import Callable, Iterator, Mapping
-from typing import Any
+from typing import IO, Any, Protocol, cast
 
 from mcap.writer import CompressionType, Writer
 
-from sea_hil.config import RecordConfig, SeaHilConfig
+from sea_hil.config.comms import RecordConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.meta import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, encode_payload,
-                                     session_metadata, write_session_header)
-from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
+from sea_hil.recorder.meta import (
+    META_FINAL,
+    encode_payload,
+    write_session_header,
+)
 from sea_hil.recorder.schemas import TOPICS, schema_bytes, schema_name, validate_payload
 
-__all__ = ["CONFIG_ATTACHMENT", "META_CONFIG", "META_FINAL", "META_SESSION", "RecordedMessage", "SessionData",
-           "SessionRecorder", "encode_payload", "install_finalizer", "read_session", "session_metadata",
-           "write_session_header"]
+__all__ = ["SessionRecorder", "install_finalizer"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _STOP = object()
 
@@ -58,6 +61,26 @@ class _Sink:
 
 
 
+class RecordSink(Protocol):
+    """Where a session's messages go (`SessionRecorder`, `RecorderProcess`): validated at the call, written in
+    order; `submit` may drop (counted) when the writer falls behind, `record` does not."""
+
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> None: ...
+
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> bool: ...
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None: ...
+
+    def write_session_header(self, config: SeaHilConfig | None = None, *, seed: int | None = None,
+                             argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None: ...
+
+    def counters(self) -> dict[str, int]: ...
+
+    def close(self, final_stats: Mapping[str, Any] | None = None) -> None: ...
+
+
 class SessionRecorder:
     """Writes one MCAP session. `record` writes synchronously; `submit` enqueues (bounded, drops when full) for
     the writer thread. Both are thread-safe. `writer_gate` (tests only) holds the writer thread before each item."""
@@ -72,7 +95,8 @@ class SessionRecorder:
         except OSError as err:
             raise RecordingError(f"cannot create recording {path}: {err}") from err
         self.path = os.fspath(path)
-        self._writer = Writer(self._sink, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
+        self._writer = Writer(cast(IO[bytes], self._sink),   # a file to the writer (write, tell, flush, close)
+                              chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
         self._writer.start(profile="", library="sea-hil")
         self._channels: dict[str, int] = {}
         schema_ids: dict[tuple[str, bytes], int] = {}   # one schema record per distinct schema

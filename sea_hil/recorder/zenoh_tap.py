@@ -11,8 +11,14 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from sea_hil.protocol.payloads import (AckPayload, EventStatePayload, PayloadCounters, SetpointPayload, StatePayload,
-                                      VoltagePayload)
+from sea_hil.protocol.payloads import (
+    AckPayload,
+    EventStatePayload,
+    PayloadCounters,
+    SetpointPayload,
+    StatePayload,
+    VoltagePayload,
+)
 from sea_hil.recorder.can_tap import Record
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message

@@ -28,9 +28,9 @@ def recorded_limbs(data: SessionData) -> list[tuple[str, int, str]]:
         return out
     states = data.messages.get("/zenoh/state", [])
     feedback = data.messages.get("/can/feedback", [])
-    name = str(states[0].payload.get("key", "?/limb1/state")).split("/")[-2] if states else "limb1"
-    node_id = int(feedback[0].payload.get("node_id", 1)) if feedback else 1
-    return [(name, node_id, data.metadata.get("sea-hil.session", {}).get("can", ""))]
+    limb = str(states[0].payload.get("key", "?/limb1/state")).split("/")[-2] if states else "limb1"
+    node = int(feedback[0].payload.get("node_id", 1)) if feedback else 1
+    return [(limb, node, data.metadata.get("sea-hil.session", {}).get("can", ""))]
 
 
 def _belongs(payload: dict[str, Any], name: str, node_id: int) -> bool:

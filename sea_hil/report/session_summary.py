@@ -15,11 +15,12 @@ Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb'
 every limb's transmissions, tracking and latency, `limbs_total` the sums and the worst tracking."""
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
-from sea_hil.recorder.writer import SessionData
+from sea_hil.recorder.reader import SessionData
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 
@@ -111,7 +112,7 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     else:
         per = [one_limb_summary(limb_view(data, name, node_id), controller) for name, node_id, _ in limbs]
     summary = per[0]
-    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per)]
+    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per, strict=True)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
     driver = driver_block(data)
     if driver is not None:

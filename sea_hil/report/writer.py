@@ -8,13 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.recorder.writer import SessionData, read_session
-from sea_hil.stats.can_bits import nominal_bits
+from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.report.completeness import completeness_block, completeness_lines
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
 from sea_hil.report.session_summary import session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary
+from sea_hil.stats.can_bits import nominal_bits
 
 
 def _bins(msgs: list, value: Any, t0_ns: int, width_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -58,7 +58,7 @@ def _limb_figures(data: SessionData, out: Path) -> list[Path]:
                              f"{title}: closed-loop latency")
         files += names
     if len(limbs) > 1:   # the 1-limb names: the first limb's figures
-        for stem, src in zip(FIGURES, files):
+        for stem, src in zip(FIGURES, files, strict=False):   # the first limb's figures
             shutil.copyfile(src, out / f"{stem}.png")
             files.append(out / f"{stem}.png")
     return files
@@ -90,7 +90,8 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
     tb = np.zeros(0)
     for bus in dict.fromkeys(bus_of.values()):   # every bus (frames of unknown node ids: the first bus)
         first = bus == next(iter(bus_of.values()))
-        msgs = [m for m in raw if bus_of.get(m.payload.get("node_id"), bus if first else None) == bus]
+        msgs = [m for m in raw
+                if (bus_of[n] if (n := m.payload.get("node_id")) in bus_of else bus if first else None) == bus]
         t_i, bits = _bins(msgs, lambda p: nominal_bits(int(p["dlc"]), fd=bool(p.get("is_fd")), bitrate_bps=bitrate,
                                                        data_bitrate_bps=data_rate), t0)
         tb = t_i if len(t_i) > len(tb) else tb

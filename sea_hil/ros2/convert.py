@@ -27,7 +27,8 @@ from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import MalformedFrame, SeaHilError
 from sea_hil.mechanics import LimbParams, limb_params, sea_geometry
 from sea_hil.protocol.can_assembly import unwrap_us
@@ -86,7 +87,6 @@ def _s(v: Any) -> str:
 
 def session_config(data: SessionData) -> SeaHilConfig | None:
     """The recording's effective config (its `config.toml` attachment), or None when it has none or it is unusable."""
-    from sea_hil.config.loader import load_config
     raw = data.attachments.get(CONFIG_ATTACHMENT)
     if raw is None:
         return None
@@ -258,7 +258,7 @@ class Converter:
         events = self.data.messages.get("/log/events", [])
         sources = [m for m in self.data.messages.get("/tracking", []) if m.payload.get("event") is True]
         paired = len(sources) == len(events) and all(
-            (a.log_time_ns, a.sequence) == (b.log_time_ns, b.sequence) for a, b in zip(sources, events))
+            (a.log_time_ns, a.sequence) == (b.log_time_ns, b.sequence) for a, b in zip(sources, events, strict=True))
         ev = [(m, sources[i] if paired else None) for i, m in enumerate(events)]
         faults = [(m, None) for m in self.data.messages.get("/log/faults", [])]
         for m, src in heapq.merge(ev, faults, key=lambda x: x[0].log_time_ns):

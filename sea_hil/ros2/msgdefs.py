@@ -60,7 +60,7 @@ def full_name(type_name: str) -> str:
     return f"{pkg}/msg/{name}"
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def definition(type_name: str) -> str:
     """The `.msg` text of one type (standard, or shipped in `sea_hil_msgs`)."""
     key = short_name(type_name)
@@ -95,7 +95,7 @@ def dependencies(type_name: str) -> list[str]:
     return out
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def full_text(type_name: str) -> str:
     """The concatenated `ros2msg` schema text of `type_name`: its definition, then every dependency once."""
     seen: list[str] = []

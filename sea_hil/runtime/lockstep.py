@@ -25,14 +25,15 @@ import zenoh
 
 from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.link import DelayQueue
-from sea_hil.protocol.payloads import AckPayload, SeqVerdict, encode
+from sea_hil.protocol.payloads import AckPayload, encode
+from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zsession import publisher
 from sea_hil.queues import timed_get
-from sea_hil.runtime.clock import Clock, control_payload
+from sea_hil.runtime.clock import Clock, RealTimeClock, control_payload
 
 
 class LockstepClock(Clock):
-    name = "lockstep"
+    name: str = "lockstep"
 
     def __init__(self, plant_resend_s: float = 0.05, edge_resend_s: float = 0.1) -> None:
         self.plant_resend_s, self.edge_resend_s = plant_resend_s, edge_resend_s
@@ -45,6 +46,11 @@ class LockstepClock(Clock):
 
     def controller(self, node: Any) -> LockstepControllerSync:
         return LockstepControllerSync(node)
+
+
+def clock_for(lockstep: bool) -> Clock:
+    """The clock of a session: lockstep (simulated time) or real time."""
+    return LockstepClock() if lockstep else RealTimeClock()
 
 
 class LockstepPacer:

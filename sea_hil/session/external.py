@@ -24,7 +24,7 @@ from pathlib import Path
 
 import zenoh
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import SeaHilError
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload
@@ -147,7 +147,9 @@ class OutsideController:
                 raise subprocess.TimeoutExpired("external controller", timeout or 0.0)
             self._wake.wait(0.1 if deadline is None else max(0.0, min(0.1, deadline - now)))
             self._wake.clear()
-        return self.returncode
+        code = self.returncode
+        assert code is not None
+        return code
 
     def _end(self, code: int) -> None:
         if self.returncode is None:

@@ -14,27 +14,30 @@ import json
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from sea_hil.config import SeaHilConfig, config_to_toml
+from sea_hil.config.loader import config_to_toml
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
 from sea_hil.live.link import await_live
 from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
-from sea_hil.recorder.writer import read_session
-from sea_hil.report.console import ProgressSample
+from sea_hil.recorder.reader import read_session
 from sea_hil.report.completeness import completeness_block
+from sea_hil.report.console import ProgressSample
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
+from sea_hil.runtime.processes import end_process, spawn_child, stop_on_signals
+from sea_hil.runtime.realtime import child_priority
+from sea_hil.session import limb_nodes
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
-from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
-from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_cpus, child_priority
 from sea_hil.session.secure import secure_profile
 
 
@@ -111,15 +114,14 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            procs = []   # [timing] pinning in real time only (lockstep runs as fast as it can)
-            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing)}
+            procs = []
             base = controller_config(_without_live(child_cfg), listen[0], None if opts.lockstep else
                                      child_priority(cfg.timing))
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
-                # the child ends when this process dies (sea_hil/session/processes.py)
-                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL, **rt_child))
+                # the child ends when this process dies (sea_hil/runtime/processes.py)
+                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
@@ -155,7 +157,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     # every bus: plant, edge(s), recorder tap
     nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller)
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
-    time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
+    time_base: TimeBase = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
                           live=(cfg.live, cfg.can.bitrate_bps) if cfg.live.enabled else None)
     b.callback(rec.close)   # idempotent: closes the file if building the nodes failed

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
 from netns_helpers import CLIENT_ADDR, SERVER_ADDR, run
+from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
 
 DELAY_MS = 25
 DURATION_S = 1.0

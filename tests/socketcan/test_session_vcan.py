@@ -25,7 +25,8 @@ VIRTUAL_RUN_TIMEOUT_S = 400.0
 
 def voltage_cmd_id(node_id: int) -> int:
     """CAN id of node ``node_id``'s VOLTAGE_CMD, from the DBC."""
-    from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
+    from sea_hil.protocol.can_codec import SeaCodec
+    from sea_hil.protocol.can_frames import VoltageCmd
     return int(SeaCodec().encode(VoltageCmd(node_id, (0.0, 0.0), 0)).arbitration_id)
 
 
