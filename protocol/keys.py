@@ -14,8 +14,18 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.payloads import MsgType
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
+KEY_PAYLOADS: dict[str, frozenset[MsgType]] = {
+    "state": frozenset({MsgType.STATE, MsgType.EVENT_STATE}),
+    "setpoint": frozenset({MsgType.SETPOINT}),
+    "voltage": frozenset({MsgType.VOLTAGE}),
+    "control": frozenset({MsgType.ACK}),
+}
+"""The binary payload types each key carries (the JSON keys `stats` and `event` none): every receiver decodes with
+`PayloadCounters.try_decode(data, KEY_PAYLOADS[channel])`, so a well-formed payload on the wrong key is rejected
+(`payload_rejected_key`) and never reaches sequence tracking (issue 29: a VOLTAGE on the setpoint key was applied)."""
 _FORBIDDEN = frozenset("*$#?")
 
 

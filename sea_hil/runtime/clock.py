@@ -18,6 +18,7 @@ from typing import Any
 import zenoh
 
 from sea_hil.config.timing import TimingConfig
+from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.zlatest import LatestSubscriber
 from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
@@ -130,9 +131,10 @@ class RealTimeEdgeSync:
     def __init__(self, edge: Any) -> None:
         self.edge = edge
 
-    def downlink_callback(self) -> Callable[[zenoh.Sample], None]:
+    def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]:
+        """The subscriber callback of the edge's downlink key `channel` ("setpoint" | "voltage")."""
         on_arrival = self.edge.on_arrival
-        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns())
+        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns(), channel)
 
     def control_callback(self) -> Callable[[zenoh.Sample], None]:
         def on_control(s: zenoh.Sample) -> None:
@@ -176,14 +178,9 @@ class RealTimeEdgeSync:
 
 
 def control_payload(edge: Any, data: bytes) -> AckPayload | None:
-    """Decode a control-key payload; a non-ACK is counted (`unexpected_payloads`) and dropped."""
-    p = edge.payloads.try_decode(data)
-    if p is None:
-        return None
-    if not isinstance(p, AckPayload):
-        edge.counters.unexpected_payloads += 1
-        return None
-    return p
+    """Decode a control-key payload; a non-ACK is counted (`payload_rejected_key`) and dropped."""
+    p = edge.payloads.try_decode(data, KEY_PAYLOADS["control"])   # another type: rejected as KEY, counted
+    return p if isinstance(p, AckPayload) else None
 
 
 class RealTimeControllerSync:
