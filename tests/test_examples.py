@@ -30,6 +30,7 @@ from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Hea
 from sea_hil.protocol.payloads import HEADER_SIZE, AckPayload, StatePayload, decode, encode
 from sea_hil.protocol.zsession import free_tcp_port, make_config
 from sea_hil.report.session_summary import session_summary
+from sea_hil.report.console import ProgressSample
 from sea_hil.session.external import ExternalWatch
 from sea_hil.session.processes import end_process
 from sea_hil.session.run import RunOptions, run_session
@@ -148,6 +149,20 @@ def test_no_controller_joining_is_a_clear_error(tmp_path) -> None:
     with pytest.raises(SeaHilError, match="no external controller answered"):
         run_session(cfg, RunOptions(controller="external", out=tmp_path / "alone", lockstep=True, progress=False,
                                     join_timeout_s=1.0), log=lambda s: None)
+
+
+def test_progress_says_waiting_for_controller_until_one_joins(tmp_path) -> None:
+    """Issue 29: before any external controller had joined, the progress showed "lead-in", "cycle 1/1" and the
+    edge's sample clock ("sim 18.30/10.50 s"); now every line says it waits, until the join timeout."""
+    cfg = load_config(overrides=TEST_CFG)
+    lines: list[object] = []
+    with pytest.raises(SeaHilError, match="no external controller answered"):
+        run_session(cfg, RunOptions(controller="external", out=tmp_path / "alone", lockstep=True, progress=True,
+                                    join_timeout_s=2.5), log=lines.append)
+    samples = [x for x in lines if isinstance(x, ProgressSample)]
+    assert samples and all(s.waiting and s.phase == "waiting for controller" for s in samples)
+    assert all("waiting for controller" in str(s) and "lead-in" not in str(s) and "sim" not in str(s)
+               for s in samples)
 
 
 def test_external_example_answers_a_resent_state_again_and_ignores_stale_and_malformed_ones() -> None:

@@ -43,6 +43,7 @@ class ProgressSample(NamedTuple):
     setpoints: int
     states: int
     latency_p50_us: float
+    waiting: bool = False       # `--controller external`: no controller has joined yet (nothing has started)
 
     @property
     def total_s(self) -> float:
@@ -50,12 +51,16 @@ class ProgressSample(NamedTuple):
 
     @property
     def phase(self) -> str:
+        if self.waiting:
+            return "waiting for controller"
         if self.sim_s < self.lead_in_s:
             return "lead-in"
         cycle = min(int((self.sim_s - self.lead_in_s) // self.period_s) + 1, self.cycles)
         return f"cycle {cycle}/{self.cycles}"
 
     def __str__(self) -> str:
+        if self.waiting:
+            return f"[{self.wall_s:6.1f} s] waiting for controller  states {self.states}"
         return (f"[{self.wall_s:6.1f} s] sim {self.sim_s:6.2f}/{self.total_s:.2f} s  {self.phase}  setpoints "
                 f"{self.setpoints}  states {self.states}  latency p50 {self.latency_p50_us:.0f} us")
 
