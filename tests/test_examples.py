@@ -221,3 +221,26 @@ def test_can_example_clears_a_fault_and_counts_bad_frames() -> None:
     finally:
         ctrl_bus.shutdown()
         driver_bus.shutdown()
+
+
+@pytest.mark.slow
+def test_api_session_runs_an_external_controller(builtin, tmp_path) -> None:
+    """Issue 29: `Session(controller="external")` was refused though docs/api.md describes Session as the session
+    `sea-hil run` runs; now it waits for the shipped example at `Session.endpoint`, which does its cycles."""
+    import sea_hil
+    cfg = load_config(overrides=TEST_CFG)
+    session = sea_hil.Session(cfg, controller="external", lockstep=True, out=tmp_path / "api", join_timeout_s=60)
+    with session:
+        session.start()
+        assert session.wait_until_running(60) and session.endpoint is not None
+        ctrl = subprocess.Popen([sys.executable, "-c", BLOCKED, str(EXAMPLE / "controller.py"), "--connect",
+                                 session.endpoint, "--config", str(tmp_path / "api" / "config.toml"), "--lockstep",
+                                 "--timeout", "120"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            _, ctrl_err = ctrl.communicate(timeout=150)
+            summary = session.wait(60)
+        finally:
+            end_process(ctrl)
+    assert ctrl.returncode == 0, ctrl_err[-3000:]
+    assert summary["tracking"] == builtin["tracking"]

@@ -87,6 +87,7 @@ class OutsideController:
     def __init__(self, cfg: SeaHilConfig, cycles: int, session: zenoh.Session, *, endpoint: str, config_path: Path,
                  lockstep: bool, join_timeout_s: float, log: Callable[[str], None] = print) -> None:
         self.returncode: int | None = None
+        self.endpoint = endpoint          # where the outside controller connects (`sea_hil.Session.endpoint`)
         self.join_timeout_s = join_timeout_s
         self.watch = ExternalWatch(cfg.trajectory.lead_in_s, cfg.trajectory.period_s * cycles)
         self.payloads = PayloadCounters()
