@@ -90,13 +90,6 @@ class EmulatedDriver:
     def running(self) -> bool:
         return self._started and not self._closed
 
-    @property
-    def endpoint(self) -> str | None:
-        """`controller="external"`: the Zenoh endpoint your controller connects to, once the nodes run (else None);
-        the session's config for it is `out/controller.toml` (docs/external-controller.md)."""
-        proc = self._parts[2] if self._parts is not None else None
-        return getattr(proc, "endpoint", None)
-
     def snapshot(self, node_id: int | None = None) -> DriveSnapshot:
         """The latest state of drive `node_id` (default: the first served)."""
         return _snapshot(self._plant.drivers, node_id)
@@ -202,7 +195,7 @@ class Session:
     @property
     def endpoint(self) -> str | None:
         """`controller="external"`: the Zenoh endpoint your controller connects to, once the nodes run (else None);
-        the session's config for it is `out/controller.toml` (docs/external-controller.md)."""
+        the session's config for it is `out/config.toml` (docs/external-controller.md)."""
         proc = self._parts[2] if self._parts is not None else None
         return getattr(proc, "endpoint", None)
 
