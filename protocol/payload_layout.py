@@ -6,8 +6,9 @@ stale).
     python -m sea_hil.protocol.payload_layout --write docs/zenoh-protocol.md   # regenerate the tables in place
     python -m sea_hil.protocol.payload_layout --check docs/zenoh-protocol.md   # exit 1 if they are out of date
 
-The tables sit between the `BEGIN`/`END` marker comments (payload-layout, key-table). tests/test_payload_layout.py checks the file against
-`sea_hil.protocol.payloads` and the docs against the file.
+The tables sit between the `BEGIN`/`END` marker comments (payload-layout, key-table). tests/test_payload_layout.py
+checks the file against `sea_hil.protocol.payloads` and the docs against the file (tests/test_key_table.py: the
+key table).
 """
 from __future__ import annotations
 
@@ -91,7 +92,8 @@ def render_key_table() -> str:
     from sea_hil.protocol.payloads import PAYLOAD_SIZE
     from sea_hil.protocol.wire_size import TCP_BATCH_PREFIX, ZENOH_MSG_OVERHEAD, estimate_wire_bytes
     lines = [KEY_BEGIN, "", "| channel | direction | rate (defaults) | payload | payload bytes | TCP stream bytes | "
-             "IPv4 bytes | Ethernet bytes | congestion control (real time / lockstep) |", "|---|---|---|---|---|---|---|---|---|"]
+             "IPv4 bytes | Ethernet bytes | congestion control (real time / lockstep) |",
+             "|---|---|---|---|---|---|---|---|---|"]
     for ch in CHANNELS:
         types = sorted(KEY_PAYLOADS.get(ch, ()), key=int)
         payload = " / ".join(t.name for t in types) or "JSON object"

@@ -18,8 +18,9 @@ from sea_hil.config import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
 from sea_hil.protocol.keys import KEY_PAYLOADS
-from sea_hil.protocol.payloads import (FOREIGN_VERSION_LOG, VERSION, AckPayload, EventStatePayload, MsgType, PayloadCounters,
-                                       SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode)
+from sea_hil.protocol.payloads import (FOREIGN_VERSION_LOG, VERSION, AckPayload, EventStatePayload, MsgType,
+                                       PayloadCounters, SetpointPayload, StatePayload, TriggerReason, VoltagePayload,
+                                       encode)
 from sea_hil.recorder.zenoh_tap import ZenohTap
 from sea_hil.report.console import end_of_run_rows
 from sea_hil.report.session_summary import REJECTION_CLASSES, TIMING_REJECTION_CLASSES, rejections_blocks

@@ -1,4 +1,5 @@
-"""Issue 12's size acceptance: no source file over 300 lines and no class over 200 (the project's "small files"
+"""Issue 12's size acceptance, loosened since (the brief: one concept per module whatever its length): no source file
+over 400 lines and no class over 200 (the project's "small files"
 standard). The source folders are the installed packages plus the benchmark rig, the scripts and the tests."""
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCE_DIRS = ("sea_hil", "protocol", "controller", "plant_emulator", "bench", "examples", "scripts", "tests")
-MAX_FILE_LINES = 300
+MAX_FILE_LINES = 400   # raised from 300 (issue 29: protocol/payloads.py; the brief withdrew the 300-line cap)
 MAX_CLASS_LINES = 200
 SKIP_PARTS = frozenset({"node_modules", "__pycache__", ".venv"})
 
@@ -53,13 +54,13 @@ def test_source_folders_are_found() -> None:
             "tests/test_layout.py"} <= names
 
 
-def test_no_file_over_300_lines_and_no_class_over_200() -> None:
+def test_no_file_over_the_line_cap_and_no_class_over_200() -> None:
     breaches = [b for path in python_sources(REPO) for b in oversized(path)]
     assert not breaches, "\n".join(breaches)
 
 
 @pytest.mark.parametrize(("body", "expected"), [
-    ("x = 1\n" * (MAX_FILE_LINES + 1), "lines (> 300)"),
+    ("x = 1\n" * (MAX_FILE_LINES + 1), f"lines (> {MAX_FILE_LINES})"),
     ("class Big:\n" + "    x = 1\n" * MAX_CLASS_LINES, "class Big 201 lines"),
 ])
 def test_the_check_catches_a_breach(tmp_path: Path, body: str, expected: str) -> None:

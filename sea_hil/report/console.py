@@ -139,7 +139,8 @@ def rejection_label(cls: str) -> str:
         return "payloads on the wrong key"
     if cls.startswith("payload_rejected_"):
         return f"malformed payloads ({cls.removeprefix('payload_rejected_')})"
-    return {"epoch_foreign": "foreign-epoch payloads", "epoch_old": "old-epoch payloads"}.get(cls, cls.replace("_", " "))
+    named = {"epoch_foreign": "foreign-epoch payloads", "epoch_old": "old-epoch payloads"}
+    return named.get(cls, cls.replace("_", " "))
 
 
 def rejection_warnings(summary: Mapping[str, Any]) -> list[str]:
