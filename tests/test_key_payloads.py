@@ -151,3 +151,13 @@ def test_every_rejection_class_the_edge_counts_reaches_summary_and_table(builder
                   "malformed payloads (type): 1", "payloads on the wrong key: 1", "foreign-epoch payloads: 1",
                   "setpoints out of envelope: 1", "unexpected payloads: 1", "stale setpoints: 1"):
         assert words in rows["warnings"], (words, rows["warnings"])
+
+
+def test_the_recorder_does_not_file_a_wrong_type_under_another_topic() -> None:
+    """A VOLTAGE on the setpoint key would have been recorded as /zenoh/voltage (and counted as a downlink message by
+    the summary); it is counted as rejected instead, and the key's own type is recorded."""
+    tap = ZenohTap()
+    assert tap.records("sea/limb1/setpoint", one_of_each(1)[MsgType.VOLTAGE], 10**18) == []
+    assert tap.payloads.rejected["key"] == 1
+    assert [r.topic for r in tap.records("sea/limb1/setpoint", one_of_each(1)[MsgType.SETPOINT], 10**18)] \
+        == ["/zenoh/setpoint"]
