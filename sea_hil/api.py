@@ -125,7 +125,7 @@ class Session:
     summary.json, figures) go to `out` (default: a temporary directory removed by `close()`). `close()` before the
     end stops the session early (its controller process is ended; `summary` stays None). `controller="external"`:
     no controller is started, the session waits up to `join_timeout_s` for your own at `endpoint`, exactly as
-    `sea-hil run --controller external` (docs/external-controller.md)."""
+    `sea-hil run --controller external` (docs/external-controller.md; like it, with the trigger at the controller)."""
 
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
@@ -136,6 +136,11 @@ class Session:
         if cycles < 1:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
         self.config = _config(config)
+        if controller == "external" and self.config.trigger.placement == "edge":
+            # as `sea-hil run --controller external`: your controller speaks the documented STATE protocol (every
+            # state up, docs/external-controller.md), so the trigger runs at the controller
+            trigger = self.config.trigger.model_copy(update={"placement": "controller"})
+            self.config = self.config.model_copy(update={"trigger": trigger})
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
         self.out = Path(out) if out is not None else Path(self._tmp.name)   # type: ignore[union-attr]
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,

@@ -228,11 +228,12 @@ def test_api_session_runs_an_external_controller(builtin, tmp_path) -> None:
     """Issue 29: `Session(controller="external")` was refused though docs/api.md describes Session as the session
     `sea-hil run` runs; now it waits for the shipped example at `Session.endpoint`, which does its cycles."""
     import sea_hil
-    cfg = load_config(overrides=TEST_CFG)
+    cfg = load_config(overrides={**TEST_CFG, "trigger": {**TEST_CFG["trigger"], "placement": "edge"}})
     session = sea_hil.Session(cfg, controller="external", lockstep=True, out=tmp_path / "api", join_timeout_s=60)
     with session:
         session.start()
         assert session.wait_until_running(60) and session.endpoint is not None
+        assert session.config.trigger.placement == "controller"    # as `sea-hil run --controller external`
         ctrl = subprocess.Popen([sys.executable, "-c", BLOCKED, str(EXAMPLE / "controller.py"), "--connect",
                                  session.endpoint, "--config", str(tmp_path / "api" / "config.toml"), "--lockstep",
                                  "--timeout", "120"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
