@@ -87,7 +87,8 @@ class EdgeNode(Node):
                                    congestion_control=zenoh.CongestionControl.BLOCK) if self.events else None
         self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
                                      int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), self.sync,
-                                     self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)))
+                                     self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)),
+                                     inner=inner)
         self.command_path = CommandPath(bus, self.codec, node_id, self.inner, inner, cfg.can.send_retries,
                                         self.counters)
         self.stats_pub = publisher(session, self.keys.stats, express=False)
@@ -97,9 +98,8 @@ class EdgeNode(Node):
         self.last_fb: Feedback | None = None
         self.last_rx_ns = 0            # monotonic receive time of last_fb (0: unknown)
         self._stopped = False          # commanded once, then stopped (stale setpoints): resume bumplessly
-        downlink = self.sync.downlink_callback()
-        self._subs = [session.declare_subscriber(self.keys.setpoint, downlink),
-                      session.declare_subscriber(self.keys.voltage, downlink),
+        self._subs = [session.declare_subscriber(self.keys.setpoint, self.sync.downlink_callback("setpoint")),
+                      session.declare_subscriber(self.keys.voltage, self.sync.downlink_callback("voltage")),
                       session.declare_subscriber(self.keys.control, self.sync.control_callback())]
 
     # ---- the node hooks -------------------------------------------------------------------------------------------
@@ -222,20 +222,20 @@ class EdgeNode(Node):
         self._stopped = not command and (self._stopped or self.counters.commands_sent > 0)
 
     # ---- Zenoh side -----------------------------------------------------------------------------------------------
-    def on_arrival(self, data: bytes, rx_ns: int) -> None:
-        """Real time: handle a setpoint/voltage payload when it arrives (`on_downlink`) and, if the downlink emulator
-        releases it at once, apply it and send the voltage it gives with the newest feedback."""
+    def on_arrival(self, data: bytes, rx_ns: int, channel: str | None = None) -> None:
+        """Real time: handle a setpoint/voltage payload from key `channel` when it arrives (`on_downlink`) and, if the
+        downlink emulator releases it at once, apply it and send the voltage it gives with the newest feedback."""
         with self.lock:
-            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns) or self.last_fb is None:
+            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns, channel) or self.last_fb is None:
                 return
             now = self.sample_t_ns
             if self.take_downlink(now) and self._answer(self.last_fb, now, self.last_rx_ns):
                 self.counters.arrival_commands += 1
 
-    def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:
-        """Handle one setpoint/voltage payload from Zenoh (`rx_ns`: monotonic arrival time); True if it entered the
-        downlink emulator (`SetpointIntake.submit`)."""
-        return self.intake.submit(data, self.sample_t_ns, self.publisher.sent_at, rx_ns)
+    def on_downlink(self, data: bytes, rx_ns: int | None = None, channel: str | None = None) -> bool:
+        """Handle one setpoint/voltage payload from Zenoh key `channel` (None: the inner placement's; `rx_ns`:
+        monotonic arrival time); True if it entered the downlink emulator (`SetpointIntake.submit`)."""
+        return self.intake.submit(data, self.sample_t_ns, self.publisher.sent_at, rx_ns, channel)
 
     def on_ack(self, data: bytes) -> bool:
         """Handle one payload from the control key (lockstep ACKs; counted and dropped otherwise)."""

@@ -11,6 +11,7 @@ import time
 from typing import Any
 
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch
+from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload, VoltagePayload
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
@@ -22,8 +23,10 @@ SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.SETPOINT]
 
 class SetpointIntake:
     def __init__(self, downlink: LinkEmulator, counters: Any, payloads: PayloadCounters, timeout_ns: int,
-                 sync: EdgeSync, envelope: Any = None, max_answer_age_ns: int = 0) -> None:
+                 sync: EdgeSync, envelope: Any = None, max_answer_age_ns: int = 0, inner: str = "edge") -> None:
         self.downlink = downlink
+        self.inner = inner                        # "edge": setpoints only; "remote": tunnelled voltages only
+        self.channel = "setpoint" if inner == "edge" else "voltage"
         self.counters = counters
         self.payloads = payloads
         self.timeout_ns = timeout_ns
@@ -37,14 +40,23 @@ class SetpointIntake:
         self.last_rx_ns = 0                       # sample time of the newest accepted setpoint/voltage
         self.last_setpoint_ns: int | None = None  # sample time of the newest applied one
 
-    def submit(self, data: bytes, sample_t_ns: int, sent_at: dict[int, int], rx_ns: int | None) -> bool:
-        """One payload at sample time `sample_t_ns`; True if it entered the downlink emulator. Closed-loop latency
-        (`latency`) = arrival - publication of the state it answers, plus the delay the downlink emulator adds."""
-        p = self.payloads.try_decode(data)
+    def submit(self, data: bytes, sample_t_ns: int, sent_at: dict[int, int], rx_ns: int | None,
+               channel: str | None = None) -> bool:
+        """One payload from key `channel` ("setpoint" | "voltage"; None: the one of the inner loop's placement) at
+        sample time `sample_t_ns`; True if it entered the downlink emulator. Closed-loop latency (`latency`) =
+        arrival - publication of the state it answers, plus the delay the downlink emulator adds. A payload of
+        another type than its key carries (`payload_rejected_key`), or on the key of the other inner placement (a
+        voltage with the inner loop at the edge: `unexpected_payloads`), is rejected before the sequence check."""
+        channel = channel or self.channel
+        p = self.payloads.try_decode(data, KEY_PAYLOADS[channel])
         if p is None:
             return False
-        if not isinstance(p, (SetpointPayload, VoltagePayload)):
+        assert isinstance(p, (SetpointPayload, VoltagePayload))   # the only types of the two downlink keys
+        if channel != self.channel:
             self.counters.unexpected_payloads += 1
+            if self.counters.unexpected_payloads in (1, 10) or self.counters.unexpected_payloads % 1000 == 0:
+                log.warning("%s payload dropped (%d so far): the inner loop runs %s, its key is %r", channel,
+                            self.counters.unexpected_payloads, self.inner, self.channel)
             return False
         verdict = self.epoch.check(p.epoch, lambda: self._restart_allowed(p.seq, sample_t_ns))
         if verdict is EpochVerdict.REJECTED:

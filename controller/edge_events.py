@@ -4,7 +4,8 @@ sensor-side event generator (`EdgeEventGenerator`). Per feedback sample it says 
 controller only the events); `answered` tells it about an applied setpoint. No I/O: the edge node publishes.
 
 The same decisions, sample for sample, as the offline session engine's edge (`sea_hil.offline.session_loop`):
-checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"`), state seq = sample index + 1,
+checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"`; TT: every outer sample whatever
+`edge_check`, and every one is published, answers in flight or not: issue 29), state seq = sample index + 1,
 the lookahead on the nominal model (`trigger.edge_model`, with `controller.compensation = "predict"`: the engine
 builds that model only then) with the setpoint the edge holds kept; the trajectory anchor (an INITIAL state) is
 re-published until the controller answers it (controller/edge_trigger.py).
@@ -71,6 +72,8 @@ class EdgeEvents:
         self.every_sample = cfg.trigger.edge_check == "sample" if every_sample is None else every_sample
         if model is None:
             model = cfg.trigger.edge_model and cfg.controller.compensation == "predict"
+        if mode == "tt":    # a time trigger has nothing to evaluate between outer samples, nor a lookahead to run
+            self.every_sample, model = False, False
         self.model: Predictor | None = None
         if model:
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)

@@ -9,6 +9,7 @@ from typing import Any
 
 import can
 
+from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.stats.histogram import LogHistogram
 
 
@@ -72,6 +73,7 @@ def edge_stats(edge: Any) -> dict[str, float]:
         "lockstep_startup_resends": c.lockstep_startup_resends,
         "commands_sent": c.commands_sent, "arrival_commands": c.arrival_commands,
         "payload_rejected": edge.payloads.as_dict()["rejected_total"],
+        **{f"payload_rejected_{r.value}": edge.payloads.rejected[r.value] for r in RejectReason},
         "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
         "setpoints_out_of_envelope": edge.envelope.rejected,
         "bus_errors": c.bus_errors, "late_samples": c.late_samples, "late_setpoints": c.late_setpoints,

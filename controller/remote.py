@@ -24,7 +24,7 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
-from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.keys import KEY_PAYLOADS, Keys
 from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, StatePayload
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.zsession import publisher
@@ -89,7 +89,7 @@ class RemoteController(Node):
     def handle(self, data: bytes, now_ns: int | None = None) -> None:
         """Handle one state payload (`now_ns`: arrival time, default now). Malformed or wrong-type payloads and
         stale/duplicated state seqs are counted (`stats_dict`) and ignored."""
-        p = self.payloads.try_decode(data)
+        p = self.payloads.try_decode(data, KEY_PAYLOADS["state"])   # another type: rejected as KEY, counted
         if p is None:
             return
         if not isinstance(p, EventStatePayload if self.edge_trigger else StatePayload) or \

@@ -16,8 +16,38 @@ from typing import Protocol
 
 from sea_hil.config.wire_names import validate_limb, validate_prefix
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.payloads import MsgType
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
+KEY_PAYLOADS: dict[str, frozenset[MsgType]] = {
+    "state": frozenset({MsgType.STATE, MsgType.EVENT_STATE}),
+    "setpoint": frozenset({MsgType.SETPOINT}),
+    "voltage": frozenset({MsgType.VOLTAGE}),
+    "control": frozenset({MsgType.ACK}),
+}
+KEY_CONGESTION: dict[str, tuple[str, str]] = {
+    "state": ("DROP", "BLOCK"), "setpoint": ("DROP", "BLOCK"), "voltage": ("DROP", "BLOCK"),
+    "control": ("DROP", "BLOCK"), "event": ("BLOCK", "BLOCK"), "stats": ("DROP", "DROP"),
+}
+"""Zenoh congestion control per key (real time, lockstep), as the built-in nodes publish (tests/test_key_table.py
+checks it against the runtime's syncs and nodes): in real time a late control message is worth less than the next
+one (DROP); a lockstep run must be complete to be reproducible (BLOCK); tracking records are never dropped."""
+KEY_RATES: dict[str, str] = {
+    "state": "every `controller.sample_period_s` (10 ms; with the trigger at the edge only on events)",
+    "setpoint": "on events only: <= 1/`controller.sample_period_s`, >= 1/`trigger.max_inter_event_s`",
+    "voltage": "every state (remote inner-loop placement only)",
+    "control": "lockstep: one ACK per handled state",
+    "event": "one tracking record per handled state",
+    "stats": "at node shutdown (`final: true`; the record's required fields: docs/recording.md)",
+}
+KEY_DIRECTION: dict[str, str] = {"state": "edge -> controller", "setpoint": "controller -> edge",
+                                 "voltage": "controller -> edge", "control": "controller -> edge",
+                                 "event": "controller (or edge) -> all", "stats": "every node -> all"}
+"""The binary payload types each key carries (the JSON keys `stats` and `event` none): every receiver decodes with
+`PayloadCounters.try_decode(data, KEY_PAYLOADS[channel])`, so a well-formed payload on the wrong key is rejected
+(`payload_rejected_key`) and never reaches sequence tracking (issue 29: a VOLTAGE on the setpoint key was applied)."""
+
+
 class _KeyedConfig(Protocol):
     """What `Keys.from_config` reads (a `ZenohConfig`; the wire layer does not import the config)."""
 

@@ -20,6 +20,7 @@ class RejectReason(StrEnum):
     NONFINITE = "nonfinite"
     ENUM = "enum"
     RANGE = "range"
+    KEY = "key"             # well formed, but a type its key does not carry (protocol/keys.py, KEY_PAYLOADS)
 
 
 class PayloadRejected(MalformedPayload):

@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import logging
 import struct
+import threading
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
@@ -263,6 +264,35 @@ def _hot(f: tuple[Any, ...]) -> Payload | None:
     return obj
 
 
+class OncePerVersion(logging.Filter):
+    """Lets the first "foreign payload version" line per version through, per process: the nodes of one `sea-hil
+    run` (edge, recorder, the external-controller watch) share a process and each decodes the same payload, so each
+    logged it once (issue 29: three lines for one foreign peer). Process-wide like the logger it is attached to."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._seen: set[int] = set()
+        self._lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        version = getattr(record, "payload_version", None)
+        if version is None:
+            return True
+        with self._lock:
+            new = version not in self._seen
+            self._seen.add(version)
+        return new
+
+    def reset(self) -> None:
+        """Forget the versions logged (a test that checks the one line runs after others that logged it)."""
+        with self._lock:
+            self._seen.clear()
+
+
+FOREIGN_VERSION_LOG = OncePerVersion()
+_log.addFilter(FOREIGN_VERSION_LOG)
+
+
 class PayloadCounters:
     """Accepted / rejected-by-reason counters around `decode` (never raises on bad input)."""
 
@@ -271,10 +301,13 @@ class PayloadCounters:
         self.rejected: Counter[str] = Counter()
         self.last_error = ""
         self._versions_logged: set[int] = set()
+        self._key_logged: set[tuple[int, frozenset[MsgType]]] = set()
 
-    def try_decode(self, b: bytes) -> Payload | None:
-        """Decode `b`, counting the outcome; None if it was rejected. The first payload of every foreign layout
-        version is logged once (a peer of another sea-hil release), later ones only counted."""
+    def try_decode(self, b: bytes, accepts: frozenset[MsgType] | None = None) -> Payload | None:
+        """Decode `b`, counting the outcome; None if it was rejected. `accepts`: the message types the key it came
+        on carries (protocol/keys.py, `KEY_PAYLOADS`); a well-formed payload of another type is rejected as KEY
+        before anything else sees it (so it never moves sequence state). The first payload of every foreign layout
+        version is logged once per process (a peer of another sea-hil release), later ones only counted."""
         try:
             p = decode(b)
         except PayloadRejected as err:
@@ -284,7 +317,16 @@ class PayloadCounters:
                 self._versions_logged.add(b[2])
                 _log.warning("a peer sends payload version %d, this node speaks %s: its messages are dropped and "
                              "counted (payload_rejected_version); run the same sea-hil release on both sides",
-                             b[2], "/".join(map(str, sorted(SUPPORTED_VERSIONS))))
+                             b[2], "/".join(map(str, sorted(SUPPORTED_VERSIONS))), extra={"payload_version": b[2]})
+            return None
+        mtype = _TYPE_OF[type(p)]
+        if accepts is not None and mtype not in accepts:
+            self.rejected[RejectReason.KEY.value] += 1
+            self.last_error = f"malformed payload (key): {mtype.name} on a key that carries " \
+                              f"{'/'.join(sorted(t.name for t in accepts))}"
+            if (mtype, accepts) not in self._key_logged:
+                self._key_logged.add((mtype, accepts))
+                _log.warning("%s: dropped and counted (payload_rejected_key)", self.last_error)
             return None
         self.accepted += 1
         return p

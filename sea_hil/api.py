@@ -127,20 +127,27 @@ class Session:
     """A whole session, as `sea-hil run` runs it: `run()` blocks until the cycles are done and returns the summary
     (`summary.json`); `start()` runs it in a background thread (`wait()` for the summary). Outputs (MCAP recording,
     summary.json, figures) go to `out` (default: a temporary directory removed by `close()`). `close()` before the
-    end stops the session early (its controller process is ended; `summary` stays None)."""
+    end stops the session early (its controller process is ended; `summary` stays None). `controller="external"`:
+    no controller is started, the session waits up to `join_timeout_s` for your own at `endpoint`, exactly as
+    `sea-hil run --controller external` (docs/external-controller.md; like it, with the trigger at the controller)."""
 
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
-                 progress: bool = False) -> None:
-        if controller not in ("et", "tt"):
-            raise SeaHilError(f"controller must be 'et' or 'tt', not {controller!r}")
+                 progress: bool = False, join_timeout_s: float = 300.0) -> None:
+        if controller not in ("et", "tt", "external"):
+            raise SeaHilError(f"controller must be 'et', 'tt' or 'external', not {controller!r}")
         if cycles < 1:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
         self.config = _config(config)
+        if controller == "external" and self.config.trigger.placement == "edge":
+            # as `sea-hil run --controller external`: your controller speaks the documented STATE protocol (every
+            # state up, docs/external-controller.md), so the trigger runs at the controller
+            trigger = self.config.trigger.model_copy(update={"placement": "controller"})
+            self.config = self.config.model_copy(update={"trigger": trigger})
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
         self.out = Path(out) if out is not None else Path(self._tmp.name) if self._tmp is not None else Path()
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,
-                                progress=progress, on_nodes=self._on_nodes)
+                                progress=progress, on_nodes=self._on_nodes, join_timeout_s=join_timeout_s)
         self.summary: dict[str, Any] | None = None
         self.error: BaseException | None = None
         self._parts: tuple[Any, Any, Any] | None = None
@@ -191,6 +198,13 @@ class Session:
     def wait_until_running(self, timeout_s: float = 60.0) -> bool:
         """Wait until the session's nodes are up (True), or it ended first / the timeout passed (False)."""
         return self._ready.wait(timeout_s) and self._parts is not None
+
+    @property
+    def endpoint(self) -> str | None:
+        """`controller="external"`: the Zenoh endpoint your controller connects to, once the nodes run (else None);
+        the session's config for it is `out/config.toml` (docs/external-controller.md)."""
+        proc = self._parts[2] if self._parts is not None else None
+        return getattr(proc, "endpoint", None)
 
     def snapshot(self, node_id: int | None = None) -> DriveSnapshot:
         """The latest state of the session's emulated drive."""

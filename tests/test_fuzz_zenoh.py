@@ -23,6 +23,7 @@ from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.payload_fields import U32_MAX, PayloadRejected
 from sea_hil.protocol.payloads import (
     MAGIC,
@@ -93,6 +94,16 @@ def _is_malformed(data: bytes) -> bool:
     return False
 
 
+def _wrong_key(data: bytes, channel: str) -> bool:
+    """Well formed, but not a type key `channel` carries (rejected as KEY, issue 29)."""
+    try:
+        p = decode(data)
+    except PayloadRejected:
+        return False
+    return MsgType[type(p).__name__.removesuffix("Payload").replace("EventState", "EVENT_STATE").upper()] \
+        not in KEY_PAYLOADS[channel]
+
+
 @pytest.fixture
 def session() -> Iterator[object]:
     s = open_session(make_config())
@@ -106,7 +117,7 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
     cfg = load_config()
     bus = open_bus(f"virtual:fuzz-{uuid.uuid4().hex[:8]}")
     edge = EdgeNode(cfg, bus, session, 1)  # type: ignore[arg-type]
-    calls = {"n": 0, "malformed": 0}
+    calls = {"n": 0, "malformed": 0, "wrong_key": 0}
     try:
         @FUZZ
         @given(data=payloads(), ack=st.booleans())
@@ -120,16 +131,19 @@ def test_edge_downlink_and_ack_handlers_survive_and_count(session: object) -> No
                      edge.envelope.rejected, ep.old + ep.foreign)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
+            calls["wrong_key"] += _wrong_key(data, "control" if ack else "setpoint")
             assert sum(a - b for a, b in zip(after, before, strict=True)) == (0 if ok else 1)
         run()
         pc = edge.payloads.as_dict()
         assert calls["n"] >= CASES and pc["accepted"] + pc["rejected_total"] == calls["n"]
-        assert pc["rejected_total"] == calls["malformed"] and edge.stats_dict()["payload_rejected"] == calls["malformed"]
+        rejected = calls["malformed"] + calls["wrong_key"]
+        assert pc["rejected_total"] == rejected and edge.stats_dict()["payload_rejected"] == rejected
+        assert edge.stats_dict()["payload_rejected_key"] == calls["wrong_key"]
         nxt = ((edge.intake.sp_seq.last or 0) + 1) & U32_MAX
         assert edge.on_downlink(encode(SetpointPayload(nxt, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME,
                                                        epoch=edge.intake.epoch.current or 0)))
         print(f"\nedge: {calls['n']} payloads, {calls['malformed']} malformed, "
-              f"{edge.counters.unexpected_payloads} wrong type, {edge.counters.stale_setpoints} stale")
+              f"{calls['wrong_key']} wrong type for the key, {edge.counters.stale_setpoints} stale")
     finally:
         edge.close()
         bus.shutdown()
@@ -171,7 +185,7 @@ def test_edge_applies_only_valid_setpoints_on_arrival(session: object) -> None:
 def test_controller_state_handler_survives_and_counts(session: object) -> None:
     # the paper's STATE stream (the default edge trigger's EVENT_STATE needs an anchor first)
     ctrl = RemoteController(load_config(overrides=paper()), session, "et", cycles=10**6)  # type: ignore[arg-type]
-    calls = {"n": 0, "malformed": 0, "t": 0}
+    calls = {"n": 0, "malformed": 0, "wrong_key": 0, "t": 0}
     try:
         @FUZZ
         @given(data=payloads(), fresh=st.booleans())
@@ -186,10 +200,12 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
                      ctrl.states + ctrl.unusable_states)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
+            calls["wrong_key"] += _wrong_key(data, "state")
             assert sum(a - b for a, b in zip(after, before, strict=True)) <= 1   # at most one outcome (a late state may end it)
         run()
         st_ = ctrl.stats_dict()
-        assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"]
+        assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"] + calls["wrong_key"]
+        assert st_.get("payload_rejected_key", 0) == calls["wrong_key"]
         assert st_["payload_accepted"] == st_["unexpected_payloads"] + st_["ignored_states"] + ctrl.seq.accepted \
             + st_["epoch_old"] + st_["epoch_foreign"]
         states = ctrl.states
@@ -200,7 +216,8 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
                                         epoch=ctrl.edge_epoch.current or 0)), calls["t"])
         assert ctrl.states == states + 1
         print(f"\ncontroller: {calls['n']} payloads, {calls['malformed']} malformed, "
-              f"{st_['unexpected_payloads']} wrong type, {st_['ignored_states']} stale, {states} states handled, "
+              f"{calls['wrong_key']} wrong type for the key, {st_['unexpected_payloads']} EVENT_STATE on the paper's "
+              f"path, {st_['ignored_states']} stale, {states} states handled, "
               f"{st_['unusable_states']} unusable")
     finally:
         ctrl.close()

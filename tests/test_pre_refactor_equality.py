@@ -28,7 +28,9 @@ import jsonschema
 import pytest
 
 from sea_hil.cli import main
+from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
+from sea_hil.report.session_summary import rejections_blocks
 from sea_hil.report.summary import deterministic
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 
@@ -54,7 +56,9 @@ EDGE_RENAMED: dict[str, str] = {}
 EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0,   # issue 19: the edge's setpoint envelope
                                  "epoch_old": 0, "epoch_foreign": 0,  # issue 19: session epochs (no replays here)
                                  "late_samples": 0,   # issue 19: real time only, lockstep answers every sample
-                                 "late_setpoints": 0}  # issue 19: no answer older than max_answer_age_s here
+                                 "late_setpoints": 0,  # issue 19: no answer older than max_answer_age_s here
+                                 # issue 29: the edge's payload rejections by class (none on the paper's path)
+                                 **{f"payload_rejected_{r.value}": 0 for r in RejectReason}}
 # The one documented difference: payload version 2 (issue 19) added the 8-byte session epoch to every payload header,
 # so every payload byte count is 8 bytes per message larger (docs/deviations.md, "Session epoch"). Only these byte
 # fields are rewritten, each checked to be exactly its message count times the old size first; message counts and
@@ -69,7 +73,8 @@ SAMPLE_PERIOD_S = 0.01
 # blocks added since (issue 17: every limb): with one limb, `limbs` holds that limb's transmissions and tracking and
 # `limbs_total` the same, derived from the top-level blocks below (checked, never dropped); timing.driver is new too
 SESSION_ADDED = ("limbs", "limbs_total")
-TIMING_ADDED = ("driver",)
+TIMING_ADDED = ("driver", "rejections")
+# issue 29: `rejections` (every class the edge rejects, from its counters: checked against them, never dropped)
 
 
 def one_limb_blocks(summary: dict[str, Any]) -> dict[str, Any]:
@@ -166,6 +171,8 @@ def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, li
     completeness = got.pop("completeness")   # issue 32: the recording against the nodes' counters (new; all there)
     assert completeness["complete"], completeness
     assert {k: got.pop(k) for k in SESSION_ADDED} == one_limb_blocks(got)
+    assert got.pop("rejections") == rejections_blocks(got["edge"])[0]
+    assert new["timing"]["rejections"] == rejections_blocks(new["timing"]["edge"])[1]
     assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
     diff = {k: (got[k], expected[k]) for k in expected if got[k] != expected[k]}
     assert not diff, diff

@@ -50,12 +50,14 @@ def test_edge_ignores_and_counts_duplicated_and_older_setpoints(nodes: tuple[Edg
     assert (st["stale_setpoints"], st["seq_duplicates"], st["seq_reordered"]) == (4, 3, 1)
 
 
-def test_edge_voltage_stream_shares_the_replay_guard(nodes: tuple[EdgeNode, RemoteController]) -> None:
-    edge, _ = nodes
-    v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
-    assert [edge.on_downlink(x) for x in v] == [True, False, False, True]
-    apply(edge, 0)
-    assert edge.counters.voltages == 2 and edge.command_path.voltage == (11.0, 0.0) and edge.counters.stale_setpoints == 2
+def test_edge_voltage_stream_shares_the_replay_guard() -> None:
+    with SessionBuilder(load_config(overrides=paper())) as b:   # voltages: the inner loop in the controller
+        edge = b.edge(b.bus(f"virtual:replay-{uuid.uuid4().hex[:8]}"), b.zenoh(), 1, inner="remote")
+        v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
+        assert [edge.on_downlink(x, channel="voltage") for x in v] == [True, False, False, True]
+        apply(edge, 0)
+        assert edge.counters.voltages == 2 and edge.command_path.voltage == (11.0, 0.0)
+        assert edge.counters.stale_setpoints == 2
 
 
 def test_restarted_controller_is_accepted_only_after_the_stream_timed_out(

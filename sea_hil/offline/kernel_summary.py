@@ -17,7 +17,7 @@ from sea_hil.controller.trigger import NO_EVENT
 from sea_hil.offline.session_fast import REASON_NAMES, KernelRun
 from sea_hil.offline.session_records import SETPOINT_BYTES
 from sea_hil.report.limbs import limb_entry, limbs_total
-from sea_hil.report.session_summary import tracking_or_zero
+from sea_hil.report.session_summary import rejections_blocks, tracking_or_zero
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, transmissions_block
 
 CYCLE, LEAD_IN, OUTSIDE = 0, 1, 2
@@ -110,7 +110,9 @@ def kernel_summary(run: KernelRun, state_key: str, state_bytes: int, controller:
         "inter_event_s": inter_event_block(ev_t[ev_keep]),
         "max_abs_voltage_v": [float(v[0]), float(v[1])],
         "edge": {},
-        TIMING_KEY: {"latency_us": {k: -1.0 for k in LATENCY_KEYS}, "latency_samples": 0, "edge": {}},
+        "rejections": rejections_blocks({})[0],     # the engine has no edge /stats (as session_summary of its data)
+        TIMING_KEY: {"latency_us": {k: -1.0 for k in LATENCY_KEYS}, "latency_samples": 0, "edge": {},
+                     "rejections": rejections_blocks({})[1]},
     }
     name = state_key.split("/")[-2] if run.n_recv else "limb1"
     entries = [limb_entry(name, 1, "", summary)]

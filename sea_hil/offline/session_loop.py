@@ -153,7 +153,7 @@ class SessionLoop:
     def next_k(self, k: int) -> int:
         """The next sample after k at which something happens."""
         e = self.e
-        if self.edge is not None and self.o.edge_check == "sample":
+        if self.edge is not None and self.edge.every_sample:
             return k + 1
         nxt = min((k // e.outer_every + 1) * e.outer_every, e.n_max)
         for due in (self.in_flight.next_due_ns(), self.pending_down.next_due_ns()):

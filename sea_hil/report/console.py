@@ -45,6 +45,7 @@ class ProgressSample(NamedTuple):
     setpoints: int
     states: int
     latency_p50_us: float
+    waiting: bool = False       # `--controller external`: no controller has joined yet (nothing has started)
 
     @property
     def total_s(self) -> float:
@@ -52,12 +53,16 @@ class ProgressSample(NamedTuple):
 
     @property
     def phase(self) -> str:
+        if self.waiting:
+            return "waiting for controller"
         if self.sim_s < self.lead_in_s:
             return "lead-in"
         cycle = min(int((self.sim_s - self.lead_in_s) // self.period_s) + 1, self.cycles)
         return f"cycle {cycle}/{self.cycles}"
 
     def __str__(self) -> str:
+        if self.waiting:
+            return f"[{self.wall_s:6.1f} s] waiting for controller  states {self.states}"
         return (f"[{self.wall_s:6.1f} s] sim {self.sim_s:6.2f}/{self.total_s:.2f} s  {self.phase}  setpoints "
                 f"{self.setpoints}  states {self.states}  latency p50 {self.latency_p50_us:.0f} us")
 
@@ -121,13 +126,34 @@ def _warnings(summary: Mapping[str, Any]) -> list[str]:
     out = []
     if not summary.get("lockstep", True):   # lockstep has no deadlines: simulated time waits for every node
         out.append(f"deadline misses: {edge.get('loop_overruns', 0)} edge loop overruns")
-    drops = {k: edge.get(k, 0) for k in ("uplink_dropped", "downlink_dropped", "seq_lost", "stale_setpoints",
-                                         "rejected_frames", "rejected_samples", "bus_errors")}
+    drops = {k: edge.get(k, 0) for k in ("uplink_dropped", "downlink_dropped", "seq_lost", "bus_errors")}
     out += [f"{k.replace('_', ' ')}: {v}" for k, v in drops.items() if v]
+    out += rejection_warnings(summary)
     saturated = summary.get("saturated_steps", edge.get("saturated_steps", 0))
     if saturated:
         out.append(f"voltage saturated: {saturated} steps")
     return out
+
+
+def rejection_label(cls: str) -> str:
+    """The table's words for a rejection class of summary.json's `rejections` (its /stats counter name)."""
+    if cls == "payload_rejected_key":
+        return "payloads on the wrong key"
+    if cls.startswith("payload_rejected_"):
+        return f"malformed payloads ({cls.removeprefix('payload_rejected_')})"
+    named = {"epoch_foreign": "foreign-epoch payloads", "epoch_old": "old-epoch payloads"}
+    return named.get(cls, cls.replace("_", " "))
+
+
+def rejection_warnings(summary: Mapping[str, Any]) -> list[str]:
+    """One "what: count" per rejection class with a count (summary.json `rejections` and `timing.rejections`;
+    older summaries without them: the edge counters they had)."""
+    timing = summary.get("timing") or {}
+    classes = {**(summary.get("rejections") or {}), **(timing.get("rejections") or {})}
+    if not classes:
+        edge = {**(timing.get("edge") or {}), **(summary.get("edge") or {})}
+        classes = {k: edge.get(k, 0) for k in ("stale_setpoints", "rejected_frames", "rejected_samples")}
+    return [f"{rejection_label(k)}: {v}" for k, v in classes.items() if v]
 
 
 def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, command: str = "run",

@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
@@ -83,6 +84,22 @@ def tracking_or_zero(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[f
     return {"max_abs_error_rad": [0.0, 0.0], "rms_error_rad": [0.0, 0.0]}
 
 
+# every class of input the edge rejects (counted, logged, dropped), by its /stats counter: `rejections` in
+# summary.json; the wall-time-derived one (lockstep re-sends draw duplicate answers) under `timing.rejections`
+REJECTION_CLASSES = (*(f"payload_rejected_{r.value}" for r in RejectReason), "unexpected_payloads", "epoch_old",
+                     "epoch_foreign", "setpoints_out_of_envelope", "late_setpoints", "late_samples",
+                     "rejected_frames", "rejected_samples", "edge_fallback_rejected")
+TIMING_REJECTION_CLASSES = ("stale_setpoints",)
+
+
+def rejections_blocks(edge: dict[str, Any]) -> tuple[dict[str, int], dict[str, int]]:
+    """(`rejections`, `timing.rejections`): the count of every rejection class in the edge's final /stats record (0
+    where the recording has none of it: an older recording, the paper's placement without the edge's fallback)."""
+    def block(classes: tuple[str, ...]) -> dict[str, int]:
+        return {k: int(edge.get(k, 0)) for k in classes}
+    return block(REJECTION_CLASSES), block(TIMING_REJECTION_CLASSES)
+
+
 def final_edge_stats(data: SessionData) -> dict[str, Any]:
     finals = [m.payload for m in data.messages.get("/stats", [])
               if m.payload.get("final") and m.payload.get("node", "edge") == "edge"]
@@ -136,6 +153,7 @@ def one_limb_summary(data: SessionData, controller: str) -> dict[str, Any]:
     v = np.abs(np.array(volts, dtype=float)).max(axis=0) if volts else np.zeros(2)
     edge = final_edge_stats(data)
     edge_det, edge_timing = split_edge_stats(edge)
+    rejected, rejected_timing = rejections_blocks(edge)
     reasons: dict[str, int] = {}
     for r in tr["reasons"]:
         reasons[str(r)] = reasons.get(str(r), 0) + 1
@@ -153,10 +171,12 @@ def one_limb_summary(data: SessionData, controller: str) -> dict[str, Any]:
         "inter_event_s": inter_event_block(tr["event_t_s"]),
         "max_abs_voltage_v": [float(v[0]), float(v[1])],
         "edge": edge_det,
+        "rejections": rejected,
         TIMING_KEY: {
             "latency_us": {k: float(edge.get(f"latency_{k}_us", -1.0)) for k in ("min", "p50", "p90", "p99", "max")},
             "latency_samples": int(edge.get("latency_count", 0)),
             "edge": edge_timing,
+            "rejections": rejected_timing,
         },
     }
     return summary

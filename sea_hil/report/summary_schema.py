@@ -36,6 +36,7 @@ TIMING = _object({
     "edge": {"type": "object", "additionalProperties": _NUMBER},             # wall-time-derived edge counters
     "driver": _object({"ticks": _COUNT, "tick_misses": _COUNT}),             # `run`: summed over the buses' drivers
     "can_bus": {"type": "object", "additionalProperties": CAN_BUS},          # [can] emulate_bitrate, per bus spec
+    "rejections": {"type": "object", "additionalProperties": _COUNT},       # sessions: wall-time-derived classes
 }, required=())
 LATENCY = _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")})
 LIMB = _object({"limb": {"type": "string"}, "node_id": _COUNT, "bus": {"type": "string"},
@@ -62,6 +63,7 @@ SUMMARY_SCHEMA: dict[str, Any] = {
         "lead_in": _object({"duration_s": _NUMBER, **TRANSMISSIONS["properties"], "tracking": TRACKING}),
         "uplink_outside_msgs": _COUNT,
         "edge": {"type": "object", "additionalProperties": _NUMBER},         # deterministic edge counters
+        "rejections": {"type": "object", "additionalProperties": _COUNT},   # sessions: count per rejection class
         "limbs": {"type": "array", "items": LIMB, "minItems": 1},           # sessions: every limb
         "limbs_total": LIMBS_TOTAL,                                           # sessions: all limbs
         "lockstep": {"type": "boolean"},                                     # `run` only

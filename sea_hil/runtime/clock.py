@@ -19,6 +19,7 @@ from typing import Any, Protocol
 import zenoh
 
 from sea_hil.config.timing import TimingConfig
+from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zlatest import LatestSubscriber
@@ -44,7 +45,7 @@ class EdgeSync(Protocol):
 
     congestion_control: zenoh.CongestionControl
 
-    def downlink_callback(self) -> Callable[[zenoh.Sample], None]: ...
+    def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]: ...
 
     def control_callback(self) -> Callable[[zenoh.Sample], None]: ...
 
@@ -183,9 +184,10 @@ class RealTimeEdgeSync:
     def __init__(self, edge: Any) -> None:
         self.edge = edge
 
-    def downlink_callback(self) -> Callable[[zenoh.Sample], None]:
+    def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]:
+        """The subscriber callback of the edge's downlink key `channel` ("setpoint" | "voltage")."""
         on_arrival = self.edge.on_arrival
-        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns())
+        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns(), channel)
 
     def control_callback(self) -> Callable[[zenoh.Sample], None]:
         def on_control(s: zenoh.Sample) -> None:
@@ -229,14 +231,9 @@ class RealTimeEdgeSync:
 
 
 def control_payload(edge: Any, data: bytes) -> AckPayload | None:
-    """Decode a control-key payload; a non-ACK is counted (`unexpected_payloads`) and dropped."""
-    p = edge.payloads.try_decode(data)
-    if p is None:
-        return None
-    if not isinstance(p, AckPayload):
-        edge.counters.unexpected_payloads += 1
-        return None
-    return p
+    """Decode a control-key payload; a non-ACK is counted (`payload_rejected_key`) and dropped."""
+    p = edge.payloads.try_decode(data, KEY_PAYLOADS["control"])   # another type: rejected as KEY, counted
+    return p if isinstance(p, AckPayload) else None
 
 
 class RealTimeControllerSync:

@@ -198,8 +198,14 @@ def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConf
         if opts.progress:
             c = edge.counters
             lat = c.latency.to_dict()
-            log(ProgressSample(now, edge.sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
-                               c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
+            sim_ns, waiting = edge.sample_t_ns, False
+            if isinstance(proc, OutsideController):   # the session starts when an outside controller answers
+                start_ns = proc.watch.first_answer_sample_ns
+                waiting = start_ns is None
+                sim_ns = 0 if start_ns is None else max(0, sim_ns - start_ns)
+            log(ProgressSample(now, sim_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
+                               c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0,
+                               waiting))
     if proc.returncode != 0:
         raise SeaHilError(f"controller process exited with status {proc.returncode}")
 
