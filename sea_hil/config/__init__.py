@@ -7,7 +7,7 @@ callers pass the config object down.
 from __future__ import annotations
 
 from sea_hil.config.base import Pair
-from sea_hil.config.comms import (CanConfig, LinkConfig, LinkDirectionConfig, RecordConfig, ZenohAclConfig, ZenohConfig,
+from sea_hil.config.comms import (CanConfig, Cia402Config, LinkConfig, LinkDirectionConfig, RecordConfig, ZenohAclConfig, ZenohConfig,
                                   ZenohTlsConfig)
 from sea_hil.config.limbs import LimbConfig
 from sea_hil.config.live import LiveConfig
@@ -17,7 +17,7 @@ from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConf
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.config.safety import DriveLimitsConfig, EndStopConfig, SafetyConfig, SetpointEnvelopeConfig
 
-__all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "DriveLimitsConfig", "EndStopConfig", "LinkConfig",
+__all__ = ["CanConfig", "Cia402Config", "ControllerConfig", "DisturbanceConfig", "DriveLimitsConfig", "EndStopConfig", "LinkConfig",
            "LimbConfig", "LinkDirectionConfig", "LiveConfig", "Pair", "PlantConfig", "RecordConfig", "SafetyConfig", "SeaHilConfig",
            "SetpointEnvelopeConfig", "SimConfig", "TrajectoryConfig", "TriggerConfig",
            "ZenohAclConfig", "ZenohConfig", "ZenohTlsConfig", "config_from_dict", "config_to_toml",
