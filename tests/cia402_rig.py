@@ -58,6 +58,10 @@ class Rig:
             self.network.add_node(n)
         self.pdo_queues: dict[tuple[int, int], queue.Queue[Any]] = {}
         self.emcys: "queue.Queue[tuple[int, Any]]" = queue.Queue()
+        self.boot_ups: "queue.Queue[int]" = queue.Queue()
+        for n in self.nodes:
+            self.network.subscribe(0x700 + n.id, lambda can_id, data, ts: self.boot_ups.put(can_id - 0x700)
+                                   if bytes(data) == b"\0" else None)
         for n in self.nodes:
             n.emcy.add_callback(lambda err, nid=n.id: self.emcys.put((nid, err)))
         self.drive.start()
@@ -68,11 +72,15 @@ class Rig:
         self.drive_bus.shutdown()
 
     def boot(self) -> None:
-        """Reset communication of both nodes, wait for their boot-up, read their PDO configuration."""
+        """Wait for both nodes' power-on boot-up (subscribed before the drive started: none missed), read their PDO
+        configuration."""
         for n in self.nodes:
-            n.nmt.state = "RESET COMMUNICATION"
-            n.nmt.wait_for_bootup(TIMEOUT_S)
+            self.wait_boot_up(n.id)
             n.setup_402_state_machine()
+
+    def wait_boot_up(self, node_id: int) -> None:
+        while self.boot_ups.get(timeout=TIMEOUT_S) != node_id:
+            pass
 
     def watch_tpdos(self) -> None:
         """Queue every reception of the enabled TPDOs (after `pdo.read()` / `save()` subscribed them)."""

@@ -9,6 +9,7 @@ import queue
 import struct
 import uuid
 
+import can
 import pytest
 from canopen.sdo.exceptions import SdoAbortedError
 
@@ -40,8 +41,13 @@ def enable_cst(r: Rig) -> None:
         assert n.sdo[0x6061].raw == 10
 
 
-def test_sdo_identity_and_segmented_upload(rig: Rig) -> None:
+def test_nmt_reset_sdo_identity_and_segmented_transfers(rig: Rig) -> None:
     rig.boot()
+    for n in rig.nodes:
+        n.sdo[0x1017].raw = 250
+        n.nmt.send_command(0x82)                      # reset communication: boot-up, 0x1000-0x1FFF to defaults
+        rig.wait_boot_up(n.id)
+        assert n.sdo[0x1017].raw == 100
     for n, joint in zip(rig.nodes, ("hip", "knee")):
         assert n.sdo[0x1000].raw == 0x00020192
         assert [n.sdo[0x1018][i].raw for i in range(1, 5)] == [0, 0x5EA40200, 0x10000, 0]
@@ -163,12 +169,12 @@ def test_keeps_working_after_1000_malformed_frames(rig: Rig) -> None:
            (0x600 + hip.id, b"", True, False),                       # remote frame on the SDO id
            (0x600 + hip.id, b"\x40\x00\x10\x00\x00\x00\x00\x00", False, True)]   # extended id
     bus = rig.network.bus
-    import can
     for i in range(1000):
         can_id, data, remote, ext = bad[i % 4]
         bus.send(can.Message(arbitration_id=can_id, data=data, is_remote_frame=remote, is_extended_id=ext,
                              dlc=0 if remote else len(data)))
-    assert hip.sdo[0x2011].raw - before == 1000
+        if i % 50 == 49:    # an SDO round trip per 50: the drive has taken them (a socket's queue is finite)
+            assert hip.sdo[0x2011].raw - before == i + 1
     node_id, emcy = rig.emcys.get(timeout=TIMEOUT_S)      # one EMCY 0x8210 for the episode, not 250
     assert node_id == hip.id and emcy.code == 0x8210 and rig.emcys.empty()
     got = rig.cycle((10, 10))
