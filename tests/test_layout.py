@@ -1,5 +1,5 @@
-"""Issue 12's size acceptance: no source file over 300 lines and no class over 200 (the project's "small files"
-standard). The source folders are the installed packages plus the benchmark rig, the scripts and the tests."""
+"""Issue 12's size check, relaxed: the brief withdrew the 300-line cap (one concept per module whatever its length);
+a generous bound remains against runaway files: no source file over 400 lines, no class over 300. The source folders are the installed packages plus the benchmark rig, the scripts and the tests."""
 from __future__ import annotations
 
 import ast
@@ -9,8 +9,8 @@ import pytest
 
 REPO = Path(__file__).resolve().parents[1]
 SOURCE_DIRS = ("sea_hil", "protocol", "controller", "plant_emulator", "bench", "examples", "scripts", "tests")
-MAX_FILE_LINES = 300
-MAX_CLASS_LINES = 200
+MAX_FILE_LINES = 400   # the 300-line cap is withdrawn (developers brief); a generous bound remains
+MAX_CLASS_LINES = 300
 SKIP_PARTS = frozenset({"node_modules", "__pycache__", ".venv"})
 
 
@@ -53,14 +53,14 @@ def test_source_folders_are_found() -> None:
             "tests/test_layout.py"} <= names
 
 
-def test_no_file_over_300_lines_and_no_class_over_200() -> None:
+def test_no_file_over_the_line_caps() -> None:
     breaches = [b for path in python_sources(REPO) for b in oversized(path)]
     assert not breaches, "\n".join(breaches)
 
 
 @pytest.mark.parametrize(("body", "expected"), [
-    ("x = 1\n" * (MAX_FILE_LINES + 1), "lines (> 300)"),
-    ("class Big:\n" + "    x = 1\n" * MAX_CLASS_LINES, "class Big 201 lines"),
+    ("x = 1\n" * (MAX_FILE_LINES + 1), f"lines (> {MAX_FILE_LINES})"),
+    ("class Big:\n" + "    x = 1\n" * MAX_CLASS_LINES, f"class Big {MAX_CLASS_LINES + 1} lines"),
 ])
 def test_the_check_catches_a_breach(tmp_path: Path, body: str, expected: str) -> None:
     path = tmp_path / "big.py"
