@@ -95,9 +95,10 @@ class Cia402Axis:
         elif index in (0x6071, 0x2000):
             if self._target_index() == index:
                 self.last_target_ns = t_ns
-        elif index == 0x2010:
+        elif index == 0x2010:                            # also ends a bus-error warning
             self.slave.counters.rejected_frames = 0
             v[(0x2011, 0)] = 0
+            self._warn(ErrorFlags.BUS_ERROR, False)
         self._update_output(t_ns)
 
     def on_nmt(self, old: int, new: int, t_ns: int) -> None:
@@ -187,6 +188,7 @@ class Cia402Axis:
             return
         self.warnings = self.warnings | flag if on else self.warnings & ~flag
         self.pending += self.slave.emcy(EMCY_CODES[flag] if on else 0, self._register())
+        self._publish_status()
 
     def refresh_counters(self) -> None:
         self.slave.values[(0x2011, 0)] = min(self.slave.counters.rejected_frames, 2 ** 32 - 1)

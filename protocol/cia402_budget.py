@@ -58,5 +58,6 @@ if __name__ == "__main__":
         b = budget(n)
         print(f"{n} limb(s), 1 kHz SYNC, 1 Mbit/s: {b.frames_per_sync} frames/SYNC, {b.bits_per_sync_worst} bits "
               f"worst case ({b.load_pct_worst:.1f} %), {b.bits_per_sync_nominal} bits unstuffed "
-              f"({b.load_pct_nominal:.1f} %), + {b.background_pct_worst:.2f} % heartbeats and statusword; fits 100 % up to {max_sync_rate_hz(n):.0f} Hz, 80 % up to "
+              f"({b.load_pct_nominal:.1f} %), + {b.background_pct_worst:.2f} % heartbeats and statusword; fits 100 % "
+              f"up to {max_sync_rate_hz(n):.0f} Hz, 80 % up to "
               f"{max_sync_rate_hz(n, max_load_pct=80.0):.0f} Hz")

@@ -65,8 +65,10 @@ def eds_text(j: JointDefaults) -> str:
              "SimpleBootUpMaster=0", "SimpleBootUpSlave=1", "Granularity=8", "DynamicChannelsSupported=0",
              "GroupMessaging=0", "NrOfRXPDO=4", "NrOfTXPDO=4", "LSS_Supported=0", "",
              "[DummyUsage]", *(f"Dummy{i:04d}=0" for i in range(1, 8)), "",
-             "[Comments]", "Lines=2", f"Line1=Device type 0x{DEVICE_TYPE:08X}; units and default PDO set: docs/cia402.md",
-             "Line2=Generated from the default configuration; regenerate with python -m sea_hil.protocol.cia402_eds", ""]
+             "[Comments]", "Lines=2",
+             f"Line1=Device type 0x{DEVICE_TYPE:08X}; units and default PDO set: docs/cia402.md",
+             "Line2=Generated from the default configuration; regenerate with python -m sea_hil.protocol.cia402_eds",
+             ""]
     for title, group in (("MandatoryObjects", mandatory), ("OptionalObjects", optional),
                          ("ManufacturerObjects", manufacturer)):
         lines += [f"[{title}]", f"SupportedObjects={len(group)}",

@@ -143,3 +143,36 @@ def test_synchronous_tpdo_every_second_sync_and_bad_sync() -> None:
     assert sent == [0, 1, 0, 1, 0, 1]
     out = limb.receive(Frame(0x080, b"\1\2\3"), 7 * MS)
     assert (0x8240, 0x11) in emcys(out, HIP) and limb.axes[0].slave.counters.rejected_frames == 1
+
+
+def test_bus_error_is_an_emcy_warning_once() -> None:
+    limb = make()
+    limb.receive(Frame(0, bytes([0x01, 0])), 0)
+    out = limb.note_bus_error(0) + limb.note_bus_error(0)
+    assert emcys(out, HIP) == [(0x8110, 0x11)] and emcys(out, KNEE) == [(0x8110, 0x11)]
+    assert sdo_read(limb, HIP, 0x6041) & 0x80                                # warning bit
+    out = limb.receive(Frame(0x601, bytes([0x2F, 0x10, 0x20, 0, 1, 0, 0, 0])), 0)   # 0x2010 = 1: reset counters
+    assert emcys(out, HIP) == [(0x0000, 0x00)] and not sdo_read(limb, HIP, 0x6041) & 0x80
+
+
+def test_two_limbs_on_one_bus_shell() -> None:
+    import uuid
+
+    import can
+
+    from sea_hil.plant_emulator.cia402_node import Cia402PlantNode
+    channel = f"cia402-{uuid.uuid4().hex[:8]}"
+    clock = [0]
+    with can.Bus(interface="virtual", channel=channel) as drive_bus, \
+            can.Bus(interface="virtual", channel=channel) as master:
+        node = Cia402PlantNode(load_config(overrides={"can": {"profile": "cia402"}}), drive_bus, (1, 2, 3, 4),
+                               now_ns=lambda: clock[0], jit=False)
+        node._on_start(None)
+        boot = {master.recv(1.0).arbitration_id for _ in range(4)}
+        assert boot == {0x701, 0x702, 0x703, 0x704}
+        node.handle(can.Message(arbitration_id=0, data=bytes([0x01, 0]), is_extended_id=False))   # all start
+        node.handle(can.Message(arbitration_id=0x603, data=bytes([0x40, 0, 0x10, 0, 0, 0, 0, 0]), is_extended_id=False))
+        node.handle(can.Message(arbitration_id=0x655, data=bytes(8), is_extended_id=False))       # node 0x55: not here
+        got = [master.recv(1.0) for _ in range(5)]                           # 4 statusword TPDOs, 1 SDO answer
+        assert sorted(m.arbitration_id for m in got) == [0x181, 0x182, 0x183, 0x184, 0x583]
+        assert node.stats.foreign_frames == 1 and node.limbs[1].node_ids == (3, 4)

@@ -46,7 +46,7 @@ def test_the_running_drive_serves_that_dictionary() -> None:
         entries = entries_by_key(object_dictionary(joint_defaults(cfg, a.joint)))
         od = canopen.objectdictionary.import_od(str(eds_path(JOINTS[a.joint])), a.slave.node_id)
         assert set(a.slave.values) == set(entries)
-        for (index, sub), e in entries.items():
+        for index, sub in entries:
             item = od[index]
             v = item[sub] if hasattr(item, "subindices") else item
             if index not in (0x6041, 0x6064, 0x2102, 0x2103, 0x606C, 0x2100, 0x2101):   # live values

@@ -23,10 +23,10 @@ from canopen.profiles.p402 import BaseNode402
 
 from sea_hil.protocol.cia402_eds import eds_path
 from tests.cia402_rig import Rig, cia402_config
-from tests.test_cia402_master import (test_cst_moves_the_limb_as_the_plant_model,  # noqa: F401  (run here too)
-                                      test_keeps_working_after_1000_malformed_frames, test_pdo_mapping_read_and_changed_over_sdo,
-                                      test_sdo_abort_codes, test_nmt_reset_sdo_identity_and_segmented_transfers,
-                                      test_soft_limit_emcy_fault_and_fault_reset)
+from tests.test_cia402_master import (  # noqa: F401  (the acceptance tests, run here on vcan0 too)
+    test_cst_moves_the_limb_as_the_plant_model, test_keeps_working_after_1000_malformed_frames,
+    test_nmt_reset_sdo_identity_and_segmented_transfers, test_pdo_mapping_read_and_changed_over_sdo,
+    test_sdo_abort_codes, test_soft_limit_emcy_fault_and_fault_reset)
 
 REPO = Path(__file__).resolve().parents[2]
 DEADLINE_S = 120.0          # UML syscalls are slow: generous, bounded
