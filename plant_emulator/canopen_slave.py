@@ -76,6 +76,7 @@ class SlaveCounters:
     pdo_received: int = 0
     pdo_sent: int = 0
     syncs: int = 0
+    tpdo_sent: list[int] = field(default_factory=lambda: [0, 0, 0, 0])
 
 
 @dataclass
@@ -259,6 +260,7 @@ class CanopenSlave:
         tp = self._tpdo[n]
         tp.last_data, tp.last_sent_ns = data, t_ns
         self.counters.pdo_sent += 1
+        self.counters.tpdo_sent[n] += 1
         return Frame(int(self.values[(0x1800 + n, 1)]) & 0x7FF, data)
 
     def _tpdo_valid(self, n: int) -> bool:

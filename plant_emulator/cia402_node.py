@@ -115,5 +115,6 @@ class Cia402PlantNode(Node):
                 n, c = a.slave.node_id, a.slave.counters
                 out.update({f"node{n}_rejected_frames": c.rejected_frames, f"node{n}_sdo_aborts": c.sdo_aborts,
                             f"node{n}_emcy": c.emcy_sent, f"node{n}_state": int(a.state),
-                            f"node{n}_limit_trips": a.limit_trips, f"node{n}_watchdog_trips": a.watchdog_trips})
+                            f"node{n}_limit_trips": a.limit_trips, f"node{n}_watchdog_trips": a.watchdog_trips,
+                            f"node{n}_syncs": c.syncs, f"node{n}_tpdo2_sent": c.tpdo_sent[1]})
         return out

@@ -56,6 +56,10 @@ class Rig:
         self.nodes = (self.hip, self.knee)
         for n in self.nodes:
             self.network.add_node(n)
+            n.sdo.RESPONSE_TIMEOUT = TIMEOUT_S      # canopen's 0.3 s is short for a loaded test machine or guest
+            for name in ("TIMEOUT_SWITCH_OP_MODE", "TIMEOUT_SWITCH_STATE_FINAL", "TIMEOUT_SWITCH_STATE_SINGLE",
+                         "TIMEOUT_CHECK_TPDO"):
+                setattr(n, name, TIMEOUT_S)         # bounds on a wait for a frame: only a failure waits this long
         self.pdo_queues: dict[tuple[int, int], queue.Queue[Any]] = {}
         self.emcys: "queue.Queue[tuple[int, Any]]" = queue.Queue()
         self.boot_ups: "queue.Queue[int]" = queue.Queue()

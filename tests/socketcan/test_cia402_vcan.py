@@ -9,6 +9,7 @@ tests/socketcan/test_cia402_vcan.py):
 """
 from __future__ import annotations
 
+import contextlib
 import queue
 import statistics
 import subprocess
@@ -107,27 +108,37 @@ def test_plant_process_master_and_candump(vcan_channel: str, tmp_path: Path) -> 
             _until(lambda: beats.get(timeout=DEADLINE_S) == 0x05)
         hip.rpdo[2].stop()
         network.sync.stop()
+        end = time.monotonic() + DEADLINE_S
+        with contextlib.suppress(queue.Empty):           # a stalled guest's drive works through its backlog of
+            while time.monotonic() < end:                # SYNCs: wait until its TPDO 2 stream is quiet for 3 s
+                positions.get(timeout=3.0)
     finally:
         network.disconnect()
         _end(proc)
         _end(dump)
         log.close()
+    assert proc.stdout is not None
+    stats_line = proc.stdout.read().strip().splitlines()[-1].split()
+    drive = dict(zip(stats_line[::2], map(int, stats_line[1::2]), strict=True))
     by_id = _candump(tmp_path / "candump.log")
     assert by_id[0x701][0][1] == b"\x00" and by_id[0x702][0][1] == b"\x00"          # boot-up
     ops = [t for t, d in by_id[0x701] if d == b"\x05"]                                 # operational heartbeats
     gaps_ms = [1e3 * (b - a) for a, b in zip(ops, ops[1:])]
-    assert len(gaps_ms) >= 3 and 80.0 <= statistics.median(gaps_ms) <= 150.0, gaps_ms   # 0x1017 = 100 ms
+    rate_hz = len(gaps_ms) / (ops[-1] - ops[0])          # 0x1017 = 100 ms: 10 Hz on average, stalls or not (a
+    assert len(gaps_ms) >= 3 and 5.0 <= rate_hz <= 11.0, gaps_ms   # stalled guest sends late beats back to back)
     assert all(d == b"" for _, d in by_id[0x080])                                      # SYNC, no counter
     assert 0x181 in by_id and 0x281 in by_id and 0x381 in by_id and 0x301 in by_id    # TPDO 1-3, RPDO 2
     sync_times = [t for t, _ in by_id[0x080]]
     lag_ms = [1e3 * (t - max(s for s in sync_times if s <= t)) for t, _ in by_id[0x281] if t >= sync_times[0]]
     per_sync = [sum(s <= t < s + SYNC_PERIOD_S for t, _ in by_id[0x281] + by_id[0x381] + by_id[0x301])
                 for s in sync_times[:-1]]
-    print(f"cia402 vcan: heartbeat gap median {statistics.median(gaps_ms):.1f} ms, TPDO 2 after SYNC median "
+    print(f"cia402 vcan: heartbeat {rate_hz:.2f} Hz, gap median {statistics.median(gaps_ms):.1f} ms, TPDO 2 after SYNC median "
           f"{statistics.median(lag_ms):.2f} ms (p90 {sorted(lag_ms)[int(0.9 * len(lag_ms))]:.2f}), frames per SYNC "
           f"median {statistics.median(per_sync)} over {len(sync_times)} SYNCs")
     answered = [t for t, _ in by_id[0x281] if t >= sync_times[0]]
-    assert len(sync_times) - 2 <= len(answered) <= len(sync_times)   # every SYNC answered by one TPDO 2 (the
-    # slow guest's drive answers late, median ~5 ms after its SYNC, so the frames of one period spill over)
+    print(f"cia402 vcan: SYNCs on the bus {len(sync_times)}, received by the drive {drive['node1_syncs']}, TPDO 2 "
+          f"sent {drive['node1_tpdo2_sent']}, in candump {len(answered)}; send failures {drive['send_failures']}")
+    assert drive["node1_tpdo2_sent"] == drive["node1_syncs"] > 0     # every SYNC the drive received is answered
+    assert len(answered) == len(sync_times) == drive["node1_syncs"]    # none lost, however late
     emcy = [d for _, d in by_id[0x081]]
     assert any(d[:3] == bytes([0x12, 0x86, 0x21]) for d in emcy), emcy                 # 0x8612, register 0x21
