@@ -2,7 +2,9 @@
 bus. It waits in `bus.recv` until the next thing due (a plant sample, a heartbeat, an event timer), hands every
 received frame to the limbs whose nodes it addresses (NMT and SYNC reach all), and sends what they answer. Frames
 for no node here are ignored and counted (`foreign_frames`); a failed send is counted and reported by the nodes as
-an EMCY (0x8110). Time comes from `now_ns` (monotonic by default; tests pass a clock they advance themselves).
+an EMCY (0x8110). Time comes from `now_ns` (monotonic by default; tests pass a clock they advance themselves); with
+`lockstep` it is simulated: one period per SYNC received (the master answers each SYNC before it sends the next, so
+the plant integrates one sample per answered SYNC, as the sea profile's lockstep pacer does per answered feedback).
 """
 from __future__ import annotations
 
@@ -32,6 +34,8 @@ class Cia402Stats:
     foreign_frames: int = 0
     send_failures: int = 0
     bus_errors: int = 0
+    ticks: int = 0          # plant samples integrated (the first limb's)
+    overruns: int = 0       # real time: periods integrated late, more than one at once
 
 
 def limb_node_ids(node_ids: tuple[int, ...]) -> list[tuple[int, int]]:
@@ -44,9 +48,12 @@ class Cia402PlantNode(Node):
     kind = "plant"
 
     def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, node_ids: tuple[int, ...] | None = None, *,
-                 now_ns: Callable[[], int] = time.monotonic_ns, jit: bool = True) -> None:
+                 now_ns: Callable[[], int] = time.monotonic_ns, jit: bool = True, lockstep: bool = False) -> None:
         super().__init__()
         self.cfg, self.bus, self.now_ns = cfg, bus, now_ns
+        self.lockstep, self.sim_t_ns = lockstep, 0
+        if lockstep:
+            self.now_ns = lambda: self.sim_t_ns
         self.limbs = [Cia402Limb.create(cfg, pair) for pair in limb_node_ids(node_ids or cfg.can.cia402.node_ids)]
         self.stats = Cia402Stats()
         if jit:
@@ -76,6 +83,8 @@ class Cia402PlantNode(Node):
             return
         self.stats.received += 1
         f = Frame(msg.arbitration_id, bytes(msg.data), bool(msg.is_remote_frame), bool(msg.is_extended_id))
+        if self.lockstep and f.can_id == 0x080 and not f.extended:
+            self.sim_t_ns += self.limbs[0].period_ns
         t = self.now_ns()
         hit = False
         for limb in self.limbs:
@@ -84,12 +93,16 @@ class Cia402PlantNode(Node):
                 self._send(limb, limb.receive(f, t))
         if not hit:
             self.stats.foreign_frames += 1
+        self.stats.ticks = self.limbs[0].driver.seq
 
     def tick(self) -> None:
         """Everything due by now (plant samples, heartbeats, timers)."""
         t = self.now_ns()
         for limb in self.limbs:
+            before = limb.driver.seq
             self._send(limb, limb.advance(t) + limb._collect(t))
+            self.stats.overruns += max(0, limb.driver.seq - before - 1) if not self.lockstep else 0
+        self.stats.ticks = self.limbs[0].driver.seq
 
     def _step(self) -> bool:
         self.tick()

@@ -84,14 +84,24 @@ class SessionBuilder:
 
     # ---- nodes ----------------------------------------------------------------------------------------------------
     def plant(self, bus: can.BusABC, node_ids: tuple[int, ...], cfg: SeaHilConfig | None = None) -> Any:
+        cfg = cfg or self.cfg
+        if cfg.can.profile == "cia402":   # the CANopen nodes of [can.cia402] node_ids (docs/cia402.md)
+            from sea_hil.plant_emulator.cia402_node import Cia402PlantNode
+            return self.add(Cia402PlantNode(cfg, bus, cfg.can.cia402.node_ids, lockstep=self.lockstep))
         from sea_hil.plant_emulator.node import PlantNode
-        return self.add(PlantNode(cfg or self.cfg, bus, node_ids, clock=self.clock))
+        return self.add(PlantNode(cfg, bus, node_ids, clock=self.clock))
 
     def edge(self, bus: can.BusABC, session: zenoh.Session, node_id: int, *, inner: str = "edge",
              cfg: SeaHilConfig | None = None, mode: str = "et") -> Any:
         """`mode` (et | tt) is the trigger the edge runs when `trigger.placement = "edge"`."""
+        cfg = cfg or self.cfg
+        if cfg.can.profile == "cia402":   # the edge as the CANopen master of the limb's two nodes
+            from sea_hil.controller.cia402_edge import Cia402EdgeNode
+            ids = cfg.can.cia402.node_ids
+            return self.add(Cia402EdgeNode(cfg, bus, session, (ids[0], ids[1]), inner=inner, clock=self.clock,
+                                           mode=mode))
         from sea_hil.controller.edge import EdgeNode
-        return self.add(EdgeNode(cfg or self.cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
+        return self.add(EdgeNode(cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
 
     def controller(self, session: zenoh.Session, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
         from sea_hil.controller.remote import RemoteController

@@ -49,12 +49,16 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
     from sea_hil.controller.edge_mux import EdgeMux
     nodes = LimbNodes(limbs)
     groups = buses_of(limbs)
+    if b.cfg.can.profile == "cia402" and len(limbs) != 1:
+        from sea_hil.errors import ConfigError
+        raise ConfigError("the cia402 profile in sea-hil run serves one limb so far ([can.cia402] node_ids: one "
+                          "(hip, knee) pair)")
     handles = {spec: (b.bus(spec), b.bus(spec), b.bus(spec)) for spec in groups}   # plant, edge, recorder tap
     if _merged(b, nodes, handles, session, inner, mode):
         return nodes
     for spec, group in groups.items():
         plant_bus, edge_bus, tap = handles[spec]
-        nodes.taps.append(tap)
+        nodes.taps.append(None if b.cfg.can.profile == "cia402" else tap)   # CANopen frames: not the DBC's
         nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
         edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
                  for limb in group]
