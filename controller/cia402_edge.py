@@ -51,7 +51,8 @@ class Cia402EdgeNode(EdgeNode):
             raise ConfigError("the cia402 profile in sea-hil run needs --lockstep (the real-time SYNC producer is "
                               "not built yet)")
         self.master = Cia402Master(node_ids)
-        self.command_path = Cia402CommandPath(self.command_path, self.master)
+        base: CommandPath = self.command_path   # type: ignore[has-type]
+        self.command_path = Cia402CommandPath(base, self.master)
         self.syncs = 0
         self._answered = True
 
