@@ -54,6 +54,7 @@ class Cia402Master:
     phase: str = "boot"          # boot -> setup -> run
     counters: MasterCounters = field(default_factory=MasterCounters)
     statusword: dict[int, int] = field(default_factory=dict)
+    emcy_code: dict[int, int] = field(default_factory=dict)     # the newest EMCY error code per node
     _booted: set[int] = field(default_factory=set)
     _queue: dict[int, list[Frame]] = field(default_factory=dict)   # per node: SDO writes still to send, in order
     _parts: dict[int, bytes] = field(default_factory=dict)          # this SYNC's TPDO 2 / 3 data by COB-ID
@@ -86,6 +87,8 @@ class Cia402Master:
                 return [Frame(0x000, bytes([0x01, 0]))]
         elif kind == 0x080 and f.can_id != 0x080:
             self.counters.emcys += 1
+            if len(f.data) >= 2:
+                self.emcy_code[node] = struct.unpack_from("<H", f.data)[0]
         elif kind == 0x180:
             self.statusword[node] = struct.unpack_from("<H", f.data)[0]
             if self.statusword[node] & 0x4F == 0x08:
@@ -93,6 +96,11 @@ class Cia402Master:
         elif kind in (0x280, 0x380):
             self._parts[f.can_id] = f.data
         return []
+
+    @property
+    def faulted(self) -> bool:
+        """A node's statusword says FAULT (or FAULT REACTION ACTIVE)."""
+        return any(self.statusword.get(n, 0) & 0x4F in (0x08, 0x0F) for n in self.node_ids)
 
     @property
     def enabled(self) -> bool:

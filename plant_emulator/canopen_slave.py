@@ -12,10 +12,11 @@ Frames not meant for any service of this node are the caller's business; frames 
 """
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple, Protocol
 
-from sea_hil.protocol.cia402_od import PDO_INVALID, Entry, Obj, entries_by_key
+from sea_hil.protocol.cia402_od import FORMATS, PDO_INVALID, Entry, Obj, entries_by_key
 
 NMT_ID, SYNC_DEFAULT = 0x000, 0x080
 BOOT, STOPPED, OPERATIONAL, PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
@@ -94,6 +95,10 @@ class CanopenSlave:
     _tpdo: list[_Tpdo] = field(default_factory=lambda: [_Tpdo() for _ in range(4)])
     _heartbeat_due_ns: int | None = None
     _pdo_length_error: bool = False
+    # caches of the communication objects, dropped on every write to 0x1000-0x1FFF and at boot (1 kHz paths)
+    _maps: dict[tuple[int, int], tuple[list[Entry], struct.Struct]] = field(default_factory=dict)
+    _rpdo_ids: dict[int, int] | None = None
+    _sync_id: int | None = None
 
     def __post_init__(self) -> None:
         self._entries = entries_by_key(self.objects)
@@ -109,6 +114,7 @@ class CanopenSlave:
                 self.values[key] = e.default_for(self.node_id)
         self._sdo, self._rpdo_pending = _Sdo(), {}
         self._tpdo = [_Tpdo() for _ in range(4)]
+        self._drop_caches()
         if not communication_only:
             self.app.on_reset()
         self._set_nmt(PRE_OPERATIONAL, t_ns)
@@ -152,16 +158,23 @@ class CanopenSlave:
         """True if a frame with this 11-bit id is for a service of this node (NMT, SYNC, its SDO, its RPDOs)."""
         return can_id in (NMT_ID, self.sync_id, 0x600 + self.node_id) or self._rpdo_number(can_id) is not None
 
+    def _drop_caches(self) -> None:
+        self._maps, self._rpdo_ids, self._sync_id = {}, None, None
+
     @property
     def sync_id(self) -> int:
-        return int(self.values.get((0x1005, 0), SYNC_DEFAULT)) & 0x7FF
+        if self._sync_id is None:
+            self._sync_id = int(self.values.get((0x1005, 0), SYNC_DEFAULT)) & 0x7FF
+        return self._sync_id
 
     def _rpdo_number(self, can_id: int) -> int | None:
-        for n in range(4):
-            cob = int(self.values.get((0x1400 + n, 1), PDO_INVALID))
-            if not cob & PDO_INVALID and cob & 0x7FF == can_id:
-                return n
-        return None
+        if self._rpdo_ids is None:
+            self._rpdo_ids = {}
+            for n in range(4):
+                cob = int(self.values.get((0x1400 + n, 1), PDO_INVALID))
+                if not cob & PDO_INVALID:
+                    self._rpdo_ids.setdefault(cob & 0x7FF, n)
+        return self._rpdo_ids.get(can_id)
 
     def receive(self, f: Frame, t_ns: int) -> list[Frame]:
         """Handle one frame addressed to this node (`owns`)."""
@@ -221,12 +234,19 @@ class CanopenSlave:
 
     # ---- PDO ------------------------------------------------------------------------------------------------------
     def _mapping(self, base: int, n: int) -> list[Entry]:
-        count = int(self.values[(base + n, 0)])
-        out = []
-        for i in range(1, count + 1):
-            m = int(self.values[(base + n, i)])
-            out.append(self._entries[(m >> 16, m >> 8 & 0xFF)])
-        return out
+        return self._packed(base, n)[0]
+
+    def _packed(self, base: int, n: int) -> tuple[list[Entry], struct.Struct]:
+        """The mapped entries of PDO n and one struct packing them all (cached)."""
+        hit = self._maps.get((base, n))
+        if hit is None:
+            count = int(self.values[(base + n, 0)])
+            out = []
+            for i in range(1, count + 1):
+                m = int(self.values[(base + n, i)])
+                out.append(self._entries[(m >> 16, m >> 8 & 0xFF)])
+            hit = self._maps[(base, n)] = (out, struct.Struct("<" + "".join(FORMATS[e.data_type][1] for e in out)))
+        return hit
 
     def _on_rpdo(self, n: int, data: bytes, t_ns: int) -> list[Frame]:
         size = sum(e.size for e in self._mapping(0x1600, n))
@@ -254,7 +274,9 @@ class CanopenSlave:
                 self.app.on_write(e.index, e.subindex, value, t_ns)
 
     def tpdo_data(self, n: int) -> bytes:
-        return b"".join(e.encode(self.values[(e.index, e.subindex)]) for e in self._mapping(0x1A00, n))
+        entries, packer = self._packed(0x1A00, n)
+        values = self.values
+        return packer.pack(*[values[(e.index, e.subindex)] for e in entries])
 
     def _tpdo_frame(self, n: int, data: bytes, t_ns: int) -> Frame:
         tp = self._tpdo[n]
@@ -343,6 +365,8 @@ class CanopenSlave:
         if code:
             return code
         self.values[(index, subindex)] = value
+        if index < 0x2000:
+            self._drop_caches()
         if index == 0x1017:
             self._restart_heartbeat(t_ns)
         if index == 0x1003:
