@@ -37,6 +37,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "controller at the 10 ms sample rate, voltages tunnelled to CAN)")
     p.add_argument("--can", metavar="SPEC", help="CAN bus: virtual:NAME (default), socketcan:vcan0, udp_multicast:GROUP")
     p.add_argument("--node", type=int, default=1, help="driver node id (of the first limb)")
+    p.add_argument("--can-profile", choices=("sea", "cia402"), help="sea = the DBC protocol; cia402 = CANopen "
+                   "CiA 402, the edge as the master of the limb's two nodes (--lockstep only; docs/cia402.md); "
+                   "default [can] profile")
     p.add_argument("--limbs", type=int, default=None, metavar="N",
                    help="emulate the default limb N times (node ids --node.., limb1..limbN), over as many CAN buses "
                         "as the bus-load model needs (docs/session.md, 'Several limbs'); default: [[limbs]] or 1")
@@ -65,7 +68,10 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     if args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
-    cfg = config_from_args(args, live_overrides(args))
+    overrides = live_overrides(args)
+    if args.can_profile:
+        overrides = {**(overrides or {}), "can": {**(overrides or {}).get("can", {}), "profile": args.can_profile}}
+    cfg = config_from_args(args, overrides)
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,

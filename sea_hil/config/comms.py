@@ -10,8 +10,26 @@ from sea_hil.config.wire_names import parse_can_spec, validate_limb, validate_pr
 from sea_hil.errors import ConfigError
 
 
+class Cia402Config(_Frozen):
+    """`[can.cia402]`: the CANopen CiA 402 profile (`[can] profile = "cia402"`, docs/cia402.md)."""
+    node_ids: tuple[int, ...] = Field((1, 2), description="CANopen node ids, (hip, knee) per limb: each SEA is its "
+                                      "own node")
+    rated_torque_mnm: int = Field(1000, gt=0, le=2**32 - 1, description="0x6076: the motor torque the ideal "
+                                  "current loop delivers at the plant's voltage limit (docs/cia402.md)")
+
+    @field_validator("node_ids")
+    @classmethod
+    def _nodes(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        if not v or len(v) % 2 or len(set(v)) != len(v) or any(not 1 <= n <= 127 for n in v):
+            raise ValueError("cia402.node_ids must be distinct CANopen node ids in 1..127, two (hip, knee) per limb")
+        return v
+
+
 class CanConfig(_Frozen):
     interface: str = "virtual:sea-hil"
+    profile: Literal["sea", "cia402"] = Field("sea", description="sea = the DBC protocol (protocol/sea.dbc); "
+                                              "cia402 = CANopen CiA 301/402, one node per SEA (docs/cia402.md)")
+    cia402: Cia402Config = Cia402Config()
     bitrate_bps: int = Field(1_000_000, gt=0, description="nominal (arbitration-phase) bit rate; classic CAN's only "
                              "rate")
     fd: bool = Field(False, description="CAN FD profile: VOLTAGE_CMD_FD and one FEEDBACK_FD frame per sample, data "

@@ -20,8 +20,10 @@ import zenoh
 from zenoh import Session as ZenohSession  # `zenoh` in the class body is the method
 
 from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.cia402_edge import Cia402EdgeNode
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
+from sea_hil.plant_emulator.cia402_node import Cia402PlantNode
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.bus_timing import warn_if_overloaded
 from sea_hil.protocol.canbus import CanHandle, open_bus
@@ -91,12 +93,20 @@ class SessionBuilder:
 
     # ---- nodes ----------------------------------------------------------------------------------------------------
     def plant(self, bus: CanHandle, node_ids: tuple[int, ...], cfg: SeaHilConfig | None = None) -> Any:
-        return self.add(PlantNode(cfg or self.cfg, bus, node_ids, clock=self.clock))
+        cfg = cfg or self.cfg
+        if cfg.can.profile == "cia402":   # the CANopen nodes of [can.cia402] node_ids (docs/cia402.md)
+            return self.add(Cia402PlantNode(cfg, bus, cfg.can.cia402.node_ids, lockstep=self.lockstep))
+        return self.add(PlantNode(cfg, bus, node_ids, clock=self.clock))
 
     def edge(self, bus: CanHandle, session: ZenohSession, node_id: int, *, inner: str = "edge",
              cfg: SeaHilConfig | None = None, mode: str = "et") -> Any:
         """`mode` (et | tt) is the trigger the edge runs when `trigger.placement = "edge"`."""
-        return self.add(EdgeNode(cfg or self.cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
+        cfg = cfg or self.cfg
+        if cfg.can.profile == "cia402":   # the edge as the CANopen master of the limb's two nodes
+            ids = cfg.can.cia402.node_ids
+            return self.add(Cia402EdgeNode(cfg, bus, session, (ids[0], ids[1]), inner=inner, clock=self.clock,
+                                           mode=mode))
+        return self.add(EdgeNode(cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
 
     def controller(self, session: ZenohSession, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
         return self.add(RemoteController(self.cfg, session, mode, inner=inner, clock=self.clock, cycles=cycles))

@@ -12,6 +12,7 @@ from typing import Any
 
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_mux import EdgeMux
+from sea_hil.errors import ConfigError
 from sea_hil.protocol.merged_bus import MergedBus, can_merge
 from sea_hil.recorder.writer import RecordSink
 from sea_hil.session.builder import SessionBuilder
@@ -51,12 +52,15 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
     several buses (and `[timing] merge_buses`): one driver, one edge and one tap for all buses (`_merged`)."""
     nodes = LimbNodes(limbs)
     groups = buses_of(limbs)
+    if b.cfg.can.profile == "cia402" and len(limbs) != 1:
+        raise ConfigError("the cia402 profile in sea-hil run serves one limb so far ([can.cia402] node_ids: one "
+                          "(hip, knee) pair)")
     handles = {spec: (b.bus(spec), b.bus(spec), b.bus(spec)) for spec in groups}   # plant, edge, recorder tap
     if _merged(b, nodes, handles, session, inner, mode):
         return nodes
     for spec, group in groups.items():
         plant_bus, edge_bus, tap = handles[spec]
-        nodes.taps.append(tap)
+        nodes.taps.append(None if b.cfg.can.profile == "cia402" else tap)   # CANopen frames: not the DBC's
         nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
         edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
                  for limb in group]
