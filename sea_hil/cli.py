@@ -14,7 +14,7 @@ from typing import NoReturn
 from sea_hil.errors import SeaHilError, Terminated
 
 COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "export", "sweep", "robustness",
-            "certs")
+            "certs", "check")
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -6,7 +6,7 @@ import sys
 from pathlib import Path
 
 from sea_hil.commands.common import (add_config_args, add_link_args, add_period_arg, add_scenario_args,
-                                     add_scheme_args, config_from_args)
+                                     add_scheme_args, add_strict_arg, config_from_args)
 from sea_hil.live.cli import add_live_args, live_overrides
 
 
@@ -44,6 +44,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write no PNG figures (about 1 s a session; `sea-hil report DIR` draws them from the "
                         "recording later): a sweep's points run with it")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
+    add_strict_arg(p)
     add_link_args(p)
     add_live_args(p)
     add_config_args(p)
@@ -73,4 +74,5 @@ def _main(args: argparse.Namespace) -> int:
         # TT publishes and answers a state at every sample of the cycle, both ends included
         samples = round(summary["duration_s"] / cfg.controller.sample_period_s) + 1
         print_end_of_run(summary, files_in(args.out), tt_msgs=samples)
-    return 0
+    from sea_hil.report.verdict import strict_status
+    return strict_status(summary) if args.strict else 0

@@ -16,9 +16,10 @@ from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConf
                                   TriggerConfig)
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.config.safety import DriveLimitsConfig, EndStopConfig, SafetyConfig, SetpointEnvelopeConfig
+from sea_hil.config.verdict import VerdictConfig
 
 __all__ = ["CanConfig", "ControllerConfig", "DisturbanceConfig", "DriveLimitsConfig", "EndStopConfig", "LinkConfig",
            "LimbConfig", "LinkDirectionConfig", "LiveConfig", "Pair", "PlantConfig", "RecordConfig", "SafetyConfig", "SeaHilConfig",
            "SetpointEnvelopeConfig", "SimConfig", "TrajectoryConfig", "TriggerConfig",
-           "ZenohAclConfig", "ZenohConfig", "ZenohTlsConfig", "config_from_dict", "config_to_toml",
+           "VerdictConfig", "ZenohAclConfig", "ZenohConfig", "ZenohTlsConfig", "config_from_dict", "config_to_toml",
            "default_toml_text", "load_config"]

@@ -13,6 +13,7 @@ from typing import Any
 
 import numpy as np
 
+from sea_hil.report.verdict import verdict
 from sea_hil.controller.trigger import NO_EVENT
 from sea_hil.offline.session_fast import REASON_NAMES, KernelRun
 from sea_hil.offline.session_records import SETPOINT_BYTES
@@ -115,4 +116,6 @@ def kernel_summary(run: KernelRun, state_key: str, state_bytes: int, controller:
     name = state_key.split("/")[-2] if run.n_recv else "limb1"
     entries = [limb_entry(name, 1, "", summary)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
+    summary["drive_faults"] = []   # as `session_summary` of the engine's messages (no heartbeats recorded)
+    summary["verdict"] = verdict({**summary, "lockstep": True})
     return summary

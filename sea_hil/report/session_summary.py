@@ -21,7 +21,9 @@ import numpy as np
 
 from sea_hil.recorder.writer import SessionData
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
+from sea_hil.report.drive_faults import drive_faults
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
+from sea_hil.report.verdict import verdict, verdict_config_of
 
 # edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
 # re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
@@ -82,10 +84,39 @@ def tracking_or_zero(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[f
     return {"max_abs_error_rad": [0.0, 0.0], "rms_error_rad": [0.0, 0.0]}
 
 
-def final_edge_stats(data: SessionData) -> dict[str, Any]:
+def final_edge_stats(data: SessionData, node: str = "edge") -> dict[str, Any]:
+    """The final `/stats` record of the edge (or of `node`, e.g. "controller"); {} when there is none."""
     finals = [m.payload for m in data.messages.get("/stats", [])
-              if m.payload.get("final") and m.payload.get("node", "edge") == "edge"]
+              if m.payload.get("final") and m.payload.get("node", "edge") == node]
     return finals[-1] if finals else {}
+
+
+# the recorder's final counters of what it lost (`sea-hil.final` metadata, sea_hil/recorder/)
+RECORDING_LOSS_KEYS = ("dropped", "write_errors", "can_frames_missed", "recorder_dropped_ops", "can_tap_unfinished")
+
+
+def recording_block(data: SessionData) -> dict[str, Any] | None:
+    """summary.json `recording`: what the recorder lost (each counter and their sum `lost`) and whether the file is
+    complete; None for a recording without final counters (the offline session engine's)."""
+    final = data.metadata.get("sea-hil.final")
+    if not final:
+        return None
+    counts = {k: int(float(final.get(k, 0) or 0)) for k in RECORDING_LOSS_KEYS}
+    return {**counts, "lost": sum(counts.values()), "complete": bool(data.complete)}
+
+
+def link_losses(data: SessionData, edge: dict[str, Any]) -> dict[str, int] | None:
+    """summary.json `link_losses`: states missing on arrival at the controller beyond the uplink model's own drops
+    (the controller's stream-seq gaps minus `uplink_dropped`); None without the controller's final stats."""
+    ctl = final_edge_stats(data, "controller")
+    if "state_seq_lost" not in ctl:
+        return None
+    return {"uplink_beyond_model": max(0, int(ctl["state_seq_lost"]) - int(edge.get("uplink_dropped", 0)))}
+
+
+def _lockstep(data: SessionData) -> bool:
+    """Was the recording made in lockstep (metadata `sea-hil.session`; the offline engine's has none: lockstep)."""
+    return str(data.metadata.get("sea-hil.session", {}).get("lockstep", "True")) == "True"
 
 
 def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
@@ -116,6 +147,15 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     driver = driver_block(data)
     if driver is not None:
         summary[TIMING_KEY]["driver"] = driver
+    summary["drive_faults"] = drive_faults(data)
+    rec = recording_block(data)
+    if rec is not None:
+        summary["recording"] = rec
+    losses = link_losses(data, summary["edge"])
+    if losses is not None:
+        summary["link_losses"] = losses
+    cfg = verdict_config_of(data.attachments.get("config.toml"))
+    summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
     return summary
 
 

@@ -25,6 +25,7 @@ from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import read_session
 from sea_hil.report.console import ProgressSample
+from sea_hil.report.limbs import META_FLOOR
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
@@ -34,6 +35,7 @@ from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
 from sea_hil.runtime.realtime import child_cpus, child_priority
+from sea_hil.runtime.timer_floor import measure_floor
 from sea_hil.session.secure import secure_profile
 
 
@@ -99,6 +101,9 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     if opts.inner == "remote" and cfg.trigger.placement == "edge":   # the CLI picks the paper's scheme for it
         raise ConfigError("inner 'remote' computes the voltage from every state: it needs trigger.placement = "
                           "'controller' (--trigger controller --compensation none)")
+    # real time: the host's own floor (an empty 1 kHz loop) before anything of the session runs (docs/verdict.md)
+    floor = measure_floor(cfg.verdict.floor_measure_s, cfg.timing.realtime_priority) \
+        if not opts.lockstep and cfg.verdict.floor_measure_s > 0 else None
     t0 = time.monotonic()
     # SIGTERM/SIGHUP raise `Terminated` here: the builder's close path ends the controller and closes the recording
     with stop_on_signals(), SessionBuilder(cfg, lockstep=opts.lockstep) as b:
@@ -123,7 +128,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
             b.callback(end_process, proc)
-        _host_nodes(b, opts, session, proc, limbs, t0, log)
+        _host_nodes(b, opts, session, proc, limbs, t0, log, floor)
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
     summary = session_summary(data, opts.controller)   # every limb (`limbs`, `limbs_total`)
@@ -143,7 +148,7 @@ def _without_live(cfg: SeaHilConfig) -> SeaHilConfig:
 
 
 def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, limbs: tuple[Limb, ...], t0: float,
-                log: Callable[..., None]) -> None:
+                log: Callable[..., None], floor: dict[str, Any] | None = None) -> None:
     """Plant, edge and recorder in this process until the controller `proc` (a child process, or the outside
     controller's watch) has finished its cycles. Closing (the builder's stack, last in first out): the controller
     ends, plant and edge stop, the recorder's taps stop, the edge's final stats are recorded and the MCAP file is
@@ -161,6 +166,8 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
     rec.add_metadata("sea-hil.limbs", nodes.metadata())
+    if floor is not None:   # the verdict weighs the driver's tick misses against it (sea_hil/report/verdict.py)
+        rec.add_metadata(META_FLOOR, {k: str(v) for k, v in floor.items()})
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
     recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.002, time_base=time_base)
