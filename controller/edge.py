@@ -36,6 +36,7 @@ from sea_hil.controller.edge_uplink import StatePublisher
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
+from sea_hil.fault_explain import LatchWatch
 from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
                                         unwrap_us)
 from sea_hil.protocol.keys import Keys
@@ -71,6 +72,8 @@ class EdgeNode(Node):
         self.max_sample_age_ns = int(round(cfg.safety.setpoint.max_sample_age_s * 1e9))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()
+        self.latches = LatchWatch(cfg.safety.drive if cfg.safety.drive.enabled else None,
+                                  (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))   # a drive latch, explained once
         self.payloads = PayloadCounters()
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
         self.sync = (clock or RealTimeClock()).edge(self)
@@ -133,11 +136,22 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
+            self._explain_latch(frame)
         elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:
                 with self.lock:
                     self._on_feedback(fb, now_ns)
+
+    def _explain_latch(self, hb: Heartbeat) -> None:
+        """Once per latch of the drive's safe state: one log line with the limit, the measured value (the newest
+        feedback) and who clears it (sea_hil/fault_explain.py)."""
+        fb = self.last_fb
+        if fb is not None:
+            self.latches.feedback(hb.node_id, fb.theta_rad, fb.omega_rad_s, fb.delta_m)
+        line = self.latches.on_heartbeat(hb)
+        if line is not None:
+            log.error("%s", line)
 
     def _on_feedback(self, fb: Feedback, rx_ns: int) -> None:
         if self.sync.repeat_feedback(fb):

@@ -21,7 +21,7 @@ from typing import Any, Sequence
 import can
 
 from sea_hil.config import SeaHilConfig, load_config
-from sea_hil.errors import SeaHilError
+from sea_hil.errors import SeaHilError, VerdictError
 
 __all__ = ["DriveSnapshot", "EmulatedDriver", "SeaHilConfig", "SeaHilError", "Session", "load_config"]
 
@@ -123,17 +123,21 @@ class Session:
     """A whole session, as `sea-hil run` runs it: `run()` blocks until the cycles are done and returns the summary
     (`summary.json`); `start()` runs it in a background thread (`wait()` for the summary). Outputs (MCAP recording,
     summary.json, figures) go to `out` (default: a temporary directory removed by `close()`). `close()` before the
-    end stops the session early (its controller process is ended; `summary` stays None)."""
+    end stops the session early (its controller process is ended; `summary` stays None). The config's inputs are
+    checked at construction (ConfigError; `allow_unsafe_start=True` runs it anyway); `strict=True`: `run()` and
+    `wait()` raise `VerdictError` (the summary in its `summary`) when the verdict is not ok (docs/verdict.md)."""
 
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
-                 progress: bool = False) -> None:
+                 progress: bool = False, strict: bool = False, allow_unsafe_start: bool = False) -> None:
+        from sea_hil.input_check import enforce
         from sea_hil.session.run import RunOptions
         if controller not in ("et", "tt"):
             raise SeaHilError(f"controller must be 'et' or 'tt', not {controller!r}")
         if cycles < 1:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
-        self.config = _config(config)
+        self.config = enforce(_config(config), force=allow_unsafe_start)   # ConfigError: docs/verdict.md
+        self.strict = strict
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
         self.out = Path(out) if out is not None else Path(self._tmp.name)   # type: ignore[union-attr]
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,
@@ -154,6 +158,10 @@ class Session:
         from sea_hil.session.run import run_session
         try:
             self.summary = run_session(self.config, self._opts, log=lambda _msg: None)
+            verdict = self.summary.get("verdict") or {}
+            if self.strict and verdict.get("status") != "ok":
+                raise VerdictError(self.summary, f"verdict {verdict.get('status')}: " + "; ".join(
+                    r["message"] for r in verdict.get("reasons", [])))
         except SeaHilError as err:
             if not self._closing:
                 self.error = err
@@ -182,6 +190,8 @@ class Session:
         self._thread.join(timeout_s)
         if self._thread.is_alive():
             raise SeaHilError(f"the session did not end within {timeout_s} s")
+        if isinstance(self.error, VerdictError):
+            raise self.error
         if self.error is not None:
             raise SeaHilError(f"the session failed: {self.error}") from self.error
         return self.summary or {}

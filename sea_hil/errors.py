@@ -36,3 +36,12 @@ class Terminated(SeaHilError):
     def __init__(self, signum: int, message: str) -> None:
         super().__init__(message)
         self.signum = signum
+
+
+class VerdictError(SeaHilError):
+    """A strict session (`Session(strict=True)`, the pytest plugin's `sea_session`) ended with a verdict that is not
+    ok (docs/verdict.md); `summary` is its summary.json, the message lists the verdict's reasons."""
+
+    def __init__(self, summary: dict, message: str) -> None:
+        super().__init__(message)
+        self.summary = summary

@@ -1,4 +1,5 @@
-"""`sea-hil report`: figures, report.md and summary.json from a session recording."""
+"""`sea-hil report`: figures, report.md and summary.json from a session recording; its verdict (docs/verdict.md) on
+stderr, at the top of report.md and in summary.json."""
 from __future__ import annotations
 
 import argparse
@@ -18,5 +19,11 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.report.writer import run_report
     if not args.recording.is_file():
         raise RecordingError(f"no such recording: {args.recording}")
-    print(json.dumps(run_report(args.recording, args.out), indent=2, sort_keys=True))
+    summary = run_report(args.recording, args.out)
+    print(json.dumps(summary, indent=2, sort_keys=True))
+    import sys
+
+    from sea_hil.report.console import verdict_rows
+    for what, value in verdict_rows(summary):   # the verdict on stderr too: stdout stays the summary's JSON
+        print(f"sea-hil report: {what.strip()}: {value}", file=sys.stderr)
     return 0

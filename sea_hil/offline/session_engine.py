@@ -150,7 +150,7 @@ def engine_verdict(summary: dict[str, Any], faulted: bool, saturated_steps: int,
     """`summary` with the engine's `drive_faults` (the engine knows only whether a soft limit faulted the drive, not
     when: `t_s` None) and its `verdict` under `cfg`'s `[verdict]`, judging the saturated inner steps too (of
     `samples` driver periods; the engine's summary has no edge counters)."""
-    from sea_hil.report.drive_faults import POLICY_USER
+    from sea_hil.fault_explain import POLICY_USER
     from sea_hil.report.verdict import verdict
     faults = [{"node_id": 1, "t_s": None, "state": "FAULT", "flags": ["soft limit"], "in_fault_s": None,
                "cleared": False, "clear_policy": POLICY_USER}] if faulted else []

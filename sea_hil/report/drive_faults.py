@@ -7,34 +7,21 @@ at the next heartbeat out of it (a CLEAR_ERRORS took it back to INIT) or at the 
 latched). Times are the heartbeat's, so they carry the heartbeat period (`can.heartbeat_rate_hz`, 10 Hz) as their
 resolution: `t_s` is seconds since the recording's first CAN frame (the drive's own clock in lockstep). The flags
 are every error flag the drive reported during the latch; `clear_policy` says who can end it (the edge's policy,
-controller/edge_command.py): a watchdog latch is cleared by the edge when setpoints are fresh again (real time; a
-lockstep session never clears), a soft-limit latch or an e-stop needs the user.
+controller/edge_command.py; the words: sea_hil/fault_explain.py): a watchdog latch is cleared by the edge when setpoints are fresh again (real time; a
+lockstep session never clears), a soft-limit latch or an e-stop needs the user. `after_session`: the latch began
+after the last measured sample (the `/tracking` record of the largest cycle time `t_s`): in real time the edge stops
+commanding once setpoints stop and the drive's watchdog takes the limb to its safe state, as designed; the verdict
+lists such a latch but does not count it.
 """
 from __future__ import annotations
 
 from typing import Any
 
 from sea_hil.errors import MalformedFrame
+from sea_hil.fault_explain import SAFE, clear_policy, flag_names
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import CMD_MASK, LIMIT_FLAGS, DriverState, ErrorFlags, Heartbeat
+from sea_hil.protocol.can_frames import CMD_MASK, DriverState, ErrorFlags, Heartbeat
 from sea_hil.recorder.reader import SessionData
-
-SAFE = (DriverState.FAULT, DriverState.ESTOP)
-POLICY_EDGE_CLEARS = "the edge clears it (CLEAR_ERRORS) once setpoints are fresh again (real time; never in lockstep)"
-POLICY_USER = "needs the user: fix the cause, then CLEAR_ERRORS (the edge never clears a soft-limit fault or an e-stop)"
-
-
-def flag_names(flags: ErrorFlags | int) -> list[str]:
-    """The names of the set error flags, in bit order."""
-    return [f.name or "" for f in ErrorFlags if f & flags]
-
-
-def clear_policy(state: DriverState, flags: ErrorFlags | int) -> str:
-    """Who ends a latch in `state` with `flags` (see the module docstring)."""
-    if state is DriverState.ESTOP or flags & (LIMIT_FLAGS | ErrorFlags.ESTOP):
-        return POLICY_USER
-    return POLICY_EDGE_CLEARS
-
 
 def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[int, Heartbeat]]:
     out = []
@@ -60,6 +47,9 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     if not raw:
         return []
     t0_ns = raw[0].log_time_ns
+    tracking = data.messages.get("/tracking", [])
+    last = max(tracking, key=lambda m: m.payload.get("t_s", float("-inf")), default=None)
+    end_ns = last.log_time_ns if last is not None else None   # the last measured sample (largest cycle time)
     open_: dict[int, dict[str, Any]] = {}
     last_ns: dict[int, int] = {}
     latches: list[dict[str, Any]] = []
@@ -74,14 +64,16 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
                 if hb.state is DriverState.ESTOP:
                     cur["state"] = hb.state
         elif cur is not None:
-            latches.append(_latch(cur, t_ns, t0_ns, cleared=True))
+            latches.append(_latch(cur, t_ns, t0_ns, end_ns, cleared=True))
             del open_[hb.node_id]
-    latches += [_latch(cur, last_ns[n], t0_ns, cleared=False) for n, cur in open_.items()]
+    latches += [_latch(cur, last_ns[n], t0_ns, end_ns, cleared=False) for n, cur in open_.items()]
     return sorted(latches, key=lambda e: (e["t_s"], e["node_id"]))
 
 
-def _latch(cur: dict[str, Any], end_ns: int, t0_ns: int, *, cleared: bool) -> dict[str, Any]:
+def _latch(cur: dict[str, Any], until_ns: int, t0_ns: int, session_end_ns: int | None, *, cleared: bool
+           ) -> dict[str, Any]:
     state, flags = cur["state"], ErrorFlags(cur["flags"])
+    after = session_end_ns is not None and cur["t_ns"] > session_end_ns
     return {"node_id": int(cur["node_id"]), "t_s": (cur["t_ns"] - t0_ns) * 1e-9, "state": state.name,
-            "flags": flag_names(flags), "in_fault_s": (end_ns - cur["t_ns"]) * 1e-9, "cleared": cleared,
-            "clear_policy": clear_policy(state, flags)}
+            "flags": flag_names(flags), "in_fault_s": (until_ns - cur["t_ns"]) * 1e-9, "cleared": cleared,
+            "clear_policy": clear_policy(state, flags), "after_session": after}

@@ -85,6 +85,8 @@ def _reason(code: str, severity: str, message: str, value: Any, threshold: Any, 
 def _fault_reasons(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
     out = []
     for f in summary.get("drive_faults") or []:
+        if f.get("after_session"):
+            continue   # the designed safe state after the last measured sample (sea_hil/report/drive_faults.py)
         flags = "|".join(f["flags"]) or "no flags"
         code = "estop" if f["state"] == "ESTOP" else \
             "watchdog_trip" if f["flags"] == ["WATCHDOG"] else "drive_fault"

@@ -121,10 +121,18 @@ def _limb_rows(summary: dict[str, Any]) -> list[str]:
     return rows
 
 
+def _verdict_lines(summary: dict[str, Any]) -> list[str]:
+    """The verdict first (docs/verdict.md): its status and every reason."""
+    v = summary.get("verdict") or {}
+    out = [f"verdict: **{v.get('status', '?')}**", ""]
+    out += [f"- {r['severity']}: {r['code']}: {r['message']}" for r in v.get("reasons", [])]
+    return out + ([""] if v.get("reasons") else [])
+
+
 def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     tx = summary["transmissions"]
     lat = summary["timing"]["latency_us"]
-    lines = ["# sea-hil session report", "",
+    lines = ["# sea-hil session report", "", *_verdict_lines(summary),
              f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
              f"file complete: {data.complete}, messages: {data.message_count}", "",
              "| figure | value |", "|---|---|",

@@ -74,9 +74,10 @@ def listen_endpoints(cfg: SeaHilConfig, opts: RunOptions) -> tuple[str, ...]:
 
 def controller_config(cfg: SeaHilConfig, endpoint: str, priority: int | None = None) -> SeaHilConfig:
     """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only; with
-    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md)."""
+    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md). Its inputs are not
+    checked again (`[verdict] check_inputs = false`): whoever started the session has decided."""
     z = type(cfg.zenoh).model_validate({**cfg.zenoh.model_dump(), "listen": (), "connect": (endpoint,)})
-    update: dict[str, Any] = {"zenoh": z}
+    update: dict[str, Any] = {"zenoh": z, "verdict": cfg.verdict.model_copy(update={"check_inputs": False})}
     if priority is not None:
         update["timing"] = cfg.timing.model_copy(update={"controller_priority": priority})
     return cfg.model_copy(update=update)
