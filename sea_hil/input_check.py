@@ -101,24 +101,39 @@ def _motion(cfg: SeaHilConfig) -> tuple[str, np.ndarray, np.ndarray, np.ndarray,
     return key, t, theta, omega, alpha, tl, lq, lw
 
 
+def _tag(message: str, what: str) -> str:
+    """A range problem's joint, quantity and limit, whichever part of the motion it is of."""
+    body = message.split(": ", 1)[1].replace(f" {what} ", " ")
+    words = body.split()
+    return f"{words[0]} {words[1]} {words[-5]}"   # joint, quantity, the limit's key
+
+
 def _trajectory(cfg: SeaHilConfig) -> Iterator[Problem]:
     from sea_hil.controller.nominal import nominal_params
     from sea_hil.controller.smc import smc_law
     key, t, theta, omega, alpha, tl, lq, lw = _motion(cfg)
     drive, stops = cfg.safety.drive, cfg.plant.end_stops
+    start_bad = any(True for _ in _start_pose(cfg))   # then the lead-in starts outside: said once, of the start
+    said: set[str] = set()   # (joint, quantity, limit) of the trajectory: the lead-in ending on it is not said again
     for what, k, tt, q, w in (("trajectory", key, t, theta, omega),
                               ("lead-in", "trajectory.lead_in_s", tl, lq, lw)):
-        if not len(tt):
+        if not len(tt) or (start_bad and what == "lead-in"):
             continue
+        found: list[Problem] = []
         if drive.enabled:
-            yield from _range(k, f"{what} angle", q, drive.position_min_rad, drive.position_max_rad,
-                              "safety.drive.position_min_rad", "safety.drive.position_max_rad", "rad", tt)
+            found += _range(k, f"{what} angle", q, drive.position_min_rad, drive.position_max_rad,
+                            "safety.drive.position_min_rad", "safety.drive.position_max_rad", "rad", tt)
             vmax = drive.velocity_max_rad_s
-            yield from _range(k, f"{what} velocity", w, (-vmax[0], -vmax[1]), vmax,
-                              "-safety.drive.velocity_max_rad_s", "safety.drive.velocity_max_rad_s", "rad/s", tt)
+            found += _range(k, f"{what} velocity", w, (-vmax[0], -vmax[1]), vmax,
+                            "-safety.drive.velocity_max_rad_s", "safety.drive.velocity_max_rad_s", "rad/s", tt)
         if stops.enabled:
-            yield from _range(k, f"{what} angle", q, stops.min_rad, stops.max_rad, "plant.end_stops.min_rad",
-                              "plant.end_stops.max_rad", "rad", tt)
+            found += _range(k, f"{what} angle", q, stops.min_rad, stops.max_rad, "plant.end_stops.min_rad",
+                            "plant.end_stops.max_rad", "rad", tt)
+        for prob in found:
+            tag = _tag(prob.message, what)
+            if tag not in said:
+                said.add(tag)
+                yield prob
     env = cfg.safety.setpoint
     if not (env.enabled or drive.enabled):
         return

@@ -34,10 +34,9 @@ def _main(args: argparse.Namespace) -> int:
     what = args.config or "the embedded defaults"
     if args.trajectory:
         what += f" with trajectory {args.trajectory}"
-    for p in found:
+    for p in found:   # one line per problem, as `run` would print the first
         print(f"sea-hil check: error: {p.message}", file=sys.stderr)
     if found:
-        print(f"sea-hil check: {what}: {len(found)} problem{'s' if len(found) > 1 else ''}", file=sys.stderr)
         return 2
     print(f"sea-hil check: {what}: ok")
     return 0
