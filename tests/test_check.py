@@ -10,8 +10,9 @@ import pytest
 from sea_hil.cli import main
 
 ROOT = Path(__file__).resolve().parent.parent
-SHIPPED_CONFIGS = sorted((ROOT / "configs").glob("*.toml"))
+SHIPPED_CONFIGS = sorted((ROOT / "configs").glob("*.toml")) + sorted((ROOT / "tests" / "fixtures").rglob("*.toml"))
 SHIPPED_TRAJECTORIES = sorted((ROOT / "configs").glob("*.csv"))
+SHIPPED_TRACES = sorted((ROOT / "configs" / "traces").glob("*.csv"))
 
 
 def _lines(err: str) -> list[str]:
@@ -20,7 +21,7 @@ def _lines(err: str) -> list[str]:
 
 
 def test_shipped_configs_and_trajectories_are_found() -> None:
-    assert len(SHIPPED_CONFIGS) >= 6 and SHIPPED_TRAJECTORIES
+    assert len(SHIPPED_CONFIGS) >= 7 and SHIPPED_TRAJECTORIES and SHIPPED_TRACES
 
 
 @pytest.mark.parametrize("path", SHIPPED_CONFIGS + [None], ids=lambda p: "default" if p is None else p.name)
@@ -33,6 +34,12 @@ def test_every_shipped_config_passes(path: Path | None, capsys: pytest.CaptureFi
 @pytest.mark.parametrize("csv", SHIPPED_TRAJECTORIES, ids=lambda p: p.name)
 def test_every_shipped_trajectory_passes(csv: Path, capsys: pytest.CaptureFixture[str]) -> None:
     assert main(["check", "--trajectory", str(csv)]) == 0
+    assert capsys.readouterr().out.strip().endswith(": ok")
+
+
+@pytest.mark.parametrize("trace", SHIPPED_TRACES, ids=lambda p: p.name)
+def test_every_shipped_link_trace_passes(trace: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    assert main(["check", "--uplink", f"trace={trace}", "--downlink", f"trace={trace}"]) == 0
     assert capsys.readouterr().out.strip().endswith(": ok")
 
 
