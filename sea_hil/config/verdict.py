@@ -39,5 +39,5 @@ class VerdictConfig(_Frozen):
                                            "plant.voltage_limit_v [% of steps]")
     rejections_max: int = Field(0, ge=0, description="each rejection counter (malformed frames and payloads, "
                                 "foreign epochs, unexpected payloads, bus errors): the most it may count")
-    recording_losses_max: int = Field(0, ge=0, description="messages the recorder dropped, could not write, or CAN "
-                                      "frames it missed")
+    recording_losses_max: int = Field(0, ge=0, description="messages the recorder dropped or could not write "
+                                      "(summary.json recording.lost)")

@@ -96,16 +96,17 @@ RECORDING_LOSS_KEYS = ("dropped", "write_errors", "can_frames_missed", "recorder
 
 
 def recording_block(data: SessionData) -> dict[str, Any] | None:
-    """summary.json `recording`: what the recorder lost (each counter, and `lost`: their sum, less the VOLTAGE_CMDs
-    the edge never sent for late samples, which its seq-gap count cannot tell from frames it missed) and whether the
-    file is complete; None for a recording without final counters (the offline session engine's)."""
+    """summary.json `recording`: what the recorder lost (each counter, and `lost`: the sum of those that are surely its
+    own -- messages dropped or not written -- without `can_frames_missed`, whose seq gaps cannot tell a frame the
+    recorder missed from one its sender never sent) and whether the file is complete; None for a recording without
+    final counters (the offline session engine's)."""
     final = data.metadata.get("sea-hil.final")
     if not final:
         return None
     counts = {k: int(float(final.get(k, 0) or 0)) for k in RECORDING_LOSS_KEYS}
-    # a CAN seq gap is also a frame its sender never sent: the edge's unanswered (late) samples are not losses
-    late = int(final_edge_stats(data).get("late_samples", 0))
-    lost = sum(v for k, v in counts.items() if k != "can_frames_missed") + max(0, counts["can_frames_missed"] - late)
+    # a CAN seq gap is also a frame its sender never sent (a skipped driver tick, a sample the edge left unanswered):
+    # reported, not counted as the recorder's loss
+    lost = sum(v for k, v in counts.items() if k != "can_frames_missed")
     return {**counts, "lost": lost, "complete": bool(data.complete)}
 
 

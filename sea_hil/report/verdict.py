@@ -73,7 +73,7 @@ COUNTER_RULES: tuple[CounterRule, ...] = (
     CounterRule("saturated_steps", ("saturated_steps",), "saturated_steps_max_pct",
                 "inner-loop steps with the voltage clipped at plant.voltage_limit_v", _inner_steps),
     CounterRule("recording_losses", ("recording", "lost"), "recording_losses_max",
-                "messages the recorder dropped or could not write, CAN frames it missed"),
+                "messages the recorder dropped or could not write"),
     *(CounterRule("rejections", path, "rejections_max", what) for path, what in REJECTION_COUNTERS),
 )
 
@@ -88,8 +88,9 @@ def _fault_reasons(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
         if f.get("after_session"):
             continue   # the designed safe state after the last measured sample (sea_hil/report/drive_faults.py)
         flags = "|".join(f["flags"]) or "no flags"
+        limit = any(n.endswith("_LIMIT") for n in f["flags"])
         code = "estop" if f["state"] == "ESTOP" else \
-            "watchdog_trip" if f["flags"] == ["WATCHDOG"] else "drive_fault"
+            "watchdog_trip" if "WATCHDOG" in f["flags"] and not limit else "drive_fault"
         t = "at an unrecorded time" if f.get("t_s") is None else f"at {f['t_s']:.3f} s"
         held = "" if f.get("in_fault_s") is None else \
             f", {f['in_fault_s']:.2f} s in {f['state']}" + ("" if f.get("cleared") else " (still latched at the end)")
