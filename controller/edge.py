@@ -136,22 +136,13 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-            self._explain_latch(frame)
+            if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:
+                log.error("%s", line)   # once per latch: the limit, the measured value, who clears it
         elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:
                 with self.lock:
                     self._on_feedback(fb, now_ns)
-
-    def _explain_latch(self, hb: Heartbeat) -> None:
-        """Once per latch of the drive's safe state: one log line with the limit, the measured value (the newest
-        feedback) and who clears it (sea_hil/fault_explain.py)."""
-        fb = self.last_fb
-        if fb is not None:
-            self.latches.feedback(hb.node_id, fb.theta_rad, fb.omega_rad_s, fb.delta_m)
-        line = self.latches.on_heartbeat(hb)
-        if line is not None:
-            log.error("%s", line)
 
     def _on_feedback(self, fb: Feedback, rx_ns: int) -> None:
         if self.sync.repeat_feedback(fb):

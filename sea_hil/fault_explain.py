@@ -9,6 +9,7 @@ CAN tap writes it to `/log/faults` (sea_hil/recorder/can_tap.py), where the live
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Any
 
 from sea_hil.config import DriveLimitsConfig
 from sea_hil.protocol.can_frames import LIMIT_FLAGS, DriverState, ErrorFlags, Heartbeat
@@ -95,7 +96,11 @@ class LatchWatch:
         if delta_m is not None:
             m.delta_m = delta_m
 
-    def on_heartbeat(self, hb: Heartbeat) -> str | None:
+    def on_heartbeat(self, hb: Heartbeat, fb: Any = None) -> str | None:
+        """The line of a new latch, or None; `fb` (anything with theta_rad, omega_rad_s, delta_m: the edge's newest
+        Feedback) is taken as the drive's measured values first."""
+        if fb is not None:
+            self.feedback(hb.node_id, fb.theta_rad, fb.omega_rad_s, fb.delta_m)
         before = self._latched.get(hb.node_id)
         if hb.state not in SAFE:
             self._latched.pop(hb.node_id, None)

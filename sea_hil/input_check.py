@@ -14,7 +14,10 @@ consistent: the answer deadline `safety.setpoint.max_answer_age_s` above the lin
 (`enabled = false`) is not checked.
 
 `enforce` raises the first problem as a ConfigError (the CLI prints it and exits 2) unless `[verdict] check_inputs`
-is false or the caller forces past it (`--allow-unsafe-start`); `sea-hil check` prints every problem.
+is false or the caller forces past it (`--allow-unsafe-start`); `sea-hil check` prints every problem. Who checks:
+`run`, `sweep` and `Session` (everything); `simulate` what its offline closed loop has (the end stops, the CSV, the
+periods: it has no drive firmware and no edge); not the single-node commands (`plant`, `edge`, `controller`,
+`record`): whoever starts the session decides.
 """
 from __future__ import annotations
 
@@ -181,9 +184,19 @@ def _links_and_periods(cfg: SeaHilConfig) -> Iterator[Problem]:
                                                 f"{cfg.can.feedback_rate_hz:g} Hz): the drive would trip at once")
 
 
-def problems(cfg: SeaHilConfig, *, motion: bool = True) -> list[Problem]:
+def offline_view(cfg: SeaHilConfig) -> SeaHilConfig:
+    """What the offline closed loop (`sea-hil simulate`) has of `cfg`'s limits: the plant's end stops, no drive
+    firmware (soft limits) and no edge (setpoint envelope)."""
+    safety = cfg.safety.model_copy(update={"drive": cfg.safety.drive.model_copy(update={"enabled": False}),
+                                           "setpoint": cfg.safety.setpoint.model_copy(update={"enabled": False})})
+    return cfg.model_copy(update={"safety": safety, "link": type(cfg.link)()})
+
+
+def problems(cfg: SeaHilConfig, *, motion: bool = True, offline: bool = False) -> list[Problem]:
     """Every input problem of `cfg` (see the module docstring); [] when it passes. `motion=False`: only the start
-    pose, the links and the periods (cheap: a sweep checks the motion once, the links of every point)."""
+    pose, the links and the periods (cheap: a sweep checks the motion once, the links of every point);
+    `offline`: what the offline closed loop has (`offline_view`)."""
+    cfg = offline_view(cfg) if offline else cfg
     out = list(_start_pose(cfg)) + list(_links_and_periods(cfg))
     if not motion:
         return out
@@ -197,12 +210,13 @@ def problems(cfg: SeaHilConfig, *, motion: bool = True) -> list[Problem]:
     return out
 
 
-def enforce(cfg: SeaHilConfig, *, force: bool = False, motion: bool = True, where: str = "") -> SeaHilConfig:
+def enforce(cfg: SeaHilConfig, *, force: bool = False, motion: bool = True, offline: bool = False,
+            where: str = "") -> SeaHilConfig:
     """`cfg` when its inputs pass (or `[verdict] check_inputs` is false, or `force`), else ConfigError with the
     first problem and how to run it anyway (`where`: a prefix naming e.g. the sweep point)."""
     if force or not cfg.verdict.check_inputs:
         return cfg
-    found = problems(cfg, motion=motion)
+    found = problems(cfg, motion=motion, offline=offline)
     if found:
         more = f" (and {len(found) - 1} more: sea-hil check)" if len(found) > 1 else ""
         raise ConfigError(f"{where}{found[0].message}{more}; --allow-unsafe-start (or [verdict] check_inputs = false) "

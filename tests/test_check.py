@@ -8,6 +8,7 @@ from pathlib import Path
 import pytest
 
 from sea_hil.cli import main
+from sea_hil.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parent.parent
 SHIPPED_CONFIGS = sorted((ROOT / "configs").glob("*.toml")) + sorted((ROOT / "tests" / "fixtures").rglob("*.toml"))
@@ -117,5 +118,24 @@ def test_check_inputs_false_lets_the_config_load(tmp_path: Path, capsys: pytest.
     from sea_hil.cli import build_parser
     cfg = tmp_path / "cfg.toml"
     cfg.write_text(BROKEN["start_above_soft_limit"][0] + "[verdict]\ncheck_inputs = false\n", encoding="utf-8")
+    args = build_parser().parse_args(["run", "--config", str(cfg), "--out", str(tmp_path)])
+    assert config_from_args(args, check="session").plant.initial_theta_rad == (0.9, 1.3)
+    cfg.write_text(BROKEN["start_above_soft_limit"][0], encoding="utf-8")
+    with pytest.raises(ConfigError, match="plant.initial_theta_rad"):
+        config_from_args(args, check="session")
+    forced = build_parser().parse_args(["run", "--config", str(cfg), "--out", str(tmp_path), "--allow-unsafe-start"])
+    assert config_from_args(forced, check="session").verdict.check_inputs is False   # the children see it too
+
+
+def test_simulate_checks_what_its_offline_loop_has(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """No drive firmware offline: a gait too fast for the drive's velocity limit simulates; an end stop still
+    refuses the start pose."""
+    from sea_hil.commands.common import config_from_args
+    from sea_hil.cli import build_parser
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text("[trajectory]\nperiod_s = 0.5\n", encoding="utf-8")
     args = build_parser().parse_args(["simulate", "--config", str(cfg), "--out", str(tmp_path)])
-    assert config_from_args(args).plant.initial_theta_rad == (0.9, 1.3)
+    assert config_from_args(args, check="offline").trajectory.period_s == 0.5
+    cfg.write_text(BROKEN["start_beyond_end_stop"][0], encoding="utf-8")
+    with pytest.raises(ConfigError, match="plant.end_stops.min_rad"):
+        config_from_args(args, check="offline")

@@ -203,3 +203,27 @@ def test_strict_simulate_exits_3_on_saturation(tmp_path: Path) -> None:
     s = json.loads((tmp_path / "o" / "summary.json").read_text(encoding="utf-8"))
     assert _codes(s)["saturated_steps"]["value"] > 1.0
     assert time.monotonic() - t0 < 120
+
+
+def test_a_latch_is_explained_once_with_limit_value_and_policy() -> None:
+    """Part 5, the pure core the edge and the recorder share (sea_hil/fault_explain.py)."""
+    from sea_hil.fault_explain import LatchWatch
+    from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+    cfg = load_config()
+    watch = LatchWatch(cfg.safety.drive, (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))
+
+    class Fb:
+        theta_rad, omega_rad_s, delta_m = (0.2, 1.35), (0.0, -2.5), (0.0, 0.0)
+
+    def hb(state: DriverState, flags: ErrorFlags) -> Heartbeat:
+        return Heartbeat(1, state, flags, 0, 0, 0)
+    assert watch.on_heartbeat(hb(DriverState.RUNNING, ErrorFlags(0)), Fb()) is None
+    line = watch.on_heartbeat(hb(DriverState.FAULT, ErrorFlags.POSITION_LIMIT), Fb())
+    assert line is not None and "knee angle 1.35 rad above safety.drive.position_max_rad[1] = 1.3 rad" in line
+    assert "needs the user" in line and "hip angle" not in line
+    assert watch.on_heartbeat(hb(DriverState.FAULT, ErrorFlags.POSITION_LIMIT), Fb()) is None      # once
+    more = watch.on_heartbeat(hb(DriverState.FAULT, ErrorFlags.POSITION_LIMIT | ErrorFlags.VELOCITY_LIMIT), Fb())
+    assert more is not None and "knee velocity -2.5 rad/s below -safety.drive.velocity_max_rad_s[1] = -2 rad/s" in more
+    assert watch.on_heartbeat(hb(DriverState.INIT, ErrorFlags(0))) is None                          # cleared
+    wd = watch.on_heartbeat(hb(DriverState.FAULT, ErrorFlags.WATCHDOG))
+    assert wd is not None and "the edge clears it" in wd and "can.watchdog_timeout_s" in wd

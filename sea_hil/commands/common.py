@@ -93,7 +93,10 @@ def _paper_scheme_where_needed(args: argparse.Namespace, ov: dict[str, Any]) -> 
         ov.setdefault("controller", {})["compensation"] = "none"
 
 
-def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
+def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None, *,
+                     check: str | None = None) -> SeaHilConfig:
+    """The config of a command's options; `check` = "session" or "offline": its inputs checked before anything moves
+    (sea_hil/input_check.py: ConfigError, exit 2), None: not checked (the single-node commands)."""
     ov: dict[str, Any] = dict(overrides or {})
     if getattr(args, "allow_unsafe_start", False):   # carried in the config: a session's children see it too
         ov["verdict"] = {**ov.get("verdict", {}), "check_inputs": False}
@@ -130,5 +133,7 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
     if period_ms is not None:
         ctrl = {**ov.get("controller", {}), "sample_period_s": check_period_ms(period_ms, cfg)}
         cfg = build({**ov, "controller": ctrl})
+    if check is None:
+        return cfg
     from sea_hil.input_check import enforce
-    return enforce(cfg)   # inputs checked before anything moves (sea_hil/input_check.py)
+    return enforce(cfg, offline=check == "offline")

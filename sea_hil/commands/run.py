@@ -59,7 +59,7 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.errors import ConfigError
     if args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
-    cfg = config_from_args(args, live_overrides(args))
+    cfg = config_from_args(args, live_overrides(args), check="session")
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,

@@ -35,7 +35,7 @@ def _main(args: argparse.Namespace) -> int:
     from sea_hil.errors import ConfigError
     if args.cycles is not None and args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
-    cfg = config_from_args(args)
+    cfg = config_from_args(args, check="offline")
     from sea_hil.report.verdict import strict_status
     if args.compare:
         tt, et, table = run_compare(cfg, args.out, args.cycles, quantise=args.quantise)
