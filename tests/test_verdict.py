@@ -227,3 +227,19 @@ def test_a_latch_is_explained_once_with_limit_value_and_policy() -> None:
     assert watch.on_heartbeat(hb(DriverState.INIT, ErrorFlags(0))) is None                          # cleared
     wd = watch.on_heartbeat(hb(DriverState.FAULT, ErrorFlags.WATCHDOG))
     assert wd is not None and "the edge clears it" in wd and "can.watchdog_timeout_s" in wd
+
+
+def test_strict_sweep_fails_at_the_end_with_the_points(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """A 2 V limit saturates the inner loop at every point (offline engine): the sweep runs them all, then --strict
+    lists each point that is not ok and exits 3; without --strict it exits 0."""
+    cfg = tmp_path / "c.toml"
+    cfg.write_text("[trajectory]\nperiod_s = 1.0\n[plant]\nvoltage_limit_v = 2.0\n[safety.drive]\nenabled = false\n"
+                   "[safety.setpoint]\nenabled = false\n", encoding="utf-8")
+    argv = ["sweep", "--config", str(cfg), "--eta", "0.5", "--r", "0.2", "--delay-ms", "0", "--jitter-ms", "0",
+            "--loss", "0", "--seed", "1", "--jobs", "1"]
+    assert main([*argv, "--out", str(tmp_path / "a"), "--strict"]) == 3
+    err = capsys.readouterr().err
+    assert "sweep --strict: 2 of 2 points not ok" in err and "saturated_steps" in err
+    rows = (tmp_path / "a" / "sweep.csv").read_text(encoding="utf-8")
+    assert "degraded" in rows
+    assert main([*argv, "--out", str(tmp_path / "b")]) == 0
