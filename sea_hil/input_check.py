@@ -98,7 +98,8 @@ def _motion(cfg: SeaHilConfig) -> tuple[str, np.ndarray, np.ndarray, np.ndarray,
         lead = LeadIn(theta0, (0.0, 0.0), s[0], duration_s)   # type: ignore[arg-type]
         tl = np.arange(-duration_s, 0.0, CHECK_STEP_S)
         ls = [lead.sample(float(v)) for v in tl]
-        lq, lw = np.array([x.theta_rad for x in ls]).reshape(-1, 2), np.array([x.omega_rad_s for x in ls]).reshape(-1, 2)
+        lq = np.array([x.theta_rad for x in ls]).reshape(-1, 2)
+        lw = np.array([x.omega_rad_s for x in ls]).reshape(-1, 2)
     else:
         tl, lq, lw = np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2))
     return key, t, theta, omega, alpha, tl, lq, lw

@@ -17,7 +17,6 @@ from sea_hil.cli import main
 from sea_hil.config import load_config
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.recorder.writer import read_session
-from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.report.verdict import COUNTER_RULES, verdict
 from sea_hil.session.run import RunOptions, run_session
@@ -110,9 +109,11 @@ def test_late_setpoints_degrade(tmp_path: Path) -> None:
 
 
 def test_envelope_rejections_degrade(tmp_path: Path) -> None:
-    """Some setpoints of the 2 s gait ask for more than 0.5 mm of spring deflection (at most 0.57 mm): rejected (paper scheme)."""
+    """Some setpoints of the 2 s gait ask for more than 0.5 mm of spring deflection (at most 0.57 mm): rejected
+    (the paper's scheme)."""
+    envelope = {"enabled": True, "deflection_max_m": [0.0005, 0.0005]}
     s = _session(tmp_path, "envelope", {"trigger": {"placement": "controller"}, "controller": {"compensation": "none"},
-                                        "safety": {"setpoint": {"enabled": True, "deflection_max_m": [0.0005, 0.0005]}}})
+                                        "safety": {"setpoint": envelope}})
     r = _codes(s)["envelope_rejections"]
     assert r["value"] == s["edge"]["setpoints_out_of_envelope"] > 0
     assert "safety.setpoint" in r["message"]

@@ -7,9 +7,9 @@ at the next heartbeat out of it (a CLEAR_ERRORS took it back to INIT) or at the 
 latched). Times are the heartbeat's, so they carry the heartbeat period (`can.heartbeat_rate_hz`, 10 Hz) as their
 resolution: `t_s` is seconds since the recording's first CAN frame (the drive's own clock in lockstep). The flags
 are every error flag the drive reported during the latch; `clear_policy` says who can end it (the edge's policy,
-controller/edge_command.py; the words: sea_hil/fault_explain.py): a watchdog latch is cleared by the edge when setpoints are fresh again (real time; a
-lockstep session never clears), a soft-limit latch or an e-stop needs the user. `after_session`: the latch began
-after the last measured sample (the `/tracking` record of the largest cycle time `t_s`): in real time the edge stops
+controller/edge_command.py; the words: sea_hil/fault_explain.py): a watchdog latch is cleared by the edge when
+setpoints are fresh again (real time; a lockstep session never clears), a soft-limit latch or an e-stop needs the
+user. `after_session`: the latch began after the last measured sample (the `/tracking` record of the largest cycle time `t_s`): in real time the edge stops
 commanding once setpoints stop and the drive's watchdog takes the limb to its safe state, as designed; the verdict
 lists such a latch but does not count it.
 """
