@@ -10,8 +10,8 @@ are every error flag the drive reported during the latch; `clear_policy` says wh
 controller/edge_command.py; the words: sea_hil/fault_explain.py): a watchdog latch is cleared by the edge when
 setpoints are fresh again (real time; a lockstep session never clears), a soft-limit latch or an e-stop needs the
 user. `after_session`: the latch began after the last measured sample (the `/tracking` record of the largest cycle
-time `t_s`): in real time the edge stops commanding once setpoints stop and the drive's watchdog takes the limb to its safe state, as designed; the verdict
-lists such a latch but does not count it.
+time `t_s`): in real time the edge stops commanding once setpoints stop and the drive's watchdog takes the limb
+to its safe state, as designed; the verdict lists such a latch but does not count it.
 """
 from __future__ import annotations
 
