@@ -36,7 +36,7 @@ from sea_hil.controller.edge_uplink import StatePublisher
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
-from sea_hil.fault_explain import LatchWatch
+from sea_hil.fault_explain import LatchWatch, latch_level
 from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, DriverState, Feedback, FeedbackAssembler, Heartbeat, SeaCodec,
                                         unwrap_us)
 from sea_hil.protocol.keys import Keys
@@ -136,8 +136,8 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
-            if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:
-                log.error("%s", line)   # once per latch: the limit, the measured value, who clears it
+            if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:   # once per latch: the limit,
+                log.log(latch_level(frame), "%s", line)         # the measured value, who clears it
         elif isinstance(frame, (Feedback, *FEEDBACK_PARTS)):   # one FD frame, or the three classic parts
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:

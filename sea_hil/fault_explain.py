@@ -29,6 +29,14 @@ def clear_policy(state: DriverState, flags: ErrorFlags | int) -> str:
     return POLICY_EDGE_CLEARS
 
 
+def latch_level(hb: Heartbeat) -> int:
+    """The log level of a latch line: ERROR when it needs the user, INFO when the edge clears it itself (a watchdog
+    trip: also the designed safe state at the end of every real-time session; the verdict counts one that happened
+    during the session)."""
+    import logging
+    return logging.ERROR if clear_policy(hb.state, hb.flags) == POLICY_USER else logging.INFO
+
+
 def flag_names(flags: ErrorFlags | int) -> list[str]:
     """The names of the set error flags, in bit order."""
     return [f.name or "" for f in ErrorFlags if f & flags]

@@ -16,6 +16,7 @@ that restarts its count (or skips a sample it did not answer) shows up as a gap 
 """
 from __future__ import annotations
 
+import logging
 from typing import Any, NamedTuple
 
 import can
@@ -25,7 +26,7 @@ from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import (CMD_BITS, DriverState, ErrorFlags, Feedback, FeedbackAngle,
                                          FeedbackJoint1, FeedbackJoint2, Heartbeat, VoltageCmd)
 from sea_hil.errors import MalformedFrame
-from sea_hil.fault_explain import LatchWatch, Measured
+from sea_hil.fault_explain import LatchWatch, Measured, latch_level
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, log_message
 
@@ -152,8 +153,9 @@ class CanTap:
         if isinstance(decoded, Heartbeat):
             logs.extend(self._driver_change(decoded))
             line = self.latches.on_heartbeat(decoded) if self.latches is not None else None
-            if line is not None:
-                logs.append((LogLevel.ERROR, f"driver{decoded.node_id}", line))
+            if line is not None:   # ERROR when it needs the user, WARNING when the edge clears it
+                level = LogLevel.ERROR if latch_level(decoded) >= logging.ERROR else LogLevel.WARNING
+                logs.append((level, f"driver{decoded.node_id}", line))
         elif self.latches is not None and isinstance(decoded, (FeedbackAngle, Feedback)):
             self.latches.feedback(decoded.node_id, decoded.theta_rad,
                                   *((decoded.omega_rad_s, decoded.delta_m) if isinstance(decoded, Feedback) else ()))
