@@ -28,8 +28,7 @@ def _main(args: argparse.Namespace) -> int:
 
     from sea_hil.commands.common import config_from_args
     from sea_hil.input_check import problems
-    args.allow_unsafe_start = True   # load it unchecked, then print every problem, not only the first
-    cfg = config_from_args(args)
+    cfg = config_from_args(args)   # loaded unchecked: every problem is printed below, not only the first
     found = problems(cfg)
     what = args.config or "the embedded defaults"
     if args.trajectory:
