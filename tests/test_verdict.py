@@ -131,7 +131,7 @@ def realtime(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """A real-time session whose downlink loses everything for 0.8 s every 4 s (a link trace): the edge stops
     commanding once its setpoint is stale, the drive's watchdog trips, the edge clears it when setpoints return; and
     whose driver stalls 20 ms every 100th tick at the clock level (its step takes that long), so it misses deadlines
-    far beyond the host's floor."""
+    far beyond the host's floor; and whose transport loses every 25th setpoint (`_lossy_transport`)."""
     from plant_emulator_stall import stalled_driver   # tests/plant_emulator_stall.py
     tmp = tmp_path_factory.mktemp("realtime")
     trace = tmp / "outage.csv"
@@ -145,9 +145,20 @@ def realtime(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
         "verdict": {"floor_measure_s": 0.2}}))
     with stalled_driver(every=100, stall_s=0.02):
         s = run_session(cfg, RunOptions(controller="et", out=tmp / "out", lockstep=False, progress=False,
-                                        figures=False))
+                                        figures=False, on_nodes=_lossy_transport))
     jsonschema.validate(s, SUMMARY_SCHEMA)
     return {"summary": s, "out": tmp / "out"}
+
+
+def _lossy_transport(plant: Any, edge: Any, proc: Any) -> None:
+    """The transport between controller and edge loses every 25th setpoint payload before the edge sees it (below
+    the link model, which runs inside the edge): what a lossy Zenoh path would do."""
+    submit, calls = edge.intake.submit, [0]
+
+    def lossy(data: bytes, *args: Any) -> bool:
+        calls[0] += 1
+        return False if calls[0] % 25 == 0 else bool(submit(data, *args))
+    edge.intake.submit = lossy
 
 
 def test_watchdog_trip_is_invalid_and_cleared_by_the_edge(realtime: dict[str, Any]) -> None:
@@ -159,6 +170,13 @@ def test_watchdog_trip_is_invalid_and_cleared_by_the_edge(realtime: dict[str, An
     data = read_session(realtime["out"] / "session.mcap")
     lines = [m.payload["message"] for m in data.messages["/log/faults"] if "latched" in m.payload["message"]]
     assert any("WATCHDOG" in ln and "the edge clears it" in ln for ln in lines), lines
+
+
+def test_setpoints_lost_beyond_the_link_model_degrade(realtime: dict[str, Any]) -> None:
+    s = realtime["summary"]
+    r = _codes(s)["lost_setpoints"]
+    assert r["value"] == s["edge"]["seq_lost"] > 0 and r["threshold"] == 0
+    assert s["edge"]["downlink_dropped"] > 0   # the model's own drops (the outage) are not in seq_lost
 
 
 def test_tick_misses_beyond_the_floor_degrade(realtime: dict[str, Any]) -> None:
