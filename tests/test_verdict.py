@@ -131,7 +131,8 @@ def realtime(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     """A real-time session whose downlink loses everything for 0.8 s every 4 s (a link trace): the edge stops
     commanding once its setpoint is stale, the drive's watchdog trips, the edge clears it when setpoints return; and
     whose driver stalls 20 ms every 100th tick at the clock level (its step takes that long), so it misses deadlines
-    far beyond the host's floor; and whose transport loses every 25th setpoint (`_lossy_transport`)."""
+    far beyond the host's floor; whose transport loses every 25th setpoint and whose edge is starved for 30 ms every
+    100th sample (`_lossy_transport`)."""
     from plant_emulator_stall import stalled_driver   # tests/plant_emulator_stall.py
     tmp = tmp_path_factory.mktemp("realtime")
     trace = tmp / "outage.csv"
@@ -159,6 +160,14 @@ def _lossy_transport(plant: Any, edge: Any, proc: Any) -> None:
         calls[0] += 1
         return False if calls[0] % 25 == 0 else bool(submit(data, *args))
     edge.intake.submit = lossy
+    on_feedback, samples = edge._on_feedback, [0]
+
+    def starved(fb: Any, rx_ns: int) -> None:   # the edge starved for 30 ms every 100th sample: a backlog
+        samples[0] += 1
+        if samples[0] % 100 == 0:
+            time.sleep(0.03)
+        on_feedback(fb, rx_ns)
+    edge._on_feedback = starved
 
 
 def test_watchdog_trip_is_invalid_and_cleared_by_the_edge(realtime: dict[str, Any]) -> None:
@@ -177,6 +186,16 @@ def test_setpoints_lost_beyond_the_link_model_degrade(realtime: dict[str, Any]) 
     r = _codes(s)["lost_setpoints"]
     assert r["value"] == s["edge"]["seq_lost"] > 0 and r["threshold"] == 0
     assert s["edge"]["downlink_dropped"] > 0   # the model's own drops (the outage) are not in seq_lost
+
+
+def test_late_samples_degrade(realtime: dict[str, Any]) -> None:
+    """The starved edge works through a backlog: the samples received more than max_sample_age_s before it got to
+    them go unanswered (late_samples), above 1 % of the samples."""
+    s = realtime["summary"]
+    r = _codes(s)["late_samples"]
+    assert r["count"] == s["edge"]["late_samples"]
+    assert r["value"] == pytest.approx(100.0 * s["edge"]["late_samples"] / s["edge"]["feedback_samples"], abs=1e-3)
+    assert r["value"] > r["threshold"] == 1.0
 
 
 def test_tick_misses_beyond_the_floor_degrade(realtime: dict[str, Any]) -> None:
