@@ -19,7 +19,7 @@ from typing import Any
 
 from sea_hil.errors import MalformedFrame
 from sea_hil.fault_explain import SAFE, clear_policy, flag_names
-from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, DriverState, ErrorFlags, Heartbeat
 from sea_hil.recorder.reader import SessionData
 
@@ -42,7 +42,7 @@ def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[i
 def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     """Every safe-state latch of every drive of the recording, in time order (see the module docstring)."""
     codec = SeaCodec(fd=None)
-    hb_cmd = codec._layout_of(Heartbeat).cmd_id   # noqa: SLF001  (the DBC's HEARTBEAT command id)
+    hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
     raw = data.messages.get("/can/raw", [])
     if not raw:
         return []
