@@ -36,9 +36,17 @@ from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import ConfigError, MalformedFrame
+from sea_hil.fault_explain import LatchWatch, latch_level
 from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import DriverState, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Heartbeat
+from sea_hil.protocol.can_frames import (
+    DriverState,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Heartbeat,
+)
 from sea_hil.protocol.canbus import CanHandle
 from sea_hil.protocol.epoch import new_epoch
 from sea_hil.protocol.keys import Keys
@@ -73,6 +81,8 @@ class EdgeNode(Node):
         self.max_sample_age_ns = int(round(cfg.safety.setpoint.max_sample_age_s * 1e9))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()
+        self.latches = LatchWatch(cfg.safety.drive if cfg.safety.drive.enabled else None,
+                                  (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))   # a drive latch, explained once
         self.payloads = PayloadCounters()
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
         self.sync: EdgeSync = (clock or RealTimeClock()).edge(self)
@@ -135,6 +145,8 @@ class EdgeNode(Node):
             return
         if isinstance(frame, Heartbeat):
             self.command_path.driver_state, self.command_path.driver_flags = frame.state, frame.flags
+            if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:   # once per latch: the limit,
+                log.log(latch_level(frame), "%s", line)         # the measured value, who clears it
         elif isinstance(frame, Feedback | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # FD, or 3 classic
             fb = frame if isinstance(frame, Feedback) else self.assembler.push(frame)
             if fb is not None:

@@ -23,7 +23,8 @@ import can
 
 from sea_hil.config.loader import load_config
 from sea_hil.config.root import SeaHilConfig
-from sea_hil.errors import SeaHilError
+from sea_hil.errors import SeaHilError, VerdictError
+from sea_hil.input_check import enforce
 from sea_hil.runtime.processes import end_process
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.run import RunOptions, run_session
@@ -129,16 +130,21 @@ class Session:
     summary.json, figures) go to `out` (default: a temporary directory removed by `close()`). `close()` before the
     end stops the session early (its controller process is ended; `summary` stays None). `controller="external"`:
     no controller is started, the session waits up to `join_timeout_s` for your own at `endpoint`, exactly as
-    `sea-hil run --controller external` (docs/external-controller.md; like it, with the trigger at the controller)."""
+    `sea-hil run --controller external` (docs/external-controller.md; like it, with the trigger at the controller).
+    The config's inputs are checked at construction (ConfigError; `allow_unsafe_start=True` runs it anyway);
+    `strict=True`: `run()` and `wait()` raise `VerdictError` (the summary in its `summary`) when the verdict is not
+    ok (docs/verdict.md)."""
 
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
-                 progress: bool = False, join_timeout_s: float = 300.0) -> None:
+                 progress: bool = False, join_timeout_s: float = 300.0, strict: bool = False,
+                 allow_unsafe_start: bool = False) -> None:
         if controller not in ("et", "tt", "external"):
             raise SeaHilError(f"controller must be 'et', 'tt' or 'external', not {controller!r}")
         if cycles < 1:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
-        self.config = _config(config)
+        self.config = enforce(_config(config), force=allow_unsafe_start)   # ConfigError: docs/verdict.md
+        self.strict = strict
         if controller == "external" and self.config.trigger.placement == "edge":
             # as `sea-hil run --controller external`: your controller speaks the documented STATE protocol (every
             # state up, docs/external-controller.md), so the trigger runs at the controller
@@ -163,6 +169,10 @@ class Session:
         """Run the session to its end in this thread; its summary."""
         try:
             self.summary = run_session(self.config, self._opts, log=lambda _msg: None)
+            verdict = self.summary.get("verdict") or {}
+            if self.strict and verdict.get("status") != "ok":
+                raise VerdictError(self.summary, f"verdict {verdict.get('status')}: " + "; ".join(
+                    r["message"] for r in verdict.get("reasons", [])))
         except SeaHilError as err:
             if not self._closing:
                 self.error = err
@@ -191,6 +201,8 @@ class Session:
         self._thread.join(timeout_s)
         if self._thread.is_alive():
             raise SeaHilError(f"the session did not end within {timeout_s} s")
+        if isinstance(self.error, VerdictError):
+            raise self.error
         if self.error is not None:
             raise SeaHilError(f"the session failed: {self.error}") from self.error
         return self.summary or {}

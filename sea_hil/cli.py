@@ -17,7 +17,7 @@ from sea_hil.errors import SeaHilError, Terminated
 from sea_hil.runtime.processes import exit_with_parent
 
 COMMANDS = ("simulate", "plant", "edge", "controller", "record", "router", "run", "report", "export", "sweep",
-            "robustness", "certs")
+            "robustness", "certs", "check")
 
 
 class OneLineParser(argparse.ArgumentParser):

@@ -9,7 +9,7 @@ from test_session_kernel import CASES, _cfg
 
 from sea_hil.config.loader import load_config
 from sea_hil.offline import session_engine
-from sea_hil.offline.session_engine import engine_summary, run_engine
+from sea_hil.offline.session_engine import engine_summary, engine_verdict, run_engine
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.report.session_summary import session_summary
 
@@ -18,7 +18,9 @@ from sea_hil.report.session_summary import session_summary
 @pytest.mark.parametrize("case", sorted(CASES))
 def test_kernel_summary_equals_the_message_summary(case, mode):
     cfg = _cfg(case)
-    assert engine_summary(cfg, mode) == session_summary(run_engine(cfg, mode).data, mode)
+    res = run_engine(cfg, mode)   # the verdict: the engine's fault flag and saturated steps, either path
+    assert engine_summary(cfg, mode) == engine_verdict(session_summary(res.data, mode), res.drive_faulted,
+                                                       res.saturated_steps, res.samples, cfg)
 
 
 @pytest.mark.parametrize("spec", ["delay=20ms,jitter=5ms,loss=5%", "delay=5ms,jitter=1ms,loss=1%"])
@@ -27,7 +29,9 @@ def test_full_length_grid_point(spec):
     cfg = load_config(None, {"link": {"seed": 1, "uplink": link, "downlink": link},
                              "trigger": {"eta": 0.2, "r": 0.05}, "disturbance": {"seed": 1}})
     fast = engine_summary(cfg, "et")
-    assert fast == session_summary(run_engine(cfg, "et").data, "et")
+    res = run_engine(cfg, "et")
+    assert fast == engine_verdict(session_summary(res.data, "et"), res.drive_faulted, res.saturated_steps,
+                                  res.samples, cfg)
     assert fast["lead_in"]["downlink_msgs"] > 0 and fast["uplink_outside_msgs"] >= 0
 
 
@@ -36,5 +40,7 @@ def test_uncovered_session_takes_the_message_path(monkeypatch):
     monkeypatch.setattr(session_engine, "run_kernel", lambda *a: calls.append(a))
     cfg = load_config(None, {"trajectory": {"period_s": 1.5, "lead_in_s": 0.3},
                              "controller": {"compensation": "predict"}})
-    assert engine_summary(cfg, "et") == session_summary(run_engine(cfg, "et").data, "et")
+    res = run_engine(cfg, "et")
+    assert engine_summary(cfg, "et") == engine_verdict(session_summary(res.data, "et"), res.drive_faulted,
+                                                       res.saturated_steps, res.samples, cfg)
     assert calls == []

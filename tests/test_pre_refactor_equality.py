@@ -75,6 +75,13 @@ SAMPLE_PERIOD_S = 0.01
 SESSION_ADDED = ("limbs", "limbs_total")
 TIMING_ADDED = ("driver", "rejections")
 # issue 29: `rejections` (every class the edge rejects, from its counters: checked against them, never dropped)
+# issue 29 (docs/verdict.md): every summary's verdict, and the session blocks it reads; the paper's path in lockstep
+# must be `ok` with nothing lost and no drive latch (never drop one)
+VERDICT_OK = {"status": "ok", "reasons": []}
+VERDICT_ADDED: dict[str, Any] = {
+    "verdict": VERDICT_OK, "drive_faults": [], "link_losses": {"uplink_beyond_model": 0},
+    "recording": {"dropped": 0, "write_errors": 0, "can_frames_missed": 0, "recorder_dropped_ops": 0,
+                  "can_tap_unfinished": 0, "lost": 0, "complete": True}}
 
 
 def one_limb_blocks(summary: dict[str, Any]) -> dict[str, Any]:
@@ -152,7 +159,8 @@ def old_offline_as_new(old: dict[str, Any]) -> dict[str, Any]:
     down, up = old["transmissions"], round(old["duration_s"] / SAMPLE_PERIOD_S)
     tx = {"downlink_msgs": down, "downlink_bytes": down * PAYLOAD_SIZE[MsgType.SETPOINT],
           "uplink_msgs": up, "uplink_bytes": up * PAYLOAD_SIZE[MsgType.STATE]}
-    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": with_totals(tx)}
+    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": with_totals(tx),
+            "verdict": VERDICT_OK, "inner_steps": round(old["duration_s"] * 1000)}   # issue 29: added
 
 
 def _param(run: tuple[str, str]) -> Any:
@@ -173,6 +181,7 @@ def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, li
     assert {k: got.pop(k) for k in SESSION_ADDED} == one_limb_blocks(got)
     assert got.pop("rejections") == rejections_blocks(got["edge"])[0]
     assert new["timing"]["rejections"] == rejections_blocks(new["timing"]["edge"])[1]
+    assert {k: got.pop(k) for k in VERDICT_ADDED} == VERDICT_ADDED
     assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
     diff = {k: (got[k], expected[k]) for k in expected if got[k] != expected[k]}
     assert not diff, diff

@@ -1,13 +1,15 @@
-"""`sea-hil report`: figures, report.md and summary.json from a session recording."""
+"""`sea-hil report`: figures, report.md and summary.json from a session recording; its verdict (docs/verdict.md) on
+stderr, at the top of report.md and in summary.json."""
 from __future__ import annotations
 
 import argparse
 import json
+import sys
 from pathlib import Path
 from typing import Any
 
 from sea_hil.errors import ConfigError, RecordingError
-from sea_hil.report.console import files_in, print_end_of_run
+from sea_hil.report.console import files_in, print_end_of_run, verdict_rows
 from sea_hil.report.node_summary import KINDS
 from sea_hil.report.writer import run_report
 
@@ -30,7 +32,9 @@ def _main(args: argparse.Namespace) -> int:
     summary = run_report(args.recording, args.out, _node_counters(args.node_summary))
     if args.json:
         print(json.dumps(summary, indent=2, sort_keys=True))
-    else:   # the whole session's result, as `run` ends (the recording against the nodes' counters included)
+        for what, value in verdict_rows(summary):   # the verdict on stderr too: stdout stays the summary's JSON
+            print(f"sea-hil report: {what.strip()}: {value}", file=sys.stderr)
+    else:   # the whole session's result, as `run` ends (the verdict first; the recording against the nodes' counters)
         print_end_of_run(summary, files_in(args.out), command="report")
     return 0
 

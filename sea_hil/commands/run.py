@@ -11,11 +11,13 @@ from sea_hil.commands.common import (
     add_period_arg,
     add_scenario_args,
     add_scheme_args,
+    add_strict_arg,
     config_from_args,
 )
 from sea_hil.errors import ConfigError
 from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
+from sea_hil.report.verdict import strict_status
 from sea_hil.session.run import RunOptions, print_summary, run_session
 
 
@@ -56,6 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write no PNG figures (about 1 s a session; `sea-hil report DIR` draws them from the "
                         "recording later): a sweep's points run with it")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
+    add_strict_arg(p)
     add_link_args(p)
     add_live_args(p)
     add_config_args(p)
@@ -71,7 +74,7 @@ def _main(args: argparse.Namespace) -> int:
     overrides = live_overrides(args)
     if args.can_profile:
         overrides = {**(overrides or {}), "can": {**(overrides or {}).get("can", {}), "profile": args.can_profile}}
-    cfg = config_from_args(args, overrides)
+    cfg = config_from_args(args, overrides, check="session")
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,
@@ -85,4 +88,4 @@ def _main(args: argparse.Namespace) -> int:
         # TT publishes and answers a state at every sample of the cycle, both ends included
         samples = round(summary["duration_s"] / cfg.controller.sample_period_s) + 1
         print_end_of_run(summary, files_in(args.out), tt_msgs=samples)
-    return 0
+    return strict_status(summary) if args.strict else 0

@@ -10,10 +10,13 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 from sea_hil.commands.common import add_scenario_args, check_period_ms
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.errors import ConfigError
+from sea_hil.input_check import enforce
+from sea_hil.report.verdict import STRICT_EXIT
 from sea_hil.sweep.grid import DIRECTIONS, LinkCondition, expand_grid, parse_axis, seed_axis
 from sea_hil.sweep.methods import (
     COMPENSATIONS,
@@ -71,6 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "timeline, links and quantisation; same summary, ~100x faster); lockstep = a `sea-hil run "
                         "--lockstep` session per point (the check that the real path behaves the same)")
     p.add_argument("--mode", choices=("lockstep", "offline"), default=None, help=argparse.SUPPRESS)  # old name
+    p.add_argument("--allow-unsafe-start", action="store_true",
+                   help="run points whose start pose, trajectory or links fail the input checks (sea-hil check)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit status 3 at the end when a point's verdict is not ok (the list is printed)")
     add_scenario_args(p)
     p.set_defaults(func=_main)
 
@@ -135,6 +142,7 @@ def _main(args: argparse.Namespace) -> int:
                         scheduler=args.scheduler, resume=args.resume, disturbance=args.disturbance,
                         mismatch=args.mismatch)
     configs = build_configs(points, opts)
+    configs = _checked(configs, args.allow_unsafe_start)
     command = _command_line(args)
 
     def log(s: str) -> None:
@@ -152,4 +160,26 @@ def _main(args: argparse.Namespace) -> int:
         f"{args.out / 'pareto.png'}, {args.out / 'methods.png'}, {args.out / 'sweep.md'}")
     if interrupted:
         raise KeyboardInterrupt
-    return 0 if ok == len(rows) else 1
+    if ok != len(rows):
+        return 1
+    if args.strict:
+        bad = [r for r in rows if r.get("verdict") != "ok"]
+        for r in bad:
+            log(f"sweep --strict: point {r['point']}: verdict {r.get('verdict') or 'missing'}"
+                f"{': ' + r['verdict_reasons'] if r.get('verdict_reasons') else ''}")
+        if bad:
+            log(f"sweep --strict: {len(bad)} of {len(rows)} points not ok")
+            return STRICT_EXIT
+    return 0
+
+
+def _checked(configs: dict[int, Any], allow_unsafe: bool) -> dict[int, Any]:
+    """The points' configs after the input checks (sea_hil/input_check.py): the start pose and trajectory once (the
+    points share them), links and periods per point; with `allow_unsafe`, unchecked and marked so (a lockstep
+    point's `sea-hil run` reads `[verdict] check_inputs = false` from its config)."""
+    if allow_unsafe:
+        return {k: c.model_copy(update={"verdict": c.verdict.model_copy(update={"check_inputs": False})})
+                for k, c in configs.items()}
+    for i, (k, c) in enumerate(configs.items()):
+        enforce(c, motion=i == 0, where=f"sweep point {k}: ")
+    return configs

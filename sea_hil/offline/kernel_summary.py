@@ -19,6 +19,7 @@ from sea_hil.offline.session_records import SETPOINT_BYTES
 from sea_hil.report.limbs import limb_entry, limbs_total
 from sea_hil.report.session_summary import rejections_blocks, tracking_or_zero
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, transmissions_block
+from sea_hil.report.verdict import verdict
 
 CYCLE, LEAD_IN, OUTSIDE = 0, 1, 2
 LATENCY_KEYS = ("min", "p50", "p90", "p99", "max")
@@ -117,4 +118,6 @@ def kernel_summary(run: KernelRun, state_key: str, state_bytes: int, controller:
     name = state_key.split("/")[-2] if run.n_recv else "limb1"
     entries = [limb_entry(name, 1, "", summary)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
+    summary["drive_faults"] = []   # as `session_summary` of the engine's messages (no heartbeats recorded)
+    summary["verdict"] = verdict({**summary, "lockstep": True})
     return summary

@@ -35,6 +35,7 @@ from sea_hil.controller.trajectory import LeadIn, make_trajectory
 from sea_hil.controller.trigger import EventTrigger, TimeTrigger
 from sea_hil.dynamics import State, initial_state
 from sea_hil.errors import SeaHilError
+from sea_hil.fault_explain import POLICY_USER
 from sea_hil.jit import compiled
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
@@ -51,6 +52,7 @@ from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.session_summary import session_summary
+from sea_hil.report.verdict import verdict
 
 __all__ = ["driver_disturbance_table", "engine_summary", "run_engine"]
 
@@ -137,8 +139,24 @@ def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, A
         if not unsupported(cfg, opts, env.traj):
             run = run_kernel(env, cfg, x, p, lsb, dist_tab)
             if run is not None:
-                return kernel_summary(run, env.rec.keys.state, env.rec.state_bytes, mode)
-        return session_summary(run_session(cfg, mode, cycles, opts=opts).data, mode)
+                return engine_verdict(kernel_summary(run, env.rec.keys.state, env.rec.state_bytes, mode),
+                                      run.faulted, run.saturated, run.k, cfg)
+        res = run_session(cfg, mode, cycles, opts=opts)
+        return engine_verdict(session_summary(res.data, mode), res.drive_faulted, res.saturated_steps, res.samples,
+                              cfg)
+
+
+def engine_verdict(summary: dict[str, Any], faulted: bool, saturated_steps: int, samples: int, cfg: SeaHilConfig
+                   ) -> dict[str, Any]:
+    """`summary` with the engine's `drive_faults` (the engine knows only whether a soft limit faulted the drive, not
+    when: `t_s` None) and its `verdict` under `cfg`'s `[verdict]`, judging the saturated inner steps too (of
+    `samples` driver periods; the engine's summary has no edge counters)."""
+    faults = [{"node_id": 1, "t_s": None, "state": "FAULT", "flags": ["soft limit"], "in_fault_s": None,
+               "cleared": False, "clear_policy": POLICY_USER}] if faulted else []
+    out = {**summary, "drive_faults": faults}
+    edge = {**out.get("edge", {}), "saturated_steps": saturated_steps, "commands_sent": samples}
+    out["verdict"] = verdict({**out, "lockstep": True, "edge": edge}, cfg.verdict)
+    return out
 
 
 def _prepare(cfg: SeaHilConfig, mode: str, cycles: int, jit: bool) -> tuple[_Env, State, Any, tuple, np.ndarray]:

@@ -19,6 +19,7 @@ from sea_hil.report.summary import (
     transmissions_block,
     write_summary,
 )
+from sea_hil.report.verdict import verdict
 
 
 def offline_transmissions(res: SimResult) -> dict[str, int]:
@@ -49,7 +50,9 @@ def run_simulation(cfg: SeaHilConfig, mode: str, out: Path, cycles: int | None, 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.process_time()
     res = simulate(cfg, mode, cycles, quantise=quantise)
-    summary = {**summarize(res, time.process_time() - t0), "quantised": quantise}
+    summary = {**summarize(res, time.process_time() - t0), "quantised": quantise,
+               "inner_steps": int(round(res.duration_s * cfg.can.feedback_rate_hz))}
+    summary["verdict"] = verdict(summary, cfg.verdict)   # offline: saturated inner steps (no drive, no link)
     title = "ET-SMC" if mode == "et" else "TT-SMC"
     tracking_figure(out / f"tracking_{mode}.png", res.t_s, res.theta_rad, res.desired_rad, title)
     inter_event_figure(out / f"inter_event_{mode}.png", res.event_t_s, title)

@@ -30,7 +30,7 @@ from sea_hil.live.feed import start_live_feed
 from sea_hil.live.link import live_child_argv
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
-from sea_hil.recorder.meta import write_session_header
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT, write_session_header
 from sea_hil.recorder.schemas import validate_payload
 from sea_hil.recorder.writer import SessionRecorder
 
@@ -200,6 +200,8 @@ def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: 
                 rec.add_metadata(*op[1:])
             elif kind == ATTACHMENT:
                 rec.add_attachment(*op[1:])
+                if op[1] == CONFIG_ATTACHMENT:   # the session's drive limits: each latch explained in /log/faults
+                    tap.configure(bytes(op[2]).decode("utf-8", "replace"))
             elif kind == CLOSE:
                 live_counts = live.counters() if live is not None else {}
                 rec.close(final_stats={**op[1], **tap.counters(), **live_counts})  # the child's CAN counts rule

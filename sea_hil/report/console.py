@@ -1,6 +1,6 @@
 """What `sea-hil run` and `sea-hil simulate` print: live progress while a session runs and one short table at the
-end (mode, messages and bytes up/down/total and the ratios to TT, tracking error per joint, latency, warnings,
-files written).
+end (the verdict and its reasons first, then mode, messages and bytes up/down/total and the ratios to TT, tracking
+error per joint, latency, warnings, files written).
 
 Rendering only: the numbers come from summary.json as written (read through `field`, which also finds the
 timing-derived fields under a `timing` key). Progress is a rich progress bar when its stream is a terminal and one
@@ -154,6 +154,17 @@ def rejection_warnings(summary: Mapping[str, Any]) -> list[str]:
         edge = {**(timing.get("edge") or {}), **(summary.get("edge") or {})}
         classes = {k: edge.get(k, 0) for k in ("stale_setpoints", "rejected_frames", "rejected_samples")}
     return [f"{rejection_label(k)}: {v}" for k, v in classes.items() if v]
+def verdict_rows(summary: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The verdict (summary.json `verdict`, docs/verdict.md) and one row per reason; [] for a summary without one."""
+    v = summary.get("verdict")
+    if not isinstance(v, Mapping):
+        return []
+    reasons = v.get("reasons") or []
+    status = str(v.get("status", "?"))
+    rows = [("verdict", status if not reasons else f"{status.upper()} ({len(reasons)} reason"
+                                                     f"{'s' if len(reasons) > 1 else ''})")]
+    rows += [(f"  {r.get('severity', '')}: {r.get('code', '')}", str(r.get("message", ""))) for r in reasons]
+    return rows
 
 
 def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, command: str = "run",
@@ -166,7 +177,8 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
         mode = f"{'lockstep' if summary.get('lockstep') else 'real time'}, {ctrl}, inner loop on " \
                f"{summary.get('inner', 'edge')}"
     lead = field(summary, "lead_in", "duration_s", default=0.0)
-    rows = [("mode", mode), ("duration", f"{summary.get('duration_s', 0.0):.2f} s" +
+    verdict_lines = verdict_rows(summary)
+    rows = verdict_lines + [("mode", mode), ("duration", f"{summary.get('duration_s', 0.0):.2f} s" +
                                         (f" (+ {lead:.2f} s lead-in)" if lead else ""))]
     rows += _messages(summary, tt_msgs)
     tracking = summary.get("tracking", {})
@@ -192,7 +204,8 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
     if isinstance(comp, Mapping):   # a recording against the nodes' own counters (sea_hil.report.completeness)
         rows.append(("recording complete", "yes" if comp.get("complete") else
                      "no: " + "; ".join(completeness_lines(comp))))
-    rows.append(("warnings", "; ".join(_warnings(summary)) or "none"))
+    rows.append(("warnings", "; ".join(_warnings(summary)) or ("none" if len(verdict_lines) <= 1 else
+                                                                   "the verdict's reasons above")))
     if files:
         rows.append(("files", "\n".join(str(f) for f in files)))
     return rows

@@ -61,9 +61,20 @@ def limbs_total(entries: list[dict[str, Any]]) -> dict[str, Any]:
             "tracking": worst}
 
 
-def driver_block(data: SessionData) -> dict[str, int] | None:
-    """Driver ticks and tick misses (real time: deadlines skipped) from the final metadata, None when not recorded."""
+META_FLOOR = "sea-hil.host_floor"   # real time: the host's empty-loop floor measured at start-up (sea_hil/session/run.py)
+
+
+def driver_block(data: SessionData) -> dict[str, Any] | None:
+    """Driver ticks and tick misses (real time: deadlines skipped) from the final metadata, None when not recorded;
+    with the host's floor measured at start-up (`floor`: ticks, misses, miss_pct, lateness p99, duration) when the
+    recording has it."""
     final = data.metadata.get("sea-hil.final", {})
     if "plant_ticks" not in final:
         return None
-    return {"ticks": int(final["plant_ticks"]), "tick_misses": int(final.get("plant_overruns", 0))}
+    out: dict[str, Any] = {"ticks": int(final["plant_ticks"]), "tick_misses": int(final.get("plant_overruns", 0))}
+    floor = data.metadata.get(META_FLOOR)
+    if floor:
+        out["floor"] = {"ticks": int(floor["ticks"]), "misses": int(floor["misses"]),
+                        "miss_pct": float(floor["miss_pct"]), "lateness_us_p99": float(floor["lateness_us_p99"]),
+                        "duration_s": float(floor["duration_s"])}
+    return out

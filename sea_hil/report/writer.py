@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from sea_hil.recorder.reader import SessionData, read_session
-from sea_hil.report.completeness import completeness_block, completeness_lines
+from sea_hil.report.completeness import completeness_lines
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
 from sea_hil.report.session_summary import session_summary, tracking_arrays
@@ -155,6 +155,12 @@ def _completeness_rows(comp: dict[str, Any]) -> list[str]:
         return []
     lines = completeness_lines(comp)
     return [f"| recording complete | {'yes' if comp.get('complete') else 'no: ' + '; '.join(lines)} |"]
+def _verdict_lines(summary: dict[str, Any]) -> list[str]:
+    """The verdict first (docs/verdict.md): its status and every reason."""
+    v = summary.get("verdict") or {}
+    out = [f"verdict: **{v.get('status', '?')}**", ""]
+    out += [f"- {r['severity']}: {r['code']}: {r['message']}" for r in v.get("reasons", [])]
+    return out + ([""] if v.get("reasons") else [])
 
 
 def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
@@ -162,7 +168,7 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     lat = summary["timing"]["latency_us"]
     comp = summary.get("completeness") or {}
     tracked = bool(data.messages.get("/tracking"))   # the controller's records of the tracking (none: no figure)
-    lines = ["# sea-hil session report", "",
+    lines = ["# sea-hil session report", "", *_verdict_lines(summary),
              f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
              f"file complete: {data.complete}, messages: {data.message_count}", "",
              "| figure | value |", "|---|---|",
@@ -195,8 +201,7 @@ def run_report(path: Path, out: Path, node_counters: dict[str, dict[str, Any]] |
     nodes' `--json` summaries) complete the completeness check where the file lacks a node's final record."""
     data = read_session(path)
     session = data.metadata.get("sea-hil.session", {})
-    summary = session_summary(data, session.get("controller", "et"))
-    summary["completeness"] = completeness_block(data, node_counters)
+    summary = session_summary(data, session.get("controller", "et"), node_counters)
     write_report_figures(data, out)
     write_summary(out / "summary.json", summary)
     (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")

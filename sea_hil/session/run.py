@@ -27,13 +27,14 @@ from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.reader import read_session
-from sea_hil.report.completeness import completeness_block
 from sea_hil.report.console import ProgressSample
+from sea_hil.report.limbs import META_FLOOR
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
 from sea_hil.runtime.processes import end_process, spawn_child, stop_on_signals
 from sea_hil.runtime.realtime import child_priority
+from sea_hil.runtime.timer_floor import measure_floor
 from sea_hil.session import limb_nodes
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
@@ -76,9 +77,10 @@ def listen_endpoints(cfg: SeaHilConfig, opts: RunOptions) -> tuple[str, ...]:
 
 def controller_config(cfg: SeaHilConfig, endpoint: str, priority: int | None = None) -> SeaHilConfig:
     """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only; with
-    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md)."""
+    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md). Its inputs are not
+    checked again (`[verdict] check_inputs = false`): whoever started the session has decided."""
     z = type(cfg.zenoh).model_validate({**cfg.zenoh.model_dump(), "listen": (), "connect": (endpoint,)})
-    update: dict[str, Any] = {"zenoh": z}
+    update: dict[str, Any] = {"zenoh": z, "verdict": cfg.verdict.model_copy(update={"check_inputs": False})}
     if priority is not None:
         update["timing"] = cfg.timing.model_copy(update={"controller_priority": priority})
     return cfg.model_copy(update=update)
@@ -103,6 +105,9 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     if opts.inner == "remote" and cfg.trigger.placement == "edge":   # the CLI picks the paper's scheme for it
         raise ConfigError("inner 'remote' computes the voltage from every state: it needs trigger.placement = "
                           "'controller' (--trigger controller --compensation none)")
+    # real time: the host's own floor (an empty 1 kHz loop) before anything of the session runs (docs/verdict.md)
+    floor = measure_floor(cfg.verdict.floor_measure_s, cfg.timing.realtime_priority) \
+        if not opts.lockstep and cfg.verdict.floor_measure_s > 0 else None
     t0 = time.monotonic()
     # SIGTERM/SIGHUP raise `Terminated` here: the builder's close path ends the controller and closes the recording
     with stop_on_signals(), SessionBuilder(cfg, lockstep=opts.lockstep) as b:
@@ -126,11 +131,10 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
             b.callback(end_process, proc)
-        _host_nodes(b, opts, session, proc, limbs, t0, log)
+        _host_nodes(b, opts, session, proc, limbs, t0, log, floor)
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
     summary = session_summary(data, opts.controller)   # every limb (`limbs`, `limbs_total`)
-    summary["completeness"] = completeness_block(data)   # the file against the nodes' own counters (issue 32)
     summary["timing"]["wall_s"] = wall_s
     if b.timelines:   # [can] emulate_bitrate: queueing delay and latency per CAN id (simulated time in lockstep)
         summary["timing"]["can_bus"] = b.bus_timing()
@@ -147,7 +151,7 @@ def _without_live(cfg: SeaHilConfig) -> SeaHilConfig:
 
 
 def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, limbs: tuple[Limb, ...], t0: float,
-                log: Callable[..., None]) -> None:
+                log: Callable[..., None], floor: dict[str, Any] | None = None) -> None:
     """Plant, edge and recorder in this process until the controller `proc` (a child process, or the outside
     controller's watch) has finished its cycles. Closing (the builder's stack, last in first out): the controller
     ends, plant and edge stop, the recorder's taps stop, the edge's final stats are recorded and the MCAP file is
@@ -165,6 +169,8 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
     rec.add_metadata("sea-hil.limbs", nodes.metadata())
+    if floor is not None:   # the verdict weighs the driver's tick misses against it (sea_hil/report/verdict.py)
+        rec.add_metadata(META_FLOOR, {k: str(v) for k, v in floor.items()})
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
     recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.002, time_base=time_base)

@@ -23,7 +23,8 @@ SCHEME_COLUMNS = ("trigger", "compensation", "edge_model", "period_ms")    # eff
 CSV_COLUMNS = ("point", "controller", *SCHEME_COLUMNS, "eta", "r", "link", "delay_ms", "jitter_ms", "loss", "cycles",
                "seed", "downlink_msgs", "downlink_bytes", "uplink_msgs", "total_msgs", "total_bytes",
                "max_err_hip_rad", "max_err_knee_rad", "max_err_rad", "rms_err_hip_rad", "rms_err_knee_rad",
-               "rms_err_rad", "latency_p50_us", "latency_p99_us", "wall_s", "status", "error", "config_sha256")
+               "rms_err_rad", "latency_p50_us", "latency_p99_us", "wall_s", "status", "error", "config_sha256",
+               "verdict", "verdict_reasons")   # the point's summary.json verdict: status, reason codes
 
 
 LINK_KEYS = ("delay_ms", "jitter_ms", "loss", "link")   # the columns of a sweep row naming its link condition
@@ -194,6 +195,8 @@ def csv_row(point: GridPoint, summary: dict[str, Any] | None, *, cycles: int, se
     if summary is None:
         return row
     row.update(_tx(summary))
+    v = summary.get("verdict") or {}
+    row.update(verdict=v.get("status", ""), verdict_reasons=" ".join(sorted({r["code"] for r in v.get("reasons", [])})))
     tracking = summary.get("tracking", {})
     mx, rms = tracking.get("max_abs_error_rad"), tracking.get("rms_error_rad")
     if mx:
