@@ -94,7 +94,12 @@ def test_report_reproduces_the_verdict(forced: tuple[Path, int, str], tmp_path: 
     run = json.loads((out / "summary.json").read_text(encoding="utf-8"))
     assert rep["verdict"] == run["verdict"]
     assert "verdict: **invalid**" in (tmp_path / "report.md").read_text(encoding="utf-8")
-    assert "sea-hil report: verdict: INVALID" in capsys.readouterr().err
+    table = capsys.readouterr().out   # the end-of-run table, the verdict first
+    assert "verdict" in table and "INVALID" in table and "drive_fault" in table
+    assert main(["report", str(out / "session.mcap"), "--out", str(tmp_path / "json"), "--json"]) == 0
+    captured = capsys.readouterr()   # --json: the summary on stdout, the verdict on stderr
+    assert json.loads(captured.out)["verdict"] == run["verdict"]
+    assert "sea-hil report: verdict: INVALID" in captured.err
 
 
 # ---- lockstep: late setpoints, envelope rejections; a clean session is ok ----------------------------------------

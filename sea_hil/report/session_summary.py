@@ -158,11 +158,8 @@ def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
     return det, timing
 
 
-def session_summary(data: SessionData, controller: str,
-                    node_counters: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
-    """summary.json of a session recording, every limb (see the module docstring); `completeness` checks the file
-    against the nodes' own counters (`node_counters` stand in for final records the file lacks), before the
-    verdict, which judges it."""
+def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
+    """summary.json of a session recording, every limb (see the module docstring)."""
     limbs = recorded_limbs(data)
     if len(limbs) == 1:
         per = [one_limb_summary(data, controller)]
@@ -181,7 +178,17 @@ def session_summary(data: SessionData, controller: str,
     losses = link_losses(data, summary["edge"])
     if losses is not None:
         summary["link_losses"] = losses
-    summary["completeness"] = completeness_block(data, node_counters)   # issue 32
+    cfg = verdict_config_of(data.attachments.get("config.toml"))
+    summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
+    return summary
+
+
+def with_completeness(summary: dict[str, Any], data: SessionData,
+                      node_counters: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
+    """`summary` of a recorder's file (`run`, `report`) with its `completeness` block (the file against the nodes'
+    own counters; `node_counters` stand in for final records the file lacks, issue 32) and the verdict judged again
+    with it. Not for the offline engine's in-memory sessions: they are not recordings."""
+    summary["completeness"] = completeness_block(data, node_counters)
     cfg = verdict_config_of(data.attachments.get("config.toml"))
     summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
     return summary
