@@ -50,6 +50,12 @@ class WindowResult:
                 + abs(r["commands_sent"] - r["/can/command"]) + abs(r["feedback_frames_sent"] - r["/can/feedback"])
                 + abs(r["can_frames"] - r["/can/raw"]))
 
+    def per_sample_us(self, group: str) -> float:
+        return 1e6 * self.cpu_s.get(group, 0.0) / max(self.samples, 1)
+
+    def total_us(self) -> float:
+        return 1e6 * sum(self.cpu_s.values()) / max(self.samples, 1)
+
 
 def recorded_counts(path: Path) -> dict[str, int]:
     """From a finished session file's metadata (summary section, no message read): the recorder's counts per
@@ -67,12 +73,6 @@ def recorded_counts(path: Path) -> dict[str, int]:
         out["commands_sent"] = int(edge["commands_sent"])
         out["feedback_frames_sent"] = 3 * int(edge["feedback_samples"]) + int(edge.get("rejected_frames", 0))
     return out
-
-    def per_sample_us(self, group: str) -> float:
-        return 1e6 * self.cpu_s.get(group, 0.0) / max(self.samples, 1)
-
-    def total_us(self) -> float:
-        return 1e6 * sum(self.cpu_s.values()) / max(self.samples, 1)
 
 
 def _task_cpu_s(pid: int) -> dict[int, tuple[float, float]]:

@@ -105,7 +105,7 @@ def message_bytes(topic: str, payload: Mapping[str, Any]) -> bytes:
     """One message of `topic`, checked and encoded: `validate_payload` + compact JSON, or for a binary channel the
     required fields + protobuf (whose encoder refuses unknown fields and wrong types); `RecordingError` if bad."""
     if topic in binary.BINARY_TOPICS:
-        if not isinstance(payload, Mapping):
+        if type(payload) is not dict and not isinstance(payload, Mapping):   # (the ABC check costs ~0.3 us)
             raise RecordingError(f"{topic}: payload must be a mapping, got {type(payload).__name__}")
         missing = [k for k in _CHANNELS[topic][3] if k not in payload]
         if missing:
