@@ -46,8 +46,11 @@ class WindowResult:
         r = self.recorded
         if not r or "commands_sent" not in r:
             return None
-        return (r["can_frames_missed"] + r["recorder_dropped_ops"] + r["dropped"] + r["write_errors"]
-                + abs(r["commands_sent"] - r["/can/command"]) + abs(r["feedback_frames_sent"] - r["/can/feedback"])
+        # as bench/bench_soak.py counts (docs/reliability.md): feedback against 3 x (driver ticks + 1), commands
+        # against the edge's VOLTAGE_CMDs; `can_frames_missed` (seq gaps) is not a loss count (a watchdog episode,
+        # where the edge answers no sample, shows as a gap)
+        return (r["recorder_dropped_ops"] + r["dropped"] + r["write_errors"] + r["can_rejected"]
+                + abs(r["commands_sent"] - r["/can/command"]) + abs(3 * (self.ticks + 1) - r["/can/feedback"])
                 + abs(r["can_frames"] - r["/can/raw"]))
 
     def per_sample_us(self, group: str) -> float:
@@ -59,19 +62,18 @@ class WindowResult:
 
 def recorded_counts(path: Path) -> dict[str, int]:
     """From a finished session file's metadata (summary section, no message read): the recorder's counts per
-    channel and of frames missed / dropped, and (one limb) the edge's commands sent and 3 x its feedback samples
-    (classic CAN: three feedback frames per sample)."""
+    channel and of frames missed / rejected / dropped, and (one limb) the edge's VOLTAGE_CMDs sent
+    (`commands_sent + arrival_commands`)."""
     from mcap.reader import make_reader
     with open(path, "rb") as f:
         meta = {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
     final = meta.get("sea-hil.final", {})
-    out = {k: int(final.get(k, 0)) for k in ("can_frames", "can_frames_missed", "recorder_dropped_ops", "dropped",
-                                                "write_errors")}
+    out = {k: int(final.get(k, 0)) for k in ("can_frames", "can_frames_missed", "can_rejected",
+                                                "recorder_dropped_ops", "dropped", "write_errors")}
     out.update({t: int(final.get(f"messages.{t}", 0)) for t in ("/can/raw", "/can/feedback", "/can/command")})
     edge = meta.get("sea-hil.edge")
     if edge and "commands_sent" in edge:
-        out["commands_sent"] = int(edge["commands_sent"])
-        out["feedback_frames_sent"] = 3 * int(edge["feedback_samples"]) + int(edge.get("rejected_frames", 0))
+        out["commands_sent"] = int(edge["commands_sent"]) + int(edge.get("arrival_commands", 0))
     return out
 
 
