@@ -20,7 +20,8 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 from benchlib import bench_args, emit, record  # noqa: E402
 
-from sea_hil.protocol.can_codec import FeedbackAngle, FeedbackJoint1, FeedbackJoint2, SeaCodec, VoltageCmd  # noqa: E402
+from sea_hil.protocol.can_codec import (T_US_MODULUS, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, SeaCodec,  # noqa: E402
+                                         VoltageCmd)
 from sea_hil.recorder.can_tap import CanTap, RawFrame  # noqa: E402
 from sea_hil.recorder.process import CANS, _apply  # noqa: E402
 from sea_hil.recorder.writer import SessionRecorder  # noqa: E402
@@ -33,7 +34,7 @@ def frames(samples: int) -> list[tuple]:
     out: list[tuple] = []
     for k in range(samples):
         x = (k % 1000) / 1000
-        for obj in (FeedbackAngle(1, k % 256, 1000 * k % (1 << 32), (0.3 * x, -0.2 * x)),
+        for obj in (FeedbackAngle(1, k % 256, 1000 * k % T_US_MODULUS, (0.3 * x, -0.2 * x)),
                     FeedbackJoint1(1, k % 256, 0.5 - x, 1e-3 * x, -1e-3 * x),
                     FeedbackJoint2(1, k % 256, x - 0.5, -1e-3 * x, 1e-3 * x),
                     VoltageCmd(1, (20 * x - 10, 10 - 20 * x), k % 256)):
