@@ -279,7 +279,7 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
         if rc != 0:
             raise RuntimeError(f"sea-hil run exited with {rc}")
         summary = {"timing": {"driver": {}}} if end_after else json.loads((out / "summary.json").read_text())
-        recorded = None if end_after or limbs != 1 else recorded_counts(out / "session.mcap")
+        recorded = None if end_after else recorded_counts(out / "session.mcap")
     groups: dict[str, float] = defaultdict(float)
     system: dict[str, float] = defaultdict(float)
     for (pid, tid), (user, kern) in b.items():
