@@ -44,7 +44,7 @@ class WindowResult:
     def lost(self) -> int | None:
         """Frames not in the recording though sent (None when not known: session ended early, several limbs)."""
         r = self.recorded
-        if not r or "commands_sent" not in r:
+        if not r or "commands_sent" not in r or self.limbs != 1:   # the edge's metadata is one limb's
             return None
         # as bench/bench_soak.py counts (docs/reliability.md): feedback against 3 x (driver ticks + 1), commands
         # against the edge's VOLTAGE_CMDs; `can_frames_missed` (seq gaps) is not a loss count (a watchdog episode,
