@@ -39,6 +39,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_scale", "6", ["--duration", "10"], ["--quick"], 130),   # 5 counts x 2 layouts x 11 s
     ("bench_cpu_per_sample", "6c", ["--limbs", "1,2,4", "--runs", "3"], ["--quick"], 900),   # 9 sessions
     ("bench_mcap", "7", ["--runs", "3"], ["--quick"], 30),
+    ("bench_recorder_child", "7c", ["--runs", "3"], ["--quick"], 30),
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
 ]

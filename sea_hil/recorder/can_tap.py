@@ -74,10 +74,11 @@ class RawFrame(NamedTuple):
 def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str, Any]]], bool, Any]:
     """((topic, payload) messages to record, rejected?, the decoded frame or the DBC's error) for one frame;
     rejected frames keep their `/can/raw`."""
-    out: list[tuple[str, dict[str, Any]]] = [
-        ("/can/raw", {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
-                      "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS,
-                      **({"is_fd": True} if f.is_fd else {})})]
+    raw = {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
+           "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS}
+    if f.is_fd:
+        raw["is_fd"] = True
+    out: list[tuple[str, dict[str, Any]]] = [("/can/raw", raw)]
     try:
         d = codec.decode_raw(f.can_id, f.data, f.dlc, is_extended=f.is_extended, is_error=f.is_error,
                              is_remote=f.is_remote, is_fd=f.is_fd)

@@ -135,10 +135,7 @@ class RecorderNode(Node):
             stopping = self.stop_event.is_set()
             while (s := sub.try_recv()) is not None:
                 self._on_zenoh(s)
-            frames = 0
-            while (msg := bus.recv(timeout=0)) is not None:
-                self.on_can(msg)
-                frames += 1
+            frames = self._drain_bus(bus)
             if stopping:
                 return
             if not frames and isinstance(self.rec, RecorderProcess):
@@ -156,13 +153,11 @@ class RecorderNode(Node):
                 if isinstance(self.rec, RecorderProcess):
                     self.rec.flush(wait=False)   # idle bus: deliver what is batched, never block
                 continue
-            while msg is not None:
-                self.on_can(msg)
-                msg = self._bus.recv(timeout=0)
+            self.on_can(msg)
+            self._drain_bus(self._bus)
             if self.tap_batch_s > 0:
                 self._pause(self.tap_batch_s)
-        while (msg := self._bus.recv(timeout=0)) is not None:   # stopping: record what is still queued
-            self.on_can(msg)
+        self._drain_bus(self._bus)   # stopping: record what is still queued
 
     def _pause(self, s: float) -> None:
         """A tap's pause between batches. Up to `SHORT_PAUSE_S` a plain sleep: `Event.wait` with a timeout costs its
@@ -173,6 +168,24 @@ class RecorderNode(Node):
             time.sleep(s)
         else:
             self.stop_event.wait(s)
+
+    def _drain_bus(self, bus: can.BusABC) -> int:
+        """Record every frame queued on `bus` (a `RecorderProcess` gets them as one batch); -> how many."""
+        if not isinstance(self.rec, RecorderProcess):
+            n = 0
+            while (msg := bus.recv(timeout=0)) is not None:
+                self.on_can(msg)
+                n += 1
+            return n
+        frames, now_ns = [], time.time_ns
+        while (msg := bus.recv(timeout=0)) is not None:
+            t = msg.timestamp
+            frames.append((round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
+                           bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
+                           bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
+        self.can_forwarded += len(frames)
+        self.rec.submit_can_batch(frames)
+        return len(frames)
 
     def on_can(self, msg: can.Message) -> None:
         """Record one frame, logged at its bus timestamp (receive time when the bus gives none)."""

@@ -14,13 +14,15 @@ from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.ros2.bag import BagSummary, write_bag
 from sea_hil.ros2.convert import Converter, session_config
 
-SEA_HIL_MARK = "/can/raw"   # every sea-hil recording registers this JSON channel (sea_hil.recorder.writer)
+SEA_HIL_MARK = "/can/raw"   # every sea-hil recording registers this channel (sea_hil.recorder.writer)
+# its encodings: JSON in recordings before the binary CAN channels, protobuf since (sea_hil.recorder.binary)
+SEA_HIL_MARK_ENCODINGS = (("jsonschema", "json"), ("protobuf", "protobuf"))
 
 
 def check_sea_hil(data: SessionData, path: str | os.PathLike[str]) -> None:
     """`RecordingError` unless `data` is a complete sea-hil recording."""
-    if data.encodings.get(SEA_HIL_MARK) != ("jsonschema", "json"):
-        raise RecordingError(f"{path} is not a sea-hil recording (no JSON channel {SEA_HIL_MARK})")
+    if data.encodings.get(SEA_HIL_MARK) not in SEA_HIL_MARK_ENCODINGS:
+        raise RecordingError(f"{path} is not a sea-hil recording (no channel {SEA_HIL_MARK})")
     if not data.complete:
         raise RecordingError(f"{path} is truncated ({data.tail_error or 'no footer'}); repair it first "
                              "(`mcap recover`), nothing exported")

@@ -173,7 +173,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
         rec.add_metadata(META_FLOOR, {k: str(v) for k, v in floor.items()})
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
-    recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.002, time_base=time_base)
+    recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.01, time_base=time_base)
                  for i, tap in enumerate(nodes.taps)]
     edge = nodes.edges[0]
     b.callback(_finish, rec, nodes, recorders, opts.lockstep)

@@ -59,7 +59,7 @@ WALL_MARGIN_S = 5.0   # the same in wall time on a loaded 2-core host (only catc
 # the router carries every state and setpoint between the edge and the controller: on the session's real-time tier
 # (`[timing]`: SCHED_FIFO as a standalone controller takes it, `node_priority`), as a zenohd on this host would be run
 ROUTER = """import sys, threading
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.protocol.zsession import make_config, open_session
 from sea_hil.runtime.realtime import ThreadPolicy, node_priority
 from sea_hil.config.timing import TimingConfig
