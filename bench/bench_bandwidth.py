@@ -29,7 +29,7 @@ def _row(s: dict[str, Any], timing: str, run: int) -> dict[str, Any]:
 def _record(timing: str, fig: str, rows: list[dict[str, Any]], runs: int, command: str) -> dict[str, Any]:
     et = [r for r in rows if r["timing"] == timing and r["controller"] == "et"]
     tt = [r for r in rows if r["timing"] == timing and r["controller"] == "tt"]
-    ratios = [e["downlink_msgs"] / t["downlink_msgs"] for e, t in zip(et, tt) if t["downlink_msgs"]]
+    ratios = [e["downlink_msgs"] / t["downlink_msgs"] for e, t in zip(et, tt, strict=True) if t["downlink_msgs"]]
     tt_msgs = sorted(t["downlink_msgs"] for t in tt)[len(tt) // 2]
     err = max(max(e["max_err_hip_rad"], e["max_err_knee_rad"]) for e in et)
     err_tt = max(max(t["max_err_hip_rad"], t["max_err_knee_rad"]) for t in tt)

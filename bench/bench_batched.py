@@ -12,17 +12,18 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.mechanics import limb_params  # noqa: E402
 from sea_hil.plant_emulator.batch import prepare_batch, step_all  # noqa: E402
 from sea_hil.plant_emulator.driver import DriverCore  # noqa: E402
 from sea_hil.plant_emulator.integrator import prepare_advance  # noqa: E402
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd, load_database  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec, load_database  # noqa: E402
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
 from sea_hil.protocol.frame_plan import FramePlan  # noqa: E402
 
 HOT = ("VOLTAGE_CMD", "FEEDBACK_ANGLE", "FEEDBACK_JOINT1", "FEEDBACK_JOINT2", "VOLTAGE_CMD_FD", "FEEDBACK_FD",
@@ -48,10 +49,10 @@ def messages() -> None:
                for s in msg.signals}
         values = tuple(row[n] for n in plan.names)
         data = msg.encode(row, strict=True)
-        print(f"  {name:16s} encode cantools {cpu_us(lambda: msg.encode(row, strict=True)):5.1f} / plan "
-              f"{cpu_us(lambda: plan.pack_plain(values)):4.1f} us; decode cantools "
-              f"{cpu_us(lambda: msg.decode(data, decode_choices=False, allow_excess=False)):5.1f} / plan "
-              f"{cpu_us(lambda: plan.unpack_plain(data)):4.1f} us")
+        print(f"  {name:16s} encode cantools {cpu_us(lambda msg=msg, row=row: msg.encode(row, strict=True)):5.1f} / plan "
+              f"{cpu_us(lambda plan=plan, values=values: plan.pack_plain(values)):4.1f} us; decode cantools "
+              f"{cpu_us(lambda msg=msg, data=data: msg.decode(data, decode_choices=False, allow_excess=False)):5.1f} / plan "
+              f"{cpu_us(lambda plan=plan, data=data: plan.unpack_plain(data)):4.1f} us")
 
 
 def codec_per_limb_sample() -> None:
@@ -60,10 +61,10 @@ def codec_per_limb_sample() -> None:
     for fd in (False, True):
         c = SeaCodec([1], fd=fd)
         msgs, m = c.encode_feedback(fb, saturate=True), c.encode(v)
-        parts = {"feedback encode": cpu_us(lambda: c.encode_feedback(fb, saturate=True)),
-                 "feedback decode": cpu_us(lambda: [c.decode(x) for x in msgs]),
-                 "voltage encode": cpu_us(lambda: c.encode(v, saturate=True)),
-                 "voltage decode": cpu_us(lambda: c.decode(m))}
+        parts = {"feedback encode": cpu_us(lambda c=c: c.encode_feedback(fb, saturate=True)),
+                 "feedback decode": cpu_us(lambda c=c, msgs=msgs: [c.decode(x) for x in msgs]),
+                 "voltage encode": cpu_us(lambda c=c: c.encode(v, saturate=True)),
+                 "voltage decode": cpu_us(lambda c=c, m=m: c.decode(m))}
         print(f"  {'CAN FD' if fd else 'classic':7s}: " + ", ".join(f"{k} {x:.1f}" for k, x in parts.items())
               + f" -> {sum(parts.values()):.1f} us CPU per limb-sample")
 
@@ -76,8 +77,8 @@ def step_per_limb_sample(limbs: list[int]) -> None:
     for n in limbs:
         cores = [DriverCore.create(i + 1, p, 1e-3, 0.1, cfg.sim.substeps, tuple(cfg.plant.initial_theta_rad),
                                    lambda t: (0.0, 0.0)) for i in range(n)]
-        alone = cpu_us(lambda: [d.step() for d in cores], 500) / n
-        batched = cpu_us(lambda: step_all(cores), 500) / n
+        alone = cpu_us(lambda cores=cores: [d.step() for d in cores], 500) / n
+        batched = cpu_us(lambda cores=cores: step_all(cores), 500) / n
         print(f"  {n} limbs: {alone:5.1f} us per limb-sample one step per limb, {batched:5.1f} us batched "
               f"({alone / batched:.2f}x)")
 

@@ -50,7 +50,7 @@ def secure_record(secure: list[dict[str, Any]], plain_runs: list[dict[str, Any]]
     pair the secure / plain ratios of p50 and p99 (`pair_p50_ratio`, `pair_p99_ratio`)."""
     p99 = pct([d["p99_us"] for d in secure], 50)
     details = [{**d, "pair_p50_ratio": d["p50_us"] / b["p50_us"], "pair_p99_ratio": d["p99_us"] / b["p99_us"],
-                "plain_p50_us": b["p50_us"], "plain_p99_us": b["p99_us"]} for d, b in zip(secure, plain_runs)]
+                "plain_p50_us": b["p50_us"], "plain_p99_us": b["p99_us"]} for d, b in zip(secure, plain_runs, strict=True)]
     r50, r99 = (statistics.median(d[k] for d in details) for k in ("pair_p50_ratio", "pair_p99_ratio"))
     return record("3s", "closed-loop latency with `--secure` (mutual TLS + ACL), interleaved A/B pairs with plain runs",
                   runs=len(secure), metric="as figure 3, secure runs; baseline = the paired plain runs' median p50",

@@ -55,8 +55,16 @@ def report(limbs: int, runs: list[WindowResult], label: str = "") -> dict[str, A
     print(f"  {'total':44s} {_span(table['total'])}  (system {_span(sys_total).strip()} %)")
     misses = [f"{r.misses}/{r.ticks}" if r.ticks else "-" for r in runs]   # "-": session ended early, not known
     print(f"  (driver tick misses in the window, loaded: {', '.join(misses)})")
+    rec = [r.recorder_us() for r in runs]
+    lost = [r.lost() for r in runs]
+    print(f"  recorder (child + taps): {_span(rec).strip()} us per limb-sample; frames lost (recording vs sent, "
+          f"whole session): {', '.join('-' if x is None else str(x) for x in lost)}")
+    for r in runs:
+        if r.recorded:
+            print(f"    recorded: {r.recorded}")
     return {"label": label, "limbs": limbs, "us_per_limb_sample": table, "samples": [r.samples for r in runs],
-            "load_avg": [r.load_avg for r in runs], "misses": misses}
+            "load_avg": [r.load_avg for r in runs], "misses": misses, "recorder_us": rec, "lost": lost,
+            "recorded": [r.recorded for r in runs]}
 
 
 def as_record(k: int, row: dict[str, Any], warm_s: float, window_s: float) -> dict[str, Any]:

@@ -19,14 +19,16 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 import can  # noqa: E402
-
 from benchlib import bench_args, cpu_loader, emit, record  # noqa: E402
 from limbrig import RigResult, run_rig  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from sea_hil.stats.histogram import LogHistogram  # noqa: E402
-from sea_hil.protocol.can_codec import FEEDBACK_PARTS, FeedbackAssembler, SeaCodec, VoltageCmd  # noqa: E402
+from sea_hil.protocol.can_assembly import FeedbackAssembler  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
+from sea_hil.protocol.can_frames import FEEDBACK_PARTS, VoltageCmd  # noqa: E402
 from sea_hil.protocol.canbus import open_bus  # noqa: E402
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.stats.histogram import LogHistogram  # noqa: E402
 
 NODE = 1
 GOAL_P99_US, GOAL_MISS = 300.0, 0.001

@@ -29,8 +29,9 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 from benchlib import REPO, bench_args, command_line, emit, record, sea_hil_run  # noqa: E402
-from sessionwatch import watch_run  # noqa: E402
 from foxglove_ws_client import receive  # noqa: E402
+from sessionwatch import watch_run  # noqa: E402
+
 from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.live.channels import CHANNELS, END_MESSAGE  # noqa: E402
 from sea_hil.recorder.reader import read_session  # noqa: E402
@@ -46,7 +47,7 @@ def _client(url: str, nice: int, timeout_s: float, result: dict[str, Any]) -> th
         os.setpriority(os.PRIO_PROCESS, threading.get_native_id(), nice)   # Linux: per-thread nice
         try:
             res = asyncio.run(receive(url, set(CHANNELS), end_message=END_MESSAGE, timeout_s=timeout_s))
-        except (OSError, asyncio.TimeoutError, SeaHilError) as err:   # a stalled session's server may vanish
+        except (TimeoutError, OSError, SeaHilError) as err:   # a stalled session's server may vanish
             result.update(live_messages=0, live_ended=False, live_error=str(err))
             return
         result.update(live_messages=sum(len(v) for v in res.messages.values()), live_ended=res.ended)
@@ -145,7 +146,7 @@ def live_records(details: list[dict[str, Any]], command: str) -> list[dict[str, 
 def replay_cost(mcap: Path, repeats: int = 5) -> dict[str, Any]:
     """CPU cost of the live view itself (LiveView.feed + LiveServer.publish, no client), replaying a recording: the
     work that would take the nodes' GIL if it were served from the `run` process (best of `repeats`)."""
-    from sea_hil.config import LiveConfig
+    from sea_hil.config.live import LiveConfig
     from sea_hil.live.server import LiveServer
     from sea_hil.live.view import LiveView
     data = read_session(mcap)
@@ -190,7 +191,7 @@ def main(argv: list[str] | None = None) -> int:
             if d["status"] == "ok":
                 print(f"pair {i + 1}/{runs} {'with' if live else 'without'} --foxglove: p99 {d['p99_us']:.0f} us  "
                       f"tick misses {d['plant_overruns']}/{d['plant_ticks']}"
-                      f"{'  live messages %d' % d.get('live_messages', 0) if live else ''}", flush=True)
+                      + (f"  live messages {d.get('live_messages', 0)}" if live else ""), flush=True)
     lock = base / "lockstep"
     sea_hil_run(lock, controller=args.controller, lockstep=True)
     cost = replay_cost(lock / "session.mcap")

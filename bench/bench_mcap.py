@@ -19,8 +19,10 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import bench_args, emit, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
-from sea_hil.config import load_config  # noqa: E402
-from sea_hil.recorder.writer import RecordedMessage, SessionRecorder, read_session  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.recorder.reader import RecordedMessage, read_session  # noqa: E402
+from sea_hil.recorder.writer import SessionRecorder  # noqa: E402
 
 
 def replay(messages: list[tuple[str, RecordedMessage]], out: Path) -> tuple[float, int, int]:

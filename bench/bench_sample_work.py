@@ -18,15 +18,16 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode  # noqa: E402
 from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us  # noqa: E402
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
 from sea_hil.protocol.canbus import open_bus  # noqa: E402
 from sea_hil.recorder.can_tap import RawFrame  # noqa: E402
 from sea_hil.stats.histogram import LogHistogram  # noqa: E402
@@ -92,7 +93,7 @@ def main(argv: list[str] | None = None) -> int:
                 spent[name] += time.thread_time() - t0
         for name in fns:
             cpu[name].append(1e6 * spent[name] / (args.number * args.limbs))
-    total = [sum(v) for v in zip(*cpu.values())]
+    total = [sum(v) for v in zip(*cpu.values(), strict=True)]
     for name, v in [*cpu.items(), ("total", total)]:
         print(f"{name:16s} {min(v):7.1f} us per limb-sample (best of {args.repeat}; median {sorted(v)[len(v) // 2]:.1f})")
     return 0

@@ -25,7 +25,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 
 from benchlib import bench_args, emit, record  # noqa: E402
 from limbrig import RigResult, run_rig  # noqa: E402
-from sea_hil.config import load_config  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.session.limbs import limb_load_pct  # noqa: E402
 
 MAX_MISS = 0.001
@@ -117,9 +118,9 @@ def main(argv: list[str] | None = None) -> int:
                         f"({duration:g} s per count; best layout: {best_layout})",
                  unit="limbs", per_run=per_run, p99=float("nan"), goal=f">= {GOAL_LIMBS} limbs (8 wanted)",
                  goal_met=min(per_run) >= GOAL_LIMBS, details=details,
-                 notes=f"measured: driver side (one PlantNode, N node ids) + edge side (N edge cores: own threads, "
-                       f"or one EdgeMux thread) in one process (1 s warm-up not counted), Zenoh to a setpoint echo "
-                       f"process; no recorder. Largest passing count per layout: "
+                 notes="measured: driver side (one PlantNode, N node ids) + edge side (N edge cores: own threads, "
+                       "or one EdgeMux thread) in one process (1 s warm-up not counted), Zenoh to a setpoint echo "
+                       "process; no recorder. Largest passing count per layout: "
                        + ", ".join(f"{lay} {min(b)}" for lay, b in bests.items()) +
                        f". One limb plans {100.0 / bus_limit:.1f} % of a bus (worst-case stuffing, "
                        f"{cfg.can.feedback_rate_hz:g} Hz, heartbeats included; profile of [can]), so a real "

@@ -2,7 +2,8 @@
 with `--levers`, the `[timing]` levers measured one by one in interleaved A/B pairs (docs/timing.md).
 
 Run: python bench/bench_session_timing.py [--runs 3] [--levers LEVER,...] [--pairs 2] [--json OUT]
-(levers: spin, gc, switch, fifo, fifo-process, fifo-session, cpu, all)
+(levers: fifo, fifo-process, fifo-session; the busy-wait tail, GC in the slack, the switch interval and CPU pinning
+were measured as no gain and removed, docs/timing.md)
 A tick miss is a skipped driver deadline (a tick later than one whole period: summary.json `timing.driver`
 `tick_misses` of `ticks`), not a merely late tick. Each session's CPU time (RUSAGE_CHILDREN: the run process, its
 controller and recorder children) is divided by its driver ticks: CPU per tick. With `--levers`, every lever is
@@ -22,18 +23,11 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 from benchlib import bench_args, command_line, emit, pct, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
 
 GOAL_MISS_PCT = 0.1
-OFF = {"spin_us": 0, "gc_in_slack": False, "switch_interval_us": 0, "realtime_priority": 0, "realtime_scope": "driver",
-       "driver_cpu": -1}
+OFF = {"realtime_priority": 0, "realtime_scope": "driver"}
 LEVERS: dict[str, dict[str, Any]] = {
-    "spin": {"spin_us": 200},
-    "gc": {"gc_in_slack": True},
-    "switch": {"switch_interval_us": 500},
     "fifo": {"realtime_priority": 50},
     "fifo-process": {"realtime_priority": 50, "realtime_scope": "process"},
     "fifo-session": {"realtime_priority": 50, "realtime_scope": "session"},
-    "cpu": {"driver_cpu": 1},
-    "all": {"spin_us": 200, "gc_in_slack": True, "switch_interval_us": 500, "realtime_priority": 50,
-            "realtime_scope": "process", "driver_cpu": 1},
 }
 
 

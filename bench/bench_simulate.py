@@ -18,10 +18,12 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import bench_args, emit, record  # noqa: E402
-from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.config.root import SeaHilConfig  # noqa: E402
+from sea_hil.jit import compiled  # noqa: E402
 from sea_hil.offline.closed_loop import simulate  # noqa: E402
 from sea_hil.offline.drive_kernel import make_session_steps  # noqa: E402
-from sea_hil.jit import compiled  # noqa: E402
 
 BASELINE_CPU_S = 0.32  # per 10 s cycle before the numba kernel (pure Python, issue 6)
 GOAL_REALTIME_X = 200.0

@@ -30,6 +30,7 @@ import sys
 import tempfile
 import time
 from collections import defaultdict
+from itertools import pairwise
 from pathlib import Path
 from typing import Any
 
@@ -40,7 +41,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from
 
 from benchlib import REPO, bench_args, command_line, emit, record  # noqa: E402
 from sessionwatch import watch_run  # noqa: E402
-from sea_hil.config import load_config  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.recorder.reader import RecordedMessage, read_session  # noqa: E402
 
 GOAL_RSS_MB = 5.0
@@ -126,7 +128,7 @@ def recording_check(mcap: Path) -> dict[str, Any]:
 
     def gaps(v: list[int]) -> int:
         v = sorted(v)
-        return sum(b - a - 1 for a, b in zip(v, v[1:]) if b > a + 1) + (v[0] - 1 if v else 0)
+        return sum(b - a - 1 for a, b in pairwise(v) if b > a + 1) + (v[0] - 1 if v else 0)
     ticks = int(final.get("plant_ticks", 0))
     # setpoints the edge never received either (its sequence tracker's `seq_lost`, beside the recorder's tap in the
     # host's Zenoh session) were dropped on the way to the host (figure 10c), not by the recorder

@@ -12,13 +12,13 @@ from __future__ import annotations
 
 import os
 import sys
-import time
 from pathlib import Path
-from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import bench_args, emit, pct, record  # noqa: E402
+
+from sea_hil.runtime.timer_floor import empty_loop  # noqa: E402  (the product's: `sea-hil run` measures it too)
 
 GOAL_MISS_PCT = 0.1
 FIFO_PRIORITY = 50   # `[timing] realtime_priority`'s default
@@ -31,28 +31,6 @@ def use_fifo(priority: int) -> str:
     except (AttributeError, PermissionError, OSError) as err:
         return f"SCHED_FIFO refused ({err}); normal scheduling"
     return ""
-
-
-def empty_loop(duration_s: float, period_ns: int = 1_000_000) -> dict[str, Any]:
-    """Run the empty loop for `duration_s` of deadlines; ticks run, deadlines missed, wake-up lateness in us."""
-    deadlines = int(duration_s * 1e9 // period_ns)
-    start_ns = time.monotonic_ns() + period_ns
-    lateness_ns: list[int] = []
-    k = misses = 0
-    while k < deadlines:
-        due_ns = start_ns + k * period_ns
-        wait_ns = due_ns - time.monotonic_ns()
-        if wait_ns > 0:
-            time.sleep(wait_ns / 1e9)
-        late_ns = time.monotonic_ns() - due_ns
-        lateness_ns.append(late_ns)
-        skipped = max(0, late_ns) // period_ns   # a wake-up later than a period: those deadlines are lost
-        misses += skipped
-        k += 1 + skipped
-    us = [v / 1000 for v in lateness_ns]
-    return {"ticks": len(lateness_ns), "deadlines": deadlines, "misses": misses,
-            "miss_pct": 100.0 * misses / deadlines, "lateness_us_p50": pct(us, 50), "lateness_us_p99": pct(us, 99),
-            "lateness_us_p999": pct(us, 99.9), "lateness_us_max": max(us)}
 
 
 def main(argv: list[str] | None = None) -> int:

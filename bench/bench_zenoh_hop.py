@@ -30,17 +30,23 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 import zenoh  # noqa: E402
-
 from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-from sea_hil.protocol.zcerts import make_certs  # noqa: E402
-from sea_hil.config import ZenohConfig  # noqa: E402
+
+from sea_hil.config.comms import ZenohConfig  # noqa: E402
+from sea_hil.errors import SeaHilError  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.payload_hot import encode_setpoint, encode_state  # noqa: E402
-from sea_hil.protocol.payloads import (PAYLOAD_SIZE, MsgType, PayloadCounters, SetpointPayload,  # noqa: E402
-                                       StatePayload, TriggerReason)
-from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
-from sea_hil.errors import SeaHilError  # noqa: E402
+from sea_hil.protocol.payloads import (  # noqa: E402
+    PAYLOAD_SIZE,
+    MsgType,
+    PayloadCounters,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+)
+from sea_hil.protocol.zcerts import make_certs  # noqa: E402
 from sea_hil.protocol.zlatest import LatestSubscriber  # noqa: E402
+from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 
 MODES = ("raw", "project", "blocking")
@@ -221,7 +227,7 @@ def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> i
     details = [{"mode": m, "hops": len(pooled[m]), "lost": lost[m], "median_us": pct(pooled[m], 50) / 1e3,
                 "p99_us": pct(pooled[m], 99) / 1e3, "min_us": min(pooled[m], default=0) / 1e3,
                 "max_us": max(pooled[m], default=0) / 1e3,
-                "ratio_to_raw": pct([x / r for x, r in zip(medians[m], medians["raw"])], 50)} for m in modes]
+                "ratio_to_raw": pct([x / r for x, r in zip(medians[m], medians["raw"], strict=True)], 50)} for m in modes]
     base = pct(medians["raw"], 50)
     rec = record("2", "Zenoh hop latency, project path vs raw zenoh-python", runs=runs,
                  metric=f"one-way hop (round trip / 2) on loopback, median per run of {pings} pings; p99 pooled",
@@ -231,13 +237,13 @@ def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> i
                  notes="`blocking` row = project payloads and publishers with a FIFO receive at the echo: the gap "
                        "between `project` and `blocking` is the newest-only hand-off (`LatestSubscriber`); "
                        "`ratio_to_raw` = median of the per-run ratios (`--profile` rows: one difference each).")
-    ratios = [p / r for p, r in zip(medians["project"], medians["raw"])]
+    ratios = [p / r for p, r in zip(medians["project"], medians["raw"], strict=True)]
     rec["ratio"] = pct(ratios, 50)   # per-run ratios: both modes of a run share the machine's state
     rec["notes"] += f" Ratio = median of the per-run ratios project/raw: {', '.join(f'{x:.2f}' for x in ratios)}."
     rec["goal_met"] = rec["ratio"] <= 1.3
     records = [rec]
     if "tls" in modes:
-        tls = [t / p for t, p in zip(medians["tls"], medians["project"])]
+        tls = [t / p for t, p in zip(medians["tls"], medians["project"], strict=True)]
         sec = record("2s", "Zenoh hop latency over the secure profile (mTLS + ACL) vs the same path on TCP", runs=runs,
                      metric=f"as figure 2, `tls` mode: median per run of {pings} pings; p99 pooled", unit="us",
                      per_run=medians["tls"], p99=pct(pooled["tls"], 99) / 1e3, baseline=pct(medians["project"], 50),

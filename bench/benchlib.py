@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.session.processes import end_process  # noqa: E402
+from sea_hil.runtime.processes import end_process  # noqa: E402
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -84,7 +84,7 @@ def host_facts() -> dict[str, Any]:
 
 
 def now_iso() -> str:
-    return _dt.datetime.now(_dt.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ")
+    return _dt.datetime.now(_dt.UTC).strftime("%Y-%m-%dT%H:%M:%SZ")
 
 
 def pct(values: Sequence[float] | np.ndarray, q: float) -> float:

@@ -17,7 +17,7 @@ from pathlib import Path
 import psutil
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-from sea_hil.session.processes import end_process  # noqa: E402
+from sea_hil.runtime.processes import end_process  # noqa: E402
 
 PROGRESS = re.compile(r"sim\s+([\d.]+)/[\d.]+ s .*setpoints (\d+)\s+states (\d+)")
 PYSPY_TID = re.compile(r'^Thread (\d+) \([^)]*\): "([^"]*)"', re.M)
@@ -35,12 +35,46 @@ class WindowResult:
     ticks: int = 0               # whole session (summary.json), loaded
     misses: int = 0
     hot: str = ""
+    recorded: dict[str, int] | None = None   # whole session: what the recording holds vs what was sent
+
+    def recorder_us(self) -> float:
+        """CPU per limb-sample of the recorder: its child process plus the session's recorder tap threads."""
+        return sum(self.per_sample_us(g) for g in self.cpu_s if g.startswith("recorder") or "recorder tap" in g)
+
+    def lost(self) -> int | None:
+        """Frames not in the recording though sent (None when not known: session ended early, several limbs)."""
+        r = self.recorded
+        if not r or "commands_sent" not in r or self.limbs != 1:   # the edge's metadata is one limb's
+            return None
+        # as bench/bench_soak.py counts (docs/reliability.md): feedback against 3 x (driver ticks + 1), commands
+        # against the edge's VOLTAGE_CMDs; `can_frames_missed` (seq gaps) is not a loss count (a watchdog episode,
+        # where the edge answers no sample, shows as a gap)
+        return (r["recorder_dropped_ops"] + r["dropped"] + r["write_errors"] + r["can_rejected"]
+                + abs(r["commands_sent"] - r["/can/command"]) + abs(3 * (self.ticks + 1) - r["/can/feedback"])
+                + abs(r["can_frames"] - r["/can/raw"]))
 
     def per_sample_us(self, group: str) -> float:
         return 1e6 * self.cpu_s.get(group, 0.0) / max(self.samples, 1)
 
     def total_us(self) -> float:
         return 1e6 * sum(self.cpu_s.values()) / max(self.samples, 1)
+
+
+def recorded_counts(path: Path) -> dict[str, int]:
+    """From a finished session file's metadata (summary section, no message read): the recorder's counts per
+    channel and of frames missed / rejected / dropped, and (one limb) the edge's VOLTAGE_CMDs sent
+    (`commands_sent + arrival_commands`)."""
+    from mcap.reader import make_reader
+    with open(path, "rb") as f:
+        meta = {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}
+    final = meta.get("sea-hil.final", {})
+    out = {k: int(final.get(k, 0)) for k in ("can_frames", "can_frames_missed", "can_rejected",
+                                                "recorder_dropped_ops", "dropped", "write_errors")}
+    out.update({t: int(final.get(f"messages.{t}", 0)) for t in ("/can/raw", "/can/feedback", "/can/command")})
+    edge = meta.get("sea-hil.edge")
+    if edge and "commands_sent" in edge:
+        out["commands_sent"] = int(edge["commands_sent"]) + int(edge.get("arrival_commands", 0))
+    return out
 
 
 def _task_cpu_s(pid: int) -> dict[int, tuple[float, float]]:
@@ -170,7 +204,7 @@ class _Progress:
                     raise RuntimeError("session ended before the window closed (lengthen --cycles or shorten "
                                        "it); its last lines:\n" + "".join(self.tail))
                 if self.first_setpoint_t is not None and time.monotonic() >= after_t:
-                    self.cond.wait_for(lambda: self.n != seen)
+                    self.cond.wait_for(lambda seen=seen: self.n != seen)
                     if self.n < 0:
                         continue
                     return self.sim_s
@@ -245,6 +279,7 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
         if rc != 0:
             raise RuntimeError(f"sea-hil run exited with {rc}")
         summary = {"timing": {"driver": {}}} if end_after else json.loads((out / "summary.json").read_text())
+        recorded = None if end_after else recorded_counts(out / "session.mcap")
     groups: dict[str, float] = defaultdict(float)
     system: dict[str, float] = defaultdict(float)
     for (pid, tid), (user, kern) in b.items():
@@ -254,4 +289,5 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
         system[g] += kern - kern_a
     drv = summary["timing"]["driver"]
     samples = int(round((sim_b - sim_a) * FEEDBACK_RATE_HZ)) * limbs
-    return WindowResult(limbs, load, samples, dict(groups), dict(system), drv.get("ticks", 0), drv.get("tick_misses", 0), hot)
+    return WindowResult(limbs, load, samples, dict(groups), dict(system), drv.get("ticks", 0), drv.get("tick_misses", 0), hot,
+                        recorded)

@@ -26,16 +26,17 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 import zenoh  # noqa: E402
-
 from benchlib import stop_process, wait_ready  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.config.root import SeaHilConfig  # noqa: E402
 from sea_hil.controller.edge import EdgeNode  # noqa: E402
 from sea_hil.controller.edge_mux import EdgeMux  # noqa: E402
 from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from sea_hil.config import SeaHilConfig, load_config  # noqa: E402
-from sea_hil.stats.histogram import LogHistogram  # noqa: E402
 from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
 from sea_hil.session.builder import SessionBuilder  # noqa: E402
+from sea_hil.stats.histogram import LogHistogram  # noqa: E402
 
 PREFIX = "sea"
 
@@ -131,7 +132,7 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
         buses = [b.bus(channel) for _ in ids] if layout == "threads" else [b.bus(channel)] * limbs
         wait_ready(proc)
         plant = b.plant(plant_bus, ids)
-        edges: list[EdgeNode] = [b.edge(bus, session, n, cfg=_limb_cfg(cfg, n)) for n, bus in zip(ids, buses)]
+        edges: list[EdgeNode] = [b.edge(bus, session, n, cfg=_limb_cfg(cfg, n)) for n, bus in zip(ids, buses, strict=True)]
         for runner in edges if layout == "threads" else [b.add(EdgeMux(buses[0], edges))]:
             runner.start()
         if warmup_s > 0:    # start-up (connections, first setpoint, queued frames) is not steady-state timing

@@ -21,8 +21,9 @@ from typing import Any
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 from benchlib import REPO, now_iso, record  # noqa: E402
-from sea_hil.errors import SeaHilError  # noqa: E402
 from report_md import render  # noqa: E402
+
+from sea_hil.errors import SeaHilError  # noqa: E402
 
 BENCH = Path(__file__).resolve().parent
 # name, figure, full arguments, quick arguments, rough full-mode seconds
@@ -38,6 +39,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_scale", "6", ["--duration", "10"], ["--quick"], 130),   # 5 counts x 2 layouts x 11 s
     ("bench_cpu_per_sample", "6c", ["--limbs", "1,2,4", "--runs", "3"], ["--quick"], 900),   # 9 sessions
     ("bench_mcap", "7", ["--runs", "3"], ["--quick"], 30),
+    ("bench_recorder_child", "7c", ["--runs", "3"], ["--quick"], 30),
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
 ]

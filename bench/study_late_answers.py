@@ -13,9 +13,11 @@ from typing import Any
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
-from sea_hil.config import load_config  # noqa: E402
-from sea_hil.offline.session_engine import run_engine  # noqa: E402
-from sea_hil.offline.session_engine import EngineOptions  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.offline.session_engine import (
+    EngineOptions,  # noqa: E402
+    run_engine,  # noqa: E402
+)
 from sea_hil.protocol.link import parse_link_spec  # noqa: E402
 from sea_hil.report.session_summary import session_summary  # noqa: E402
 

@@ -30,13 +30,13 @@ import can
 import zenoh
 
 from sea_hil.config.root import SeaHilConfig
-from sea_hil.controller.edge_core import EdgeCore
+from sea_hil.controller.edge_core import CommandFrames, EdgeCore
 from sea_hil.errors import BusError, ConfigError
-from sea_hil.protocol.canbus import send_with_retry
 from sea_hil.protocol.can_frames import Feedback
+from sea_hil.protocol.canbus import CanHandle, send_with_retry
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.zsession import publisher
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.clock import Clock, EdgeSync, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.edge")
@@ -45,8 +45,11 @@ log = logging.getLogger("sea_hil.edge")
 class EdgeNode(Node):
     kind = "edge"
 
-    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, session: zenoh.Session, node_id: int, *,
-                 inner: str = "edge", clock: Clock | None = None, mode: str = "et") -> None:
+    def __init__(self, cfg: SeaHilConfig, bus: CanHandle, session: zenoh.Session, node_id: int, *,
+                 inner: str = "edge", clock: Clock | None = None, mode: str = "et",
+                 commands: CommandFrames | None = None) -> None:
+        """`commands`: how the core's answers become CAN frames (None: the sea profile's VOLTAGE_CMD and CLEAR_ERRORS
+        through the DBC; the CiA 402 edge passes its CANopen master's, controller/cia402_edge.py)."""
         if inner not in ("edge", "remote"):
             raise ValueError("inner must be 'edge' or 'remote'")
         if cfg.trigger.placement == "edge" and (inner != "edge" or mode not in ("et", "tt")):
@@ -55,19 +58,18 @@ class EdgeNode(Node):
         self.cfg, self.bus, self.node_id = cfg, bus, node_id
         self.keys = Keys.from_config(cfg.zenoh)
         self.lock = threading.Lock()       # feedback path vs. setpoint arrival (Zenoh callback thread)
-        self.sync = (clock or RealTimeClock()).edge(self)
+        self.sync: EdgeSync = (clock or RealTimeClock()).edge(self)
         self.state_pub = publisher(session, self.keys.state, congestion_control=self.sync.congestion_control)
         self.event_pub = publisher(session, self.keys.event, express=False,
                                    congestion_control=zenoh.CongestionControl.BLOCK) \
             if cfg.trigger.placement == "edge" else None
         self.core = EdgeCore(cfg, node_id, inner=inner, mode=mode, state_sink=self.state_pub.put,
                              record_sink=self._publish_record, stamp=self.sync.state_stamp,
-                             restart_possible=self.sync.restart_possible)
+                             restart_possible=self.sync.restart_possible, commands=commands)
         self.stats_pub = publisher(session, self.keys.stats, express=False)
         self.send_retries = cfg.can.send_retries
-        downlink = self.sync.downlink_callback()
-        self._subs = [session.declare_subscriber(self.keys.setpoint, downlink),
-                      session.declare_subscriber(self.keys.voltage, downlink),
+        self._subs = [session.declare_subscriber(self.keys.setpoint, self.sync.downlink_callback("setpoint")),
+                      session.declare_subscriber(self.keys.voltage, self.sync.downlink_callback("voltage")),
                       session.declare_subscriber(self.keys.control, self.sync.control_callback())]
 
     # ---- the node hooks -------------------------------------------------------------------------------------------
@@ -105,7 +107,8 @@ class EdgeNode(Node):
 
     def on_can(self, msg: can.Message, now_ns: int) -> None:
         """Handle one received CAN frame (`now_ns`: its monotonic receive time, the start of the loop time of the
-        sample it completes)."""
+        sample it completes). Malformed frames are counted (`rejected_frames`), logged and ignored (`EdgeCore.on_frame`,
+        which also explains a drive latch once)."""
         fb = self.core.on_frame(msg)
         if fb is not None:
             with self.lock:
@@ -124,21 +127,21 @@ class EdgeNode(Node):
         self.event_pub.put(json.dumps(record).encode())  # type: ignore[union-attr]
 
     # ---- Zenoh side -----------------------------------------------------------------------------------------------
-    def on_arrival(self, data: bytes, rx_ns: int) -> None:
-        """Real time: handle a setpoint/voltage payload when it arrives (`on_downlink`) and, if the downlink emulator
-        releases it at once, apply it and send the voltage it gives with the newest feedback."""
+    def on_arrival(self, data: bytes, rx_ns: int, channel: str | None = None) -> None:
+        """Real time: handle a setpoint/voltage payload from key `channel` when it arrives (`on_downlink`) and, if the
+        downlink emulator releases it at once, apply it and send the voltage it gives with the newest feedback."""
         core = self.core
         with self.lock:
-            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns) or core.last_fb is None:
+            if self.stop_event.is_set() or not self.on_downlink(data, rx_ns, channel) or core.last_fb is None:
                 return
             if self.take_downlink(core.sample_t_ns) and self._send(core.respond(core.last_fb, core.last_rx_ns,
                                                                                  self.sync)):
                 core.counters.arrival_commands += 1
 
-    def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:
-        """Handle one setpoint/voltage payload from Zenoh (`rx_ns`: monotonic arrival time); True if it entered the
-        downlink emulator."""
-        return self.core.on_downlink(data, rx_ns)
+    def on_downlink(self, data: bytes, rx_ns: int | None = None, channel: str | None = None) -> bool:
+        """Handle one setpoint/voltage payload from Zenoh key `channel` (None: the inner placement's; `rx_ns`:
+        monotonic arrival time); True if it entered the downlink emulator."""
+        return self.core.on_downlink(data, rx_ns, channel)
 
     def on_ack(self, data: bytes) -> bool:
         """Handle one payload from the control key (lockstep ACKs; counted and dropped otherwise)."""

@@ -30,15 +30,35 @@ from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.errors import MalformedFrame
+from sea_hil.fault_explain import LatchWatch, latch_level
 from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import (FEEDBACK_PARTS, LIMIT_FLAGS, ClearErrors, DriverState, ErrorFlags, Feedback,
-                                         Heartbeat, VoltageCmd)
+from sea_hil.protocol.can_frames import (
+    LIMIT_FLAGS,
+    ClearErrors,
+    DriverState,
+    ErrorFlags,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Heartbeat,
+    VoltageCmd,
+)
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
+from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
+from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.protocol.payload_hot import encode_state
-from sea_hil.protocol.payloads import (PAYLOAD_SIZE, EventStatePayload, MsgType, PayloadCounters, SetpointPayload,
-                                       VoltagePayload, encode)
+from sea_hil.protocol.payloads import (
+    PAYLOAD_SIZE,
+    EventStatePayload,
+    MsgType,
+    PayloadCounters,
+    SetpointPayload,
+    VoltagePayload,
+    encode,
+)
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.wire_size import estimate_wire_bytes
 from sea_hil.protocol.zsession import LinkedPublisher
@@ -83,7 +103,7 @@ class EdgeCounters:
 def percentiles_us(name: str, h: LogHistogram, keys: tuple[str, ...]) -> dict[str, float]:
     """`{name}_us_{key}` in microseconds (-1 when empty) for keys of `LogHistogram.to_dict` (min, p50, p99, max)."""
     d = h.to_dict()
-    return {f"{name}_us_{k}": float(d[k]) * 1e6 if d[k] is not None else -1.0 for k in keys}
+    return {f"{name}_us_{k}": float(v) * 1e6 if (v := d[k]) is not None else -1.0 for k in keys}
 
 
 class _Sink:
@@ -158,8 +178,11 @@ class SetpointIntake:
 
     def __init__(self, downlink: LinkEmulator, counters: EdgeCounters, payloads: PayloadCounters, timeout_ns: int,
                  restart_possible: Callable[[bool], bool], envelope: EnvelopeGate | None = None,
-                 max_answer_age_ns: int = 0, wall_ns: Callable[[], int] = time.monotonic_ns) -> None:
+                 max_answer_age_ns: int = 0, wall_ns: Callable[[], int] = time.monotonic_ns,
+                 inner: str = "edge") -> None:
         self.downlink = downlink
+        self.inner = inner                        # "edge": setpoints only; "remote": tunnelled voltages only
+        self.channel = "setpoint" if inner == "edge" else "voltage"
         self.counters = counters
         self.payloads = payloads
         self.timeout_ns = timeout_ns
@@ -174,14 +197,23 @@ class SetpointIntake:
         self.last_rx_ns = 0                       # sample time of the newest accepted setpoint/voltage
         self.last_setpoint_ns: int | None = None  # sample time of the newest applied one
 
-    def submit(self, data: bytes, sample_t_ns: int, sent_at: dict[int, int], rx_ns: int | None) -> bool:
-        """One payload at sample time `sample_t_ns`; True if it entered the downlink emulator. Closed-loop latency
-        (`latency`) = arrival - publication of the state it answers, plus the delay the downlink emulator adds."""
-        p = self.payloads.try_decode(data)
+    def submit(self, data: bytes, sample_t_ns: int, sent_at: dict[int, int], rx_ns: int | None,
+               channel: str | None = None) -> bool:
+        """One payload from key `channel` ("setpoint" | "voltage"; None: the one of the inner loop's placement) at
+        sample time `sample_t_ns`; True if it entered the downlink emulator. Closed-loop latency (`latency`) =
+        arrival - publication of the state it answers, plus the delay the downlink emulator adds. A payload of
+        another type than its key carries (`payload_rejected_key`), or on the key of the other inner placement (a
+        voltage with the inner loop at the edge: `unexpected_payloads`), is rejected before the sequence check."""
+        channel = channel or self.channel
+        p = self.payloads.try_decode(data, KEY_PAYLOADS[channel])
         if p is None:
             return False
-        if not isinstance(p, (SetpointPayload, VoltagePayload)):
+        assert isinstance(p, SetpointPayload | VoltagePayload)   # the only types of the two downlink keys
+        if channel != self.channel:
             self.counters.unexpected_payloads += 1
+            if self.counters.unexpected_payloads in (1, 10) or self.counters.unexpected_payloads % 1000 == 0:
+                log.warning("%s payload dropped (%d so far): the inner loop runs %s, its key is %r", channel,
+                            self.counters.unexpected_payloads, self.inner, self.channel)
             return False
         verdict = self.epoch.check(p.epoch, lambda: self._restart_allowed(p.seq, sample_t_ns))
         if verdict is EpochVerdict.REJECTED:
@@ -285,6 +317,33 @@ class FreeRunning:
         return False
 
 
+class CommandFrames(Protocol):
+    """How the edge's answer goes on the bus (the extension point of the CAN side's profile): the frames commanding
+    voltage `u` in answer to feedback `seq`, the frames resetting a (non-limit) drive fault, and whether a repeated
+    sample may be answered by re-sending the last command (`repeatable`)."""
+
+    repeatable: bool
+
+    def command(self, u: tuple[float, float], seq: int) -> list[can.Message]: ...
+
+    def clear(self) -> list[can.Message]: ...
+
+
+class SeaCommands:
+    """The sea profile's `CommandFrames`: one VOLTAGE_CMD (saturated to the DBC's range), CLEAR_ERRORS (protocol/sea.dbc)."""
+
+    repeatable = True
+
+    def __init__(self, codec: SeaCodec, node_id: int) -> None:
+        self.codec, self.node_id = codec, node_id
+
+    def command(self, u: tuple[float, float], seq: int) -> list[can.Message]:
+        return [self.codec.encode(VoltageCmd(self.node_id, u, seq), saturate=True)]
+
+    def clear(self) -> list[can.Message]:
+        return [self.codec.encode(ClearErrors(self.node_id))]
+
+
 class EdgeCore:
     """One limb's edge: see the module docstring. `state_sink(payload)` gets every state payload the uplink emulator
     releases (the shell puts it on Zenoh); `stamp(delivery_ns)` gives a state's header time and
@@ -296,17 +355,21 @@ class EdgeCore:
                  record_sink: Callable[[dict[str, Any]], Any] = lambda record: None,
                  stamp: Callable[[int], int] = lambda at_ns: time.monotonic_ns(),
                  restart_possible: Callable[[bool], bool] = lambda timed_out: timed_out,
-                 epoch: int | None = None, wall_ns: Callable[[], int] = time.monotonic_ns) -> None:
+                 epoch: int | None = None, wall_ns: Callable[[], int] = time.monotonic_ns,
+                 commands: CommandFrames | None = None) -> None:
         self.cfg, self.node_id, self.inner_mode = cfg, node_id, inner
         self.codec = SeaCodec.for_bus(cfg.can, [node_id])
+        self.commands = commands if commands is not None else SeaCommands(self.codec, node_id)
         self.assembler = FeedbackAssembler()
-        self.inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad),
+        self.inner = InnerLoop(cfg, nominal_params(cfg), cfg.plant.initial_theta_rad,
                                1.0 / cfg.can.feedback_rate_hz)
         self.envelope = EnvelopeGate(SetpointEnvelope.from_config(cfg.safety.setpoint), log)
         self.period_ns = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.max_sample_age_ns = int(round(cfg.safety.setpoint.max_sample_age_s * 1e9))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
         self.counters = EdgeCounters()
+        self.latches = LatchWatch(cfg.safety.drive if cfg.safety.drive.enabled else None,
+                                  (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))   # a drive latch, explained once
         self.payloads = PayloadCounters()
         seed = cfg.link.seed
         self.publisher = StatePublisher(LinkedPublisher(_Sink(state_sink), LinkEmulator(cfg.link.uplink, f"{seed}/up")),
@@ -315,7 +378,8 @@ class EdgeCore:
             if cfg.trigger.placement == "edge" else None
         self.intake = SetpointIntake(LinkEmulator(cfg.link.downlink, f"{seed}/down"), self.counters, self.payloads,
                                      int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), restart_possible,
-                                     self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)), wall_ns)
+                                     self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)), wall_ns,
+                                     inner)
         self.voltage: tuple[float, float] | None = None    # the newest tunnelled voltage (inner = remote)
         self.driver_state = DriverState.INIT
         self.driver_flags = ErrorFlags(0)         # the driver's error flags from its latest HEARTBEAT
@@ -362,9 +426,11 @@ class EdgeCore:
             return None
         if isinstance(frame, Heartbeat):
             self.driver_state, self.driver_flags = frame.state, frame.flags
+            if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:   # once per latch: the limit,
+                log.log(latch_level(frame), "%s", line)         # the measured value, who clears it
         elif isinstance(frame, Feedback):
             return frame
-        elif isinstance(frame, FEEDBACK_PARTS):         # the three classic parts
+        elif isinstance(frame, FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # the three classic parts
             return self.assembler.push(frame)
         return None
 
@@ -396,7 +462,7 @@ class EdgeCore:
             seq, data, at = self.publisher.publish(fb, now)
             return [] if at is None else [(seq, data, at)]
         d = self.events.on_sample(now, (fb.theta_rad, fb.omega_rad_s, fb.delta_m, fb.nut_vel_m_s))
-        out = []
+        out: list[tuple[int, bytes, int]] = []
         if d is None:
             return out
         if d.reason is not None:
@@ -415,9 +481,10 @@ class EdgeCore:
         self.publisher.poll(now_ns)
 
     # ---- Zenoh in -----------------------------------------------------------------------------------------------
-    def on_downlink(self, data: bytes, rx_ns: int | None = None) -> bool:
-        """One setpoint/voltage payload (`rx_ns`: monotonic arrival time); True if it entered the downlink emulator."""
-        return self.intake.submit(data, self.sample_t_ns, self.publisher.sent_at, rx_ns)
+    def on_downlink(self, data: bytes, rx_ns: int | None = None, channel: str | None = None) -> bool:
+        """One setpoint/voltage payload from Zenoh key `channel` (None: the inner placement's; `rx_ns`: monotonic
+        arrival time); True if it entered the downlink emulator."""
+        return self.intake.submit(data, self.sample_t_ns, self.publisher.sent_at, rx_ns, channel)
 
     def take_downlink(self, now_ns: int) -> bool:
         """Apply the setpoints/voltages the downlink emulator releases by sample time `now_ns`; True if any."""
@@ -451,7 +518,7 @@ class EdgeCore:
             return None     # stop commanding: the driver watchdog takes it to its safe state
         frames = []
         if clear and self.driver_state is DriverState.FAULT and not self.driver_flags & LIMIT_FLAGS:
-            frames.append(self.codec.encode(ClearErrors(self.node_id)))
+            frames.extend(self.commands.clear())
             self.counters.clear_errors_sent += 1
             self.driver_state = DriverState.INIT
             if self.events is not None and self.events.drive_cleared(self.sample_t_ns):
@@ -460,8 +527,9 @@ class EdgeCore:
             u = self.voltage if self.voltage is not None else (0.0, 0.0)
         else:
             u = self.inner.voltage((*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s))
-        self.last_cmd = self.codec.encode(VoltageCmd(self.node_id, u, fb.seq), saturate=True)
-        frames.append(self.last_cmd)
+        cmd = self.commands.command(u, fb.seq)
+        self.last_cmd = cmd[-1] if self.commands.repeatable and cmd else None   # a repeated sample re-sends it
+        frames.extend(cmd)
         return frames
 
     def fresh(self, now_ns: int) -> bool:
@@ -495,7 +563,7 @@ class EdgeCore:
         lat = c.latency.to_dict()
         up, down = pub.uplink.link.counters(), intake.downlink.counters()
         sp_seq = intake.sp_seq
-        out: dict[str, float] = {
+        out: dict[str, Any] = {     # counts and floats (the epoch's and the latency's dicts are typed loosely)
             "node_id": self.node_id, "feedback_samples": c.feedback, "rejected_frames": c.rejected_frames,
             "rejected_samples": c.rejected_samples,
             "uplink_msgs": c.states_sent, "uplink_bytes": c.state_bytes, "downlink_applied": c.setpoints,
@@ -504,6 +572,7 @@ class EdgeCore:
             "lockstep_startup_resends": c.lockstep_startup_resends,
             "commands_sent": c.commands_sent, "arrival_commands": c.arrival_commands,
             "payload_rejected": self.payloads.as_dict()["rejected_total"],
+            **{f"payload_rejected_{r.value}": self.payloads.rejected[r.value] for r in RejectReason},
             "unexpected_payloads": c.unexpected_payloads, "controller_restarts": c.controller_restarts,
             "setpoints_out_of_envelope": self.envelope.rejected,
             "bus_errors": c.bus_errors, "late_samples": c.late_samples, "late_setpoints": c.late_setpoints,

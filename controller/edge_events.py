@@ -3,8 +3,9 @@ sensor-side event generator (`EdgeEventGenerator`). Per feedback sample it says 
 (and with which body fields) and gives the tracking record of each outer sample (the edge sees every sample, the
 controller only the events); `answered` tells it about an applied setpoint. No I/O: the edge node publishes.
 
-The same decisions, sample for sample, as the offline session engine's edge (`sea_hil.offline.session_loop`):
-checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"`), state seq = sample index + 1,
+The offline session engine runs this same core (inside `EdgeCore`, `sea_hil.offline.session_engine`):
+checks every outer sample (or every 1 kHz sample, `trigger.edge_check = "sample"`; TT: every outer sample whatever
+`edge_check`, and every one is published, answers in flight or not: issue 29), state seq = sample index + 1,
 the lookahead on the nominal model (`trigger.edge_model`, with `controller.compensation = "predict"`: the engine
 builds that model only then) with the setpoint the edge holds kept; the trajectory anchor (an INITIAL state) is
 re-published until the controller answers it (controller/edge_trigger.py).
@@ -19,17 +20,19 @@ not held (counted).
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.envelope import SetpointEnvelope, admissible
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.predictor import Predictor
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import make_trajectory, trajectory_id
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, error_threshold
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, error_threshold
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass(frozen=True)
@@ -69,10 +72,12 @@ class EdgeEvents:
         self.every_sample = cfg.trigger.edge_check == "sample" if every_sample is None else every_sample
         if model is None:
             model = cfg.trigger.edge_model and cfg.controller.compensation == "predict"
+        if mode == "tt":    # a time trigger has nothing to evaluate between outer samples, nor a lookahead to run
+            self.every_sample, model = False, False
         self.model: Predictor | None = None
         if model:
             self.model = Predictor.for_inner(inner, period_ns, cfg.sim.substeps, jit=jit)
-            self.model.warm(tuple(cfg.plant.initial_theta_rad))
+            self.model.warm(cfg.plant.initial_theta_rad)
         self.events = 0
         self.resume_anchors = 0
         self.sampled_at: dict[int, int] = {}
@@ -88,17 +93,20 @@ class EdgeEvents:
         self.max_stale_excess_ns = 0      # ... beyond the answer timeout at that sample
         self._last_hold_ns: int | None = None   # the sample the held setpoint was computed for (answered or local)
 
-    def on_sample(self, sample_ns: int, fb: tuple) -> EdgeDecision | None:
+    def on_sample(self, sample_ns: int, fb: tuple[tuple[float, float], ...]) -> EdgeDecision | None:
         """fb = (theta, omega, delta, nut velocity) pairs of the sample at `sample_ns`; None: not checked."""
         k = round(sample_ns / self.period_ns)
         outer = k % self.outer_every == 0
         if not (outer or self.every_sample):
             return None
-        ahead = None
+        ahead: Callable[[int], JointState] | None = None
         if self.model is not None:
             model, held = self.model, self.inner
             hold = (held.deflection_m, held.sliding) if held.deflection_m is not None else None
-            ahead = lambda h_ns: model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)  # noqa: E731
+
+            def model_ahead(h_ns: int) -> JointState:
+                return model.predict_held(fb, sample_ns, sample_ns + h_ns, hold)
+            ahead = model_ahead
         js = JointState(fb[0], fb[1])
         t_ns, ds, reason = self.generator.on_sample(sample_ns, js, ahead)
         seq = k + 1

@@ -25,6 +25,7 @@ from sea_hil.controller.edge import EdgeNode, receive_stamped
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import CMD_BITS
+from sea_hil.protocol.canbus import CanHandle
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.edge")
@@ -33,7 +34,7 @@ log = logging.getLogger("sea_hil.edge")
 class EdgeMux(Node):
     kind = "edge"
 
-    def __init__(self, bus: can.BusABC, edges: Sequence[EdgeNode], *, workers: bool = False) -> None:
+    def __init__(self, bus: CanHandle, edges: Sequence[EdgeNode], *, workers: bool = False) -> None:
         if not edges:
             raise ConfigError("an edge multiplexer needs at least one edge core")
         by_id = {e.node_id: e for e in edges}

@@ -8,16 +8,18 @@ and the same lead-in from the first measured state (t = 0 is that sample + `lead
 no answer yet the trigger is not evaluated (no burst of duplicate events while the answer is in flight), until
 `answer_timeout_ns` has passed — a lost state or a lost setpoint then lets the next event through (re-trigger). The
 timeout follows the measured round trip: max(`min_timeout_ns`, 3 x the smoothed round trip), capped at
-`max_timeout_ns` (the edge's `max_answer_age_s`: an answer later than that is dropped anyway).
+`max_timeout_ns` (the edge's `max_answer_age_s`: an answer later than that is dropped anyway). A time trigger (TT)
+is not gated at all: a time-triggered sensor publishes every checked sample however many answers are in flight
+(`periodic_reason`, issue 29), also while the anchor's answer is awaited.
 
 The trajectory anchor: the edge's t (and the lead-in) count from an anchor, a state published with reason INITIAL;
 the controller counts its t from the same state (controller/remote_core.py), so both ends evaluate x_d(t) at the
-same t. Until the controller has answered the anchor nothing else is published; when no answer to it comes within
-`anchor_timeout_ns` (a controller that was not listening yet, a lost state or answer) the edge re-anchors on its
-current sample, and also when no answer at all came for `reanchor_after_ns` (a restarted controller: the edge has
-stopped commanding by then). Before this, the edge anchored on its own first sample whether or not the controller
-received it, so a controller that started listening later ran the trajectory shifted by that time (issue 16's
-real-time failure, docs/et-over-links.md).
+same t. Until the controller has answered the anchor nothing else is published (ET; TT goes on publishing); when
+no answer to it comes within `anchor_timeout_ns` (a controller that was not listening yet, a lost state or answer)
+the edge re-anchors on its current sample, and also when no answer at all came for `reanchor_after_ns` (a restarted
+controller: the edge has stopped commanding by then). Before this, the edge anchored on its own first sample whether
+or not the controller received it, so a controller that started listening later ran the trajectory shifted by that
+time (issue 16's real-time failure, docs/et-over-links.md).
 
 Overdue answers (the local fallback of a silent downlink, docs/deviations.md section 17): `outstanding` holds the
 states published since the newest answer; `overdue(sample_ns)` says the oldest of them has waited `answer_timeout_ns`
@@ -31,7 +33,8 @@ from dataclasses import dataclass, field
 
 from sea_hil.controller.smc import JointState, tracking_errors
 from sea_hil.controller.trajectory import CsvTrajectory, DesiredSample, GaitTrajectory, LeadIn, anchored_lead_in
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, _distance, epsilon
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, _distance, epsilon
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass
@@ -83,8 +86,10 @@ class EdgeEventGenerator:
         anchor = self._needs_anchor(sample_ns)
         if anchor:
             self._anchor(sample_ns, js)
-        t_ns = sample_ns - self.t0_ns  # type: ignore[operator]
+        t_ns = self.time_of(sample_ns)
         ds = self.desired(t_ns)
+        if self.periodic:
+            return t_ns, ds, self.periodic_reason(anchor)
         js_eval, t_eval, ds_eval = self._ahead(sample_ns, js, t_ns, ds, ahead)
         eps = epsilon(tracking_errors(js_eval, ds_eval), ds_eval.theta_rad, ds_eval.omega_rad_s)
         if anchor:
@@ -100,6 +105,19 @@ class EdgeEventGenerator:
                 return t_ns, ds, None           # only the error moving again may fire while an answer is in flight
         reason = self.trigger.update(t_eval, eps)
         return t_ns, ds, reason
+
+    @property
+    def periodic(self) -> bool:
+        """A time-triggered sensor (TT): it publishes every checked sample, answers in flight or not (issue 29)."""
+        return isinstance(self.trigger, TimeTrigger)
+
+    def periodic_reason(self, anchor: bool) -> TriggerReason:
+        """The reason of a TT state: INITIAL at an anchor, else TIME, whether or not the anchor or any later state has
+        been answered yet. Not gated on the answer in flight (the event trigger's burst guard below): that gate made
+        TT stop-and-wait on a delayed link (issue 29: 488 of 1001 states at 5 ms +- 1 ms / 1 % each way). Answers
+        are matched by state_seq (`answered`), a late one is dropped by the edge's intake as for ET; the anchor
+        handshake is kept (re-anchor when the anchor's answer does not come within `anchor_timeout_ns`)."""
+        return TriggerReason.INITIAL if anchor else TriggerReason.TIME
 
     def _needs_anchor(self, sample_ns: int) -> bool:
         if self.t0_ns is None:
@@ -134,7 +152,7 @@ class EdgeEventGenerator:
         measured velocity and a smoothed acceleration (finite differences of the 1 kHz or outer samples)."""
         if self._prev is not None and sample_ns > self._prev[0]:
             dt = (sample_ns - self._prev[0]) * 1e-9
-            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1]))
+            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1], strict=True))
             self._alpha = (0.8 * self._alpha[0] + 0.2 * a[0], 0.8 * self._alpha[1] + 0.2 * a[1])
         self._prev = (sample_ns, js.omega_rad_s)
         if not self.lookahead or not self.rtt_ns:
@@ -143,8 +161,9 @@ class EdgeEventGenerator:
         if model is not None:
             return model(int(self.rtt_ns)), t_eval, self.desired(t_eval)
         h = self.rtt_ns * 1e-9
-        th = tuple(q + w * h + 0.5 * a * h * h for q, w, a in zip(js.theta_rad, js.omega_rad_s, self._alpha))
-        om = tuple(w + a * h for w, a in zip(js.omega_rad_s, self._alpha))
+        (q1, q2), (w1, w2), (a1, a2) = js.theta_rad, js.omega_rad_s, self._alpha
+        th = (q1 + w1 * h + 0.5 * a1 * h * h, q2 + w2 * h + 0.5 * a2 * h * h)
+        om = (w1 + a1 * h, w2 + a2 * h)
         return JointState(th, om), t_eval, self.desired(t_eval)
 
     def overdue(self, sample_ns: int) -> bool:

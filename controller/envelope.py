@@ -9,7 +9,7 @@ import logging
 import math
 from typing import NamedTuple
 
-from sea_hil.config import SetpointEnvelopeConfig
+from sea_hil.config.safety import SetpointEnvelopeConfig
 
 INF = float("inf")
 
@@ -26,9 +26,9 @@ class SetpointEnvelope(NamedTuple):
     deflection_max_m: tuple[float, float] = (INF, INF)
 
     @classmethod
-    def from_config(cls, cfg: SetpointEnvelopeConfig) -> "SetpointEnvelope":
+    def from_config(cls, cfg: SetpointEnvelopeConfig) -> SetpointEnvelope:
         """The configured envelope; with `enabled = false` only non-finite setpoints are rejected."""
-        return cls(tuple(cfg.deflection_max_m) if cfg.enabled else (INF, INF))   # type: ignore[arg-type]
+        return cls(cfg.deflection_max_m if cfg.enabled else (INF, INF))
 
     def check(self, deflection_m: tuple[float, float]) -> Verdict:
         if admissible(deflection_m, self.deflection_max_m):

@@ -4,10 +4,16 @@ from __future__ import annotations
 
 import logging
 
-from sea_hil.controller.backstepping import (COMPENSATION, NO_ESTIMATE, InnerGains, Measurement,
-                                             backstepping_voltage, cross_term_weight)
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.backstepping import (
+    COMPENSATION,
+    NO_ESTIMATE,
+    InnerGains,
+    Measurement,
+    backstepping_voltage,
+    cross_term_weight,
+)
 from sea_hil.controller.observer import OBSERVER_UNSTARTED, Estimate, ObserverState, observer_step
-from sea_hil.config import SeaHilConfig
 from sea_hil.mechanics import LimbParams
 
 log = logging.getLogger(__name__)

@@ -2,7 +2,7 @@
 `[plant]` alone, so the two differ exactly where `[controller.model]` or `--mismatch` says)."""
 from __future__ import annotations
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.mechanics import LimbParams, limb_params
 
 

@@ -4,11 +4,12 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.smc import JointState, smc_deflection, tracking_errors
 from sea_hil.controller.trajectory import DesiredSample
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, epsilon, error_threshold
-from sea_hil.config import SeaHilConfig
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, epsilon, error_threshold
 from sea_hil.mechanics import LimbParams
+from sea_hil.protocol.payloads import TriggerReason
 
 
 @dataclass(frozen=True, slots=True)

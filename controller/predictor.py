@@ -16,22 +16,26 @@ model lookahead (controller/edge_trigger.py) and the offline session engine all 
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any, Callable
+from typing import Any
 
+from sea_hil.config.base import Pair
+from sea_hil.controller.backstepping import InnerGains
 from sea_hil.controller.inner import inner_step
-from sea_hil.controller.observer import OBSERVER_UNSTARTED
+from sea_hil.controller.observer import OBSERVER_UNSTARTED, ObserverState
 from sea_hil.controller.smc import JointState
-from sea_hil.dynamics import deflections, rk4_core, saturate
+from sea_hil.dynamics import State, deflections, rk4_core, saturate
 from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import LimbParams, sea_geometry
 
 
-def make_predict_steps(fingerprint: str = "") -> Callable[..., tuple]:
+def make_predict_steps(fingerprint: str = "") -> Callable[..., State]:
     """The nominal closed loop, `n_steps` samples from the state x of sample k0, the setpoint (vx, s) held (or the
     measured deflection when `hold_measured`); `fingerprint` (sea_hil/jit.py) only keys numba's disk cache."""
 
-    def predict_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, gains, obs, dt_s):  # noqa
+    def predict_steps(x: State, k0: int, n_steps: int, period_ns: int, substeps: int, vx: Pair, s: Pair,
+                      hold_measured: bool, p: LimbParams, gains: InnerGains, obs: ObserverState, dt_s: float) -> State:
         fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
         for k in range(k0, k0 + n_steps):
             dl1, dl2, _, _ = deflections(x, p)
@@ -48,7 +52,7 @@ def make_predict_steps(fingerprint: str = "") -> Callable[..., tuple]:
     return predict_steps
 
 
-def predict_kernel(jit: bool = True) -> Callable[..., tuple]:
+def predict_kernel(jit: bool = True) -> Callable[..., State]:
     kernel = compiled(make_predict_steps) if jit else None
     return kernel if kernel is not None else make_predict_steps()
 
@@ -71,7 +75,7 @@ class Predictor:
 
     def __post_init__(self) -> None:
         self.kernel = predict_kernel(self.jit)
-        self._call: Callable[..., tuple] | None = None    # the kernel's entry point for this predictor's types
+        self._call: Callable[..., tuple[Any, ...]] | None = None    # the kernel's entry point for this predictor's types
         self._gains = self.gains._replace(compensation=0)   # the nominal closed loop without the edge's observer
 
     def warm(self, theta_rad: tuple[float, float]) -> None:
@@ -80,7 +84,7 @@ class Predictor:
         self.predict((theta_rad, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)), 0, self.period_ns, count=False)
 
     @classmethod
-    def for_inner(cls, inner: Any, period_ns: int, substeps: int, jit: bool = True) -> "Predictor":
+    def for_inner(cls, inner: Any, period_ns: int, substeps: int, jit: bool = True) -> Predictor:
         """The predictor of the nominal closed loop with the edge's inner loop `inner` (an `InnerLoop`)."""
         return cls(inner._p, inner.gains, inner.period_s, period_ns, substeps, jit=jit)
 
@@ -125,11 +129,12 @@ class Predictor:
         if k_end <= k:
             return JointState((q1, q2), (w1, w2))
         self.predictions += count
-        held = None
+        held: tuple[Pair, Pair] | None = None
         for apply_ns, vx, s in self.schedule:
             if apply_ns <= sample_ns:
                 held = (vx, s)
-        for apply_ns, vx, s in [e for e in self.schedule if sample_ns < e[0] < until_ns] + [(until_ns, None, None)]:
+        due: list[tuple[int, Pair | None, Pair | None]] = [e for e in self.schedule if sample_ns < e[0] < until_ns]
+        for apply_ns, next_vx, next_s in [*due, (until_ns, None, None)]:
             k_next = min(apply_ns // self.period_ns, k_end)
             if k_next > k:
                 hv, hs = held if held is not None else ((0.0, 0.0), (0.0, 0.0))
@@ -141,6 +146,6 @@ class Predictor:
                     self._call = entry(self.kernel, args)
                 x = self._call(*args)
                 k = k_next
-            if vx is not None:
-                held = (vx, s)
+            if next_vx is not None and next_s is not None:
+                held = (next_vx, next_s)
         return JointState((x[0], x[1]), (x[2], x[3]))

@@ -21,15 +21,15 @@ import time
 
 import zenoh
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.errors import MalformedPayload
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
-from sea_hil.protocol.keys import Keys
-from sea_hil.protocol.payloads import (EventStatePayload, PayloadCounters, SeqVerdict, SequenceTracker,
-                                       StatePayload)
+from sea_hil.protocol.keys import KEY_PAYLOADS, Keys
+from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, StatePayload
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.zsession import publisher
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.runtime.clock import Clock, ControllerSync, RealTimeClock
 from sea_hil.runtime.node import Node
 
 log = logging.getLogger("sea_hil.controller")
@@ -48,7 +48,7 @@ class RemoteController(Node):
         self.core = ControllerCore(cfg, mode, inner, cycles, self.epoch)   # the pure part: state in, messages out
         self.edge_trigger, self.trajectory_id = self.core.edge_trigger, self.core.trajectory_id
         self.trajectory_mismatches = 0
-        self.sync = (clock or RealTimeClock()).controller(self)
+        self.sync: ControllerSync = (clock or RealTimeClock()).controller(self)
         self.source = self.sync.state_source(session, self.keys.state)
         self.sp_pub = publisher(session, self.keys.setpoint, congestion_control=self.sync.congestion_control)
         self.v_pub = publisher(session, self.keys.voltage, congestion_control=self.sync.congestion_control)
@@ -81,7 +81,7 @@ class RemoteController(Node):
         return True
 
     def finished(self) -> bool:
-        return self.done
+        return bool(self.done)
 
     def _close(self) -> None:
         self.source.close()
@@ -90,7 +90,7 @@ class RemoteController(Node):
     def handle(self, data: bytes, now_ns: int | None = None) -> None:
         """Handle one state payload (`now_ns`: arrival time, default now). Malformed or wrong-type payloads and
         stale/duplicated state seqs are counted (`stats_dict`) and ignored."""
-        p = self.payloads.try_decode(data)
+        p = self.payloads.try_decode(data, KEY_PAYLOADS["state"])   # another type: rejected as KEY, counted
         if p is None:
             return
         if not isinstance(p, EventStatePayload if self.edge_trigger else StatePayload) or \
@@ -153,9 +153,11 @@ class RemoteController(Node):
 
     def _stats(self) -> dict[str, object]:
         pc = self.payloads.as_dict()
+        rejected = pc["rejected"]
+        assert isinstance(rejected, dict)
         return {"states_handled": self.states, "setpoints_sent": self.setpoint_seq,
                 "payload_accepted": pc["accepted"], "payload_rejected": pc["rejected_total"],
-                **{f"payload_rejected_{k}": v for k, v in pc["rejected"].items()},  # type: ignore[union-attr]
+                **{f"payload_rejected_{k}": v for k, v in rejected.items()},
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
                 "trajectory_mismatches": self.trajectory_mismatches, "unanchored_states": self.core.unanchored,

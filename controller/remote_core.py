@@ -15,7 +15,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_events import tracking_record
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
@@ -42,15 +42,15 @@ class ControllerCore:
         self.params = nominal_params(cfg)
         self.traj = make_trajectory(cfg.trajectory)
         self.outer = OuterController(cfg, self.params, mode)
-        self.inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), cfg.controller.sample_period_s)
+        self.inner = InnerLoop(cfg, self.params, cfg.plant.initial_theta_rad, cfg.controller.sample_period_s)
         self.edge_trigger = cfg.trigger.placement == "edge"      # answer every EVENT_STATE
         self.trajectory_id = trajectory_id(cfg.trajectory)
         self.predictor: Predictor | None = None
         if cfg.controller.compensation == "predict":            # the edge's closed loop at its own rate
             period_s = 1.0 / cfg.can.feedback_rate_hz
-            edge_inner = InnerLoop(cfg, self.params, tuple(cfg.plant.initial_theta_rad), period_s)
+            edge_inner = InnerLoop(cfg, self.params, cfg.plant.initial_theta_rad, period_s)
             self.predictor = Predictor.for_inner(edge_inner, int(round(period_s * 1e9)), cfg.sim.substeps)
-            self.predictor.warm(tuple(cfg.plant.initial_theta_rad))
+            self.predictor.warm(cfg.plant.initial_theta_rad)
         self.duration_ns = int(round(self.traj.period_s * cycles * 1e9))
         self.lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         self.lead_in: LeadIn | None = None
@@ -77,7 +77,9 @@ class ControllerCore:
                 return Answer([], None, None)
         elif self.t0_ns is None:    # the paper's placement: t counts from the first state handled
             self._anchor(p)
-        t_ns = p.sample_t_ns - self.t0_ns  # type: ignore[operator]
+        t0_ns = self.t0_ns
+        assert t0_ns is not None   # anchored above
+        t_ns = p.sample_t_ns - t0_ns
         self.last_t_ns = t_ns
         if t_ns > self.duration_ns:
             self.done = True
@@ -95,7 +97,7 @@ class ControllerCore:
                                                              sp.sliding, sp.reason, epoch=self.epoch)))
         if self.inner_mode == "remote":
             m = (*p.theta_rad, *p.omega_rad_s, *p.delta_m, *p.nut_vel_m_s)
-            u = self.inner.voltage(m)  # type: ignore[arg-type]
+            u = self.inner.voltage(m)
             self.setpoint_seq += 1
             messages.append(("voltage", encode(VoltagePayload(self.setpoint_seq, wall_ns(), p.seq, u,
                                                               epoch=self.epoch))))
@@ -128,7 +130,7 @@ class ControllerCore:
             apply_ns = self.predictor.apply_time_ns(now)
             js = self.predictor.predict((p.theta_rad, p.omega_rad_s, p.delta_m, p.nut_vel_m_s), p.sample_t_ns,
                                         apply_ns)
-            t_eval = apply_ns - self.t0_ns  # type: ignore[operator]
+            t_eval = t_ns + (apply_ns - p.sample_t_ns)   # = apply_ns - t0_ns
         ds_eval = self.desired(t_eval)
         if not self.edge_trigger:
             return self.outer.step(t_eval, p.seq, js, ds_eval), now

@@ -14,10 +14,11 @@ import hashlib
 import math
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from sea_hil.config import TrajectoryConfig
+from sea_hil.config.model import TrajectoryConfig
 from sea_hil.errors import TrajectoryError
 
 # (offset, [(amplitude, harmonic, phase)]) per joint, angles in rad
@@ -32,7 +33,7 @@ class DesiredSample:
     alpha_rad_s2: tuple[float, float]
 
 
-def gait_joint(spec: tuple, w: float, t: float) -> tuple[float, float, float]:
+def gait_joint(spec: tuple[Any, ...], w: float, t: float) -> tuple[float, float, float]:
     """(q, q', q'') of one joint's Fourier spec (`_HIP`, `_KNEE`) at t, base angular rate w (rad/s)."""
     offset, harmonics = spec
     q, qd, qdd = offset, 0.0, 0.0
@@ -62,7 +63,7 @@ class GaitTrajectory:
 
 class CsvTrajectory:
     def __init__(self, path: str | Path) -> None:
-        from scipy.interpolate import CubicSpline   # 0.35 s to import: only when a CSV trajectory is used
+        from scipy.interpolate import CubicSpline  # 0.35 s to import: only when a CSV trajectory is used
 
         t, q = _read_csv(Path(path))
         periodic = bool(np.allclose(q[0], q[-1]))
@@ -138,7 +139,7 @@ def anchored_lead_in(theta_rad: tuple[float, float], omega_rad_s: tuple[float, f
     return lead_ns, LeadIn(theta_rad, omega_rad_s, target, lead_ns * 1e-9)
 
 
-def lead_in_sample(c_hip: tuple, c_knee: tuple, duration_s: float, t_s: float
+def lead_in_sample(c_hip: tuple[float, ...], c_knee: tuple[float, ...], duration_s: float, t_s: float
                    ) -> tuple[tuple[float, float], tuple[float, float], tuple[float, float]]:
     """(theta, omega, alpha) pairs of the lead-in quintics (coefficients `quintic`) at t_s in [-duration_s, 0]
     (clamped); plain float code (the offline session kernel compiles it)."""
@@ -147,7 +148,7 @@ def lead_in_sample(c_hip: tuple, c_knee: tuple, duration_s: float, t_s: float
     return (h[0], k[0]), (h[1], k[1]), (h[2], k[2])
 
 
-def quintic_at(c: tuple, tau: float) -> tuple[float, float, float]:
+def quintic_at(c: tuple[float, ...], tau: float) -> tuple[float, float, float]:
     """(q, q', q'') of the quintic with coefficients c at tau."""
     q = c[0] + tau * (c[1] + tau * (c[2] + tau * (c[3] + tau * (c[4] + tau * c[5]))))
     qd = c[1] + tau * (2 * c[2] + tau * (3 * c[3] + tau * (4 * c[4] + tau * 5 * c[5])))

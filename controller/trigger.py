@@ -25,7 +25,7 @@ def epsilon(xt: tuple[float, float, float, float], xd: tuple[float, float], xd_d
 def _distance(a: tuple[float, ...], b: tuple[float, ...]) -> float:
     """Euclidean distance, summed left to right (the hot path of `EventTrigger.update`)."""
     acc = 0.0
-    for u, v in zip(a, b):
+    for u, v in zip(a, b):  # noqa: B905 - numba compiles this (its zip takes no strict=); a, b: 8 floats each
         d = u - v
         acc += d * d
     return math.sqrt(acc)
@@ -67,7 +67,7 @@ class EventTrigger:
 
     def update(self, t_ns: int, eps: tuple[float, ...]) -> TriggerReason | None:
         started = self._eps_i is not None
-        code = event_reason(started, self._eps_i if started else _EPS_UNSET, self._t_i_ns, t_ns, eps,
+        code = event_reason(started, self._eps_i if self._eps_i is not None else _EPS_UNSET, self._t_i_ns, t_ns, eps,
                             self.threshold, self.r, self.max_inter_event_ns)
         if code == NO_EVENT:
             return None

@@ -11,7 +11,7 @@ numba up; numba not installed) `step_all` runs `DriverCore.step` per driver: the
 """
 from __future__ import annotations
 
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -97,6 +97,6 @@ def step_all(drivers: Sequence[DriverCore], *, jit: bool = True) -> list[Feedbac
     _entry(kernel, drivers[0].params)(xs, np.array(segf), np.array(segi, np.int64), np.array(dist),
                                       drivers[0].params, delta)
     return [drv.finish_period(tuple(row), (d1, d2))
-            for drv, row, (d1, d2) in zip(drivers, xs.tolist(), delta.tolist())]
+            for drv, row, (d1, d2) in zip(drivers, xs.tolist(), delta.tolist(), strict=True)]
 
 

@@ -16,12 +16,20 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-from sea_hil.plant_emulator.dynamics import State, deflections, initial_state, saturate
+from sea_hil.dynamics import State, deflections, initial_state, saturate
+from sea_hil.mechanics import LimbParams
 from sea_hil.plant_emulator.integrator import Disturbance, advance
 from sea_hil.plant_emulator.soft_limits import DriveLimits
-from sea_hil.protocol.can_frames import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Feedback, Heartbeat,
-                                 VoltageCmd)
-from sea_hil.mechanics import LimbParams
+from sea_hil.protocol.can_frames import (
+    ClearErrors,
+    DeflectionSetpoint,
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Feedback,
+    Heartbeat,
+    VoltageCmd,
+)
 
 U16 = 0xFFFF
 
@@ -60,7 +68,7 @@ class DriverCore:
     @classmethod
     def create(cls, node_id: int, params: LimbParams, period_s: float, watchdog_s: float, substeps: int,
                theta0_rad: tuple[float, float], disturbance: Disturbance,
-               limits: DriveLimits = DriveLimits()) -> "DriverCore":
+               limits: DriveLimits = DriveLimits()) -> DriverCore:
         x0 = initial_state(theta0_rad[0], theta0_rad[1], 0.0, 0.0, params)
         return cls(node_id, params, int(round(period_s * 1e9)), int(round(watchdog_s * 1e9)), substeps, x0,
                    disturbance, limits)

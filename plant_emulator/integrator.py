@@ -11,7 +11,8 @@ they differ only off the model's domain, where plain Python's `math` raises `Val
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -82,11 +83,14 @@ def advance(t: float, x: State, u: tuple[float, float], dt: float, substeps: int
         values += (*dist(ti), *dist(ti + hh), *dist(ti + h))
     dist_values = np.array(values)   # an array: one signature for any sub-step count
     if type(substeps) is int and len(x) == 8 and all(type(v) is float for v in (t, dt, *x, *u)):
-        return _entry(kernel, p)(t, x, u, dt, substeps, p, dist_values)
-    return kernel(t, x, u, dt, substeps, p, dist_values)
+        out: State = _entry(kernel, p)(t, x, u, dt, substeps, p, dist_values)
+    else:
+        out = kernel(t, x, u, dt, substeps, p, dist_values)
+    return out
 
 
-_ENTRIES: dict[tuple[int, int], tuple[Any, LimbParams, Any]] = {}   # (id(kernel), id(params)) -> entry: a cache
+# (id(kernel), id(params)) -> (kernel, params, entry): a cache
+_ENTRIES: dict[tuple[int, int], tuple[Any, LimbParams, Callable[..., Any]]] = {}
 _ENTRIES_MAX = 64
 
 
@@ -105,7 +109,7 @@ def _advance_signature(p_type: Any) -> tuple[Any, ...]:
     return (f64, types.UniTuple(f64, 8), types.UniTuple(f64, 2), f64, types.int64, p_type, types.Array(f64, 1, "C"))
 
 
-def entry_point(kernel: Any, p: LimbParams, signature: Callable[[Any], tuple[Any, ...]]) -> Any:
+def entry_point(kernel: Any, p: LimbParams, signature: Callable[[Any], tuple[Any, ...]]) -> Callable[..., Any]:
     """The entry point of `kernel`'s overload for the numba argument types `signature(numba.typeof(p))` (compiled,
     or loaded from numba's cache, when it is not there yet), cached per kernel and parameter object: a hit costs
     one dict lookup."""
@@ -120,6 +124,6 @@ def entry_point(kernel: Any, p: LimbParams, signature: Callable[[Any], tuple[Any
         kernel.compile(sig)
     if len(_ENTRIES) >= _ENTRIES_MAX:
         _ENTRIES.clear()
-    entry = kernel.overloads[sig].entry_point
+    entry: Callable[..., Any] = kernel.overloads[sig].entry_point
     _ENTRIES[key] = (kernel, p, entry)
     return entry

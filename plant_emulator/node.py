@@ -12,11 +12,14 @@ from __future__ import annotations
 
 import logging
 import time
+from collections.abc import Callable, Container
 from dataclasses import dataclass
-from typing import Callable, Container
 
 import can
 
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.errors import BusError, MalformedFrame
+from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.batch import prepare_batch, step_all
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
@@ -24,13 +27,11 @@ from sea_hil.plant_emulator.integrator import prepare_advance
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback
-from sea_hil.protocol.canbus import send_with_retry
-from sea_hil.config import SeaHilConfig
-from sea_hil.errors import BusError, MalformedFrame
-from sea_hil.runtime.clock import Clock, RealTimeClock
+from sea_hil.protocol.canbus import CanHandle, send_with_retry
+from sea_hil.protocol.timed_bus import TimedBus
+from sea_hil.runtime.clock import Clock, Pacer, RealTimeClock
 from sea_hil.runtime.node import Node
 from sea_hil.stats.histogram import LogHistogram
-from sea_hil.mechanics import limb_params
 
 log = logging.getLogger("sea_hil.plant")
 
@@ -63,27 +64,28 @@ def is_foreign(msg: can.Message, served: Container[int], cmd_ids: frozenset[int]
 class PlantNode(Node):
     kind = "plant"
 
-    def __init__(self, cfg: SeaHilConfig, bus: can.BusABC, node_ids: tuple[int, ...], *,
+    def __init__(self, cfg: SeaHilConfig, bus: CanHandle, node_ids: tuple[int, ...], *,
                  clock: Clock | None = None) -> None:
         if not node_ids:
             raise BusError("plant needs at least one node id")
         super().__init__()
         self.cfg = cfg
         self.bus = bus
-        self.sim_bus = bool(getattr(bus, "simulated", False))   # lockstep bus-timing model: simulated arrival times
+        # lockstep bus-timing model: simulated arrival times
+        self.sim: TimedBus | None = bus if isinstance(bus, TimedBus) and bus.simulated else None
         self.codec = SeaCodec.for_bus(cfg.can, node_ids)
         self.cmd_ids = command_ids()
         p = limb_params(cfg.plant)
         cc = cfg.can
         self.period_ns = int(round(1e9 / cc.feedback_rate_hz))
         self.drivers = {n: DriverCore.create(n, p, 1.0 / cc.feedback_rate_hz, cc.watchdog_timeout_s, cfg.sim.substeps,
-                                             tuple(cfg.plant.initial_theta_rad), make_disturbance(cfg.disturbance),
+                                             cfg.plant.initial_theta_rad, make_disturbance(cfg.disturbance),
                                              DriveLimits.from_config(cfg.safety.drive))
                         for n in node_ids}
         self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
         self.lateness = LogHistogram()
         self.stats = TickStats()
-        self.pacer = (clock or RealTimeClock()).plant(self)
+        self.pacer: Pacer = (clock or RealTimeClock()).plant(self)
 
     # ---- frames -------------------------------------------------------------------------------------------------
     def _on_message(self, msg: can.Message, now_ns: int) -> None:
@@ -118,15 +120,15 @@ class PlantNode(Node):
         routes = getattr(self.bus, "routes", None)
         bus = routes.get(node_id) if routes is not None and node_id is not None else None
         for n, drv in self.drivers.items():
-            if bus is None or routes.get(n) is bus:
+            if bus is None or routes is not None and routes.get(n) is bus:
                 drv.flags |= ErrorFlags.BUS_ERROR
         self.stats.bus_errors += 1
         if self.stats.bus_errors == 1 or self.stats.bus_errors % 1000 == 0:
             log.warning("%s (%d bus errors so far)", what, self.stats.bus_errors)
 
     def publish(self, drv: DriverCore, feedback: Feedback) -> None:
-        if self.sim_bus:   # the sample's frames leave at its sample time; commands act from their simulated arrival
-            self.bus.advance_sim_time(drv.sample_t_ns)
+        if self.sim is not None:   # the sample's frames leave at its sample time; commands act from their arrival
+            self.sim.advance_sim_time(drv.sample_t_ns)
             drv.period_start_ns = drv.sample_t_ns
         try:
             msgs = self.codec.encode_feedback(feedback, saturate=True)
@@ -143,8 +145,8 @@ class PlantNode(Node):
         self.publish(drv, feedback)
 
     def heartbeats(self) -> None:
-        if self.sim_bus:
-            self.bus.advance_sim_time(max(drv.sample_t_ns for drv in self.drivers.values()))
+        if self.sim is not None:
+            self.sim.advance_sim_time(max(drv.sample_t_ns for drv in self.drivers.values()))
         for drv in self.drivers.values():
             self._send(self.codec.encode(drv.heartbeat()))
 
@@ -160,7 +162,7 @@ class PlantNode(Node):
         """Integrate one period of every served limb (one compiled call for all when loaded, `plant_emulator.batch`)
         and return each driver with its new sample's feedback, in node-id order of `drivers`."""
         drivers = list(self.drivers.values())
-        return list(zip(drivers, step_all(drivers)))
+        return list(zip(drivers, step_all(drivers), strict=True))
 
     def drain_until(self, deadline_ns: int, done: Callable[[], bool] | None = None) -> None:
         """Handle received frames until `deadline_ns` (monotonic) or until `done()`."""
@@ -176,7 +178,7 @@ class PlantNode(Node):
                 self.stop_event.wait(min(remaining * 1e-9, 0.01))
                 continue
             if msg is not None:
-                self._on_message(msg, self.bus.rx_time_ns if self.sim_bus else time.monotonic_ns())
+                self._on_message(msg, self.sim.rx_time_ns if self.sim is not None else time.monotonic_ns())
 
     # ---- the node hooks -----------------------------------------------------------------------------------------
     def _on_start(self, duration_s: float | None) -> None:
@@ -195,7 +197,7 @@ class PlantNode(Node):
                                  "send_failures": s.send_failures, "bus_errors": s.bus_errors,
                                  "foreign_frames": s.foreign_frames}
         for k in ("p50", "p99", "max"):
-            out[f"lateness_us_{k}"] = lat[k] * 1e6 if lat[k] is not None else -1.0
+            out[f"lateness_us_{k}"] = v * 1e6 if (v := lat[k]) is not None else -1.0
         for n, drv in self.drivers.items():
             c = drv.counters
             out.update({f"node{n}_rejected_frames": c.rejected_frames, f"node{n}_ignored_commands": c.ignored_commands,

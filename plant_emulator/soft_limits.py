@@ -19,12 +19,11 @@ class DriveLimits(NamedTuple):
     spring_force_max_n: tuple[float, float] = (INF, INF)
 
     @classmethod
-    def from_config(cls, cfg: DriveLimitsConfig) -> "DriveLimits":
+    def from_config(cls, cfg: DriveLimitsConfig) -> DriveLimits:
         """The configured limits; none (every check passes) when `enabled` is false."""
         if not cfg.enabled:
             return cls()
-        return cls(tuple(cfg.position_min_rad), tuple(cfg.position_max_rad),   # type: ignore[arg-type]
-                   tuple(cfg.velocity_max_rad_s), tuple(cfg.spring_force_max_n))   # type: ignore[arg-type]
+        return cls(cfg.position_min_rad, cfg.position_max_rad, cfg.velocity_max_rad_s, cfg.spring_force_max_n)
 
     def violations(self, theta_rad: tuple[float, float], omega_rad_s: tuple[float, float],
                    deflection_m: tuple[float, float], p: LimbParams) -> ErrorFlags:

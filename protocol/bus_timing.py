@@ -18,11 +18,15 @@ from __future__ import annotations
 import heapq
 import itertools
 import logging
+from collections.abc import Iterable
 from dataclasses import dataclass, field
-from typing import Any, Iterable, NamedTuple
+from typing import Any, NamedTuple
 
 import can
 
+from sea_hil.config.comms import CanConfig
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat, VoltageCmd
 from sea_hil.stats.can_bits import NS_PER_S, frame_time_ns
 from sea_hil.stats.histogram import LogHistogram
 
@@ -123,7 +127,7 @@ class BusArbiter:
         first frame ready .. last frame delivered)."""
         def us(h: LogHistogram) -> dict[str, float]:   # values are recorded + 1 ns (a log histogram has no 0)
             d = h.to_dict()
-            return {k: -1.0 if d[k] is None else 0.0 if d[k] < 1e-8 else round(float(d[k]) * 1e6, 3)
+            return {k: -1.0 if (v := d[k]) is None else 0.0 if v < 1e-8 else round(float(v) * 1e6, 3)
                     for k in ("p50", "p99", "max")}
         span = self.busy_until_ns - (self.first_ready_ns or 0)
         return {"bitrate_bps": self.rates.bitrate_bps, "data_bitrate_bps": self.rates.data_bitrate_bps,
@@ -142,11 +146,9 @@ class BusArbiter:
         return out
 
 
-def planned_load_pct(can_cfg: Any, node_ids: Iterable[int]) -> float:
+def planned_load_pct(can_cfg: CanConfig, node_ids: Iterable[int]) -> float:
     """Bus load (%) the configured profile plans for `node_ids` on one bus: per node and sample its feedback and
     its voltage frame at `feedback_rate_hz`, its heartbeat at `heartbeat_rate_hz` (worst-case stuffing)."""
-    from sea_hil.protocol.can_codec import Feedback, Heartbeat, SeaCodec, VoltageCmd
-    from sea_hil.protocol.can_frames import DriverState, ErrorFlags
     codec, rates, z = SeaCodec.for_bus(can_cfg), BusRates.of(can_cfg), (0.0, 0.0)
     sample = codec.encode_feedback(Feedback(1, 0, 0, z, z, z, z)) + [codec.encode(VoltageCmd(1, z, 0))]
     per_node_ns = (sum(rates.frame_ns(m) for m in sample) * can_cfg.feedback_rate_hz

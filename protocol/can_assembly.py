@@ -5,9 +5,16 @@ import numbers
 from collections import OrderedDict, deque
 from typing import Any
 
-from sea_hil.protocol.can_frames import (FEEDBACK_PARTS, SEQ_MODULUS, T_US_MODULUS, Feedback, FeedbackAngle,
-                                 FeedbackJoint1, FeedbackJoint2)
 from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_frames import (
+    FEEDBACK_PARTS,
+    SEQ_MODULUS,
+    T_US_MODULUS,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+)
 
 
 def unwrap_us(prev_full_us: int, wrapped: int) -> int:

@@ -13,36 +13,42 @@ The frame types (`sea_hil.protocol.can_frames`) and feedback assembly (`sea_hil.
 from __future__ import annotations
 
 import functools
-
 import math
 import numbers
+from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
 from importlib import resources
-from typing import Any, Iterable
+from typing import Any
 
 import can
 import cantools
 from cantools.database import EncodeError
 
-from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
-from sea_hil.protocol.can_frames import (CMD_BITS, CMD_MASK, FEEDBACK_PARTS, FRAME_TYPES, NODE_ID_MAX, NODE_ID_MIN, ROLLING,
-                                 SEQ_MODULUS, T_US_MODULUS, ClearErrors, DeflectionSetpoint, DriverState, ErrorFlags,
-                                 EStop, Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Frame,
-                                 Heartbeat, Pair, SignalBinding, VoltageCmd, binding_of, can_id_of, check_node_id,
-                                 profile_messages)
 from sea_hil.errors import ConfigError, MalformedFrame
+from sea_hil.protocol.can_frames import (
+    CMD_BITS,
+    CMD_MASK,
+    NODE_ID_MAX,
+    NODE_ID_MIN,
+    ROLLING,
+    Feedback,
+    Frame,
+    SignalBinding,
+    binding_of,
+    check_node_id,
+    profile_messages,
+)
 from sea_hil.protocol.frame_plan import FramePlan
 
-__all__ = ["CMD_BITS", "CMD_MASK", "FEEDBACK_PARTS", "FRAME_TYPES", "NODE_ID_MAX", "NODE_ID_MIN", "SEQ_MODULUS",
-           "T_US_MODULUS", "ClearErrors", "DeflectionSetpoint", "DriverState", "ErrorFlags", "EStop", "Feedback",
-           "FeedbackAngle", "FeedbackAssembler", "FeedbackJoint1", "FeedbackJoint2", "Frame", "Heartbeat",
-           "Pair", "SeaCodec", "VoltageCmd", "can_id_of", "check_node_id", "load_database", "seq_gap", "unwrap_us"]
+__all__ = ["SeaCodec", "load_database"]
 
 
 def load_database() -> cantools.database.can.Database:
     """Parse the packaged DBC (frame ids masked to the command bits)."""
     text = resources.files("sea_hil.protocol").joinpath("sea.dbc").read_text(encoding="utf-8")
-    return cantools.database.load_string(text, database_format="dbc", frame_id_mask=CMD_MASK, strict=True)
+    db = cantools.database.load_string(text, database_format="dbc", frame_id_mask=CMD_MASK, strict=True)
+    assert isinstance(db, cantools.database.can.Database)   # a DBC is a CAN database
+    return db
 
 
 @dataclass(frozen=True)
@@ -62,7 +68,7 @@ class _Sig:
 
 @dataclass(frozen=True)
 class _Layout:
-    cls: type
+    cls: type[Frame]
     message: Any
     cmd_id: int
     dlc: int
@@ -71,8 +77,8 @@ class _Layout:
     is_fd: bool
     # per signal (sig, name, min, max, is_int, clampable, min - tol, max + tol, plain): the hot paths' precomputed
     # view of `sigs`; `plain` = no enum, so a finite in-range value needs no further check
-    plan: tuple[tuple[Any, ...], ...] = ()
-    frame: FramePlan | None = None   # the precompiled pack/unpack of `message` (sea_hil.protocol.frame_plan)
+    plan: tuple[tuple[Any, ...], ...]
+    frame: FramePlan                 # the precompiled pack/unpack of `message` (sea_hil.protocol.frame_plan)
     binding: SignalBinding | None = None   # fields <-> the plan's value tuple (None: through the signal dicts)
 
 
@@ -82,10 +88,16 @@ def _codec_database() -> cantools.database.can.Database:
     return load_database()
 
 
+def _layout(cls: type[Frame], name: str) -> _Layout:
+    """The immutable layout of message `name` for frame type `cls` (its precompiled frame plan): built once per
+    process and shared by every codec (building one costs ~1 ms, a codec ~40 ms: one per edge core, per offline
+    sweep point)."""
+    key: Any = cls      # mypy takes a union of frame types for unhashable (functools.cache's Hashable arguments)
+    return _built_layout(key, name)
+
+
 @functools.cache
-def _layout(cls: type, name: str) -> _Layout:
-    """The immutable layout of message `name` (its precompiled frame plan): built once per process and shared by
-    every codec (building one costs ~1 ms, a codec ~40 ms: one per edge core, per offline sweep point)."""
+def _built_layout(cls: type[Frame], name: str) -> _Layout:
     msg = _codec_database().get_message_by_name(name)
     sigs, used = [], 0
     for s in msg.signals:
@@ -194,15 +206,16 @@ class SeaCodec:
                                  f"expected {lay.dlc}")
         if int.from_bytes(data, "little") & ~lay.used_mask:
             raise MalformedFrame(f"{lay.message.name} node {node_id}: reserved bits set in {data.hex()}")
-        vals = lay.frame.unpack_plain(data)   # = cantools decode (tests/test_frame_plan), all values in range
+        # = cantools decode (tests/test_frame_plan), all values in range
+        vals: Sequence[Any] | None = lay.frame.unpack_plain(data)
         if vals is None:                      # some value outside its DBC range: clamp within tolerance, or reject
             vals = [(int(v) if is_int else min(max(float(v), lo), hi))
                     if plain and lo_tol <= v <= hi_tol   # finite (NaN and inf fail the comparison) and in range
                     else _checked(lay.message.name, s, v)
-                    for (s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain), v in zip(lay.plan, lay.frame.unpack(data))]
+                    for (s, name, lo, hi, is_int, _, lo_tol, hi_tol, plain), v in zip(lay.plan, lay.frame.unpack(data), strict=True)]
         if lay.binding is not None:
             return lay.binding.build(node_id, vals)
-        return lay.cls.from_signals(node_id, dict(zip(lay.frame.names, vals)))
+        return lay.cls.from_signals(node_id, dict(zip(lay.frame.names, vals, strict=True)))
 
     def saturate(self, obj: Any) -> tuple[Any, bool]:
         """Copy of `obj` with every physical value and counter clamped to its DBC range (not seq/t_us, enums, NaN);
@@ -215,7 +228,7 @@ class SeaCodec:
         changed = _clamp(lay, values)
         return (lay.cls.from_signals(obj.node_id, values) if changed else obj), changed
 
-    def _layout_of(self, cls: type) -> _Layout:
+    def _layout_of(self, cls: type[Frame]) -> _Layout:
         lay = self._by_cls.get(cls)
         if lay is None:
             raise MalformedFrame(f"{cls.__name__} is not a sea-hil CAN frame type")

@@ -10,9 +10,10 @@ from __future__ import annotations
 
 import dataclasses
 import numbers
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import IntEnum, IntFlag
-from typing import Any, Callable, ClassVar, Union
+from typing import Any, ClassVar, Self
 
 from sea_hil.errors import MalformedFrame
 
@@ -69,7 +70,7 @@ class _Signals:
         return out
 
     @classmethod
-    def from_signals(cls, node_id: int, s: dict[str, Any]) -> Any:
+    def from_signals(cls, node_id: int, s: dict[str, Any]) -> Self:
         kw = {n: (s[g[0]], s[g[1]]) if isinstance(g, tuple) else s[g] for n, g in cls.FIELDS}
         return cls(node_id=node_id, **kw)  # type: ignore[call-arg]
 
@@ -194,15 +195,15 @@ class Feedback(_Signals):
                    (j1.nut_vel_m_s, j2.nut_vel_m_s))
 
 
-Frame = Union[EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
-              FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Feedback]
-FRAME_TYPES: tuple[type, ...] = (EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
+Frame = (EStop | ClearErrors | VoltageCmd | DeflectionSetpoint | Heartbeat
+         | FeedbackAngle | FeedbackJoint1 | FeedbackJoint2 | Feedback)
+FRAME_TYPES: tuple[type[Frame], ...] = (EStop, ClearErrors, VoltageCmd, DeflectionSetpoint, Heartbeat,
                                  FeedbackAngle, FeedbackJoint1, FeedbackJoint2, Feedback)
 
 
-def profile_messages(fd: bool) -> dict[type, str]:
+def profile_messages(fd: bool) -> dict[type[Frame], str]:
     """Frame type -> its DBC message in the classic (`fd` False) or the CAN FD profile."""
-    out = {}
+    out: dict[type[Frame], str] = {}
     for cls in FRAME_TYPES:
         name = cls.DBC if not fd else cls.DBC if cls.DBC_FD is None else cls.DBC_FD
         if name:
@@ -216,7 +217,7 @@ class SignalBinding:
     straight-line code, so the hot paths go object -> values -> object without the `to_signals` / `from_signals`
     dicts; the same mapping (`FIELDS`). `values(obj)` raises ValueError/TypeError unless each pair field is a pair."""
 
-    def __init__(self, cls: type, names: tuple[str, ...]) -> None:
+    def __init__(self, cls: type[Frame], names: tuple[str, ...]) -> None:
         index = {n: i for i, n in enumerate(names)}
         flat = [sig for _, g in cls.FIELDS for sig in (g if isinstance(g, tuple) else (g,))]   # FIELDS order
         if sorted(flat) != sorted(names):
@@ -236,10 +237,10 @@ class SignalBinding:
         namespace: dict[str, Any] = {"cls": cls}
         exec(compile("\n".join(lines), f"<signal binding {cls.__name__}>", "exec"), namespace)  # noqa: S102
         self.values: Callable[[Any], list[Any]] = namespace["values"]
-        self.build: Callable[[int, Any], Any] = namespace["build"]
+        self.build: Callable[[int, Any], Frame] = namespace["build"]
 
 
-def binding_of(cls: type, names: tuple[str, ...]) -> SignalBinding | None:
+def binding_of(cls: type[Frame], names: tuple[str, ...]) -> SignalBinding | None:
     """The `SignalBinding` of a frame type with the plain `FIELDS` mapping; None when it maps its own way
     (`Heartbeat`: the flag bits) and goes through `to_signals` / `from_signals`."""
     return None if "to_signals" in cls.__dict__ or "from_signals" in cls.__dict__ else SignalBinding(cls, names)

@@ -11,7 +11,8 @@ generic `encode` / `decode` (and so as cantools; tests/test_frame_plan.py checks
 """
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 
 def _raw_expr(s: Any, v: str) -> str:
@@ -39,7 +40,8 @@ def _compile(name: str, lines: list[str], label: str) -> Callable[..., Any]:
     namespace: dict[str, Any] = {}
     code = compile("\n".join(lines), f"<frame plan {label}.{name}>", "exec")   # source built from the DBC only
     exec(code, namespace)  # noqa: S102
-    return namespace[name]
+    fn: Callable[..., Any] = namespace[name]
+    return fn
 
 
 def generate(plan: Any) -> tuple[Callable[..., Any], Callable[..., Any], Callable[..., Any]]:
@@ -51,16 +53,16 @@ def generate(plan: Any) -> tuple[Callable[..., Any], Callable[..., Any], Callabl
     names = [f"v{i}" for i in range(len(sigs))]
     unpacked = ", ".join(names) + ("," if len(names) == 1 else "")
     pack = ["def pack_plain(values):", f"    {unpacked} = values"]
-    for s, v in zip(sigs, names):
+    for s, v in zip(sigs, names, strict=True):
         kinds = "type({v}) is not int" if s.identity else "(type({v}) is not float and type({v}) is not int)"
         pack.append(f"    if {kinds.format(v=v)} or not ({s.minimum!r} <= {v} <= {s.maximum!r}):")
         pack.append("        return None")
-    terms = [f"(({_raw_expr(s, v)}) & {s.mask}) << {s.start}" for s, v in zip(sigs, names)]
+    terms = [f"(({_raw_expr(s, v)}) & {s.mask}) << {s.start}" for s, v in zip(sigs, names, strict=True)]
     pack.append(f"    return ({' | '.join(terms) or '0'}).to_bytes({plan.length}, 'little')")
     unpack = ["def unpack(data):", "    w = int.from_bytes(data, 'little')",
               f"    return ({', '.join(_physical_expr(s) for s in sigs)}{',' if len(sigs) == 1 else ''})"]
     plain = ["def unpack_plain(data):", "    w = int.from_bytes(data, 'little')"]
-    for s, v in zip(sigs, names):
+    for s, v in zip(sigs, names, strict=True):
         plain += [f"    {v} = {_physical_expr(s)}", f"    if {_range_test(s, v)}:", "        return None"]
     plain.append(f"    return ({unpacked})")
     return (_compile("pack_plain", pack, plan.name), _compile("unpack", unpack, plan.name),

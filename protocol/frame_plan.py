@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import Any
 
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.frame_codegen import generate
@@ -94,7 +95,7 @@ class FramePlan:
         """The frame's data bytes for physical `values` (signal order); `MalformedFrame` for a value cantools strict
         refuses (out of range with its tolerance, NaN, inf, not a number)."""
         word = 0
-        for s, v in zip(self.signals, values):
+        for s, v in zip(self.signals, values, strict=True):
             t = type(v)
             if t is not float and t is not int and not isinstance(v, (int, float)):   # as cantools: subclasses too
                 raise MalformedFrame(f"{self.name}.{s.name}: {v!r} is not a number")

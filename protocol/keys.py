@@ -12,40 +12,50 @@
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Protocol
 
+from sea_hil.config.wire_names import validate_limb, validate_prefix
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.payloads import MsgType
 
 CHANNELS: tuple[str, ...] = ("state", "setpoint", "voltage", "stats", "event", "control")
-_FORBIDDEN = frozenset("*$#?")
+KEY_PAYLOADS: dict[str, frozenset[MsgType]] = {
+    "state": frozenset({MsgType.STATE, MsgType.EVENT_STATE}),
+    "setpoint": frozenset({MsgType.SETPOINT}),
+    "voltage": frozenset({MsgType.VOLTAGE}),
+    "control": frozenset({MsgType.ACK}),
+}
+KEY_CONGESTION: dict[str, tuple[str, str]] = {
+    "state": ("DROP", "BLOCK"), "setpoint": ("DROP", "BLOCK"), "voltage": ("DROP", "BLOCK"),
+    "control": ("DROP", "BLOCK"), "event": ("BLOCK", "BLOCK"), "stats": ("DROP", "DROP"),
+}
+"""Zenoh congestion control per key (real time, lockstep), as the built-in nodes publish (tests/test_key_table.py
+checks it against the runtime's syncs and nodes): in real time a late control message is worth less than the next
+one (DROP); a lockstep run must be complete to be reproducible (BLOCK); tracking records are never dropped."""
+KEY_RATES: dict[str, str] = {
+    "state": "every `controller.sample_period_s` (10 ms; with the trigger at the edge only on events)",
+    "setpoint": "on events only: <= 1/`controller.sample_period_s`, >= 1/`trigger.max_inter_event_s`",
+    "voltage": "every state (remote inner-loop placement only)",
+    "control": "lockstep: one ACK per handled state",
+    "event": "one tracking record per handled state",
+    "stats": "at node shutdown (`final: true`; the record's required fields: docs/recording.md)",
+}
+KEY_DIRECTION: dict[str, str] = {"state": "edge -> controller", "setpoint": "controller -> edge",
+                                 "voltage": "controller -> edge", "control": "controller -> edge",
+                                 "event": "controller (or edge) -> all", "stats": "every node -> all"}
+"""The binary payload types each key carries (the JSON keys `stats` and `event` none): every receiver decodes with
+`PayloadCounters.try_decode(data, KEY_PAYLOADS[channel])`, so a well-formed payload on the wrong key is rejected
+(`payload_rejected_key`) and never reaches sequence tracking (issue 29: a VOLTAGE on the setpoint key was applied)."""
 
 
-def _check_chunk(what: str, chunk: str, full: str) -> None:
-    if not chunk:
-        raise ConfigError(f"zenoh {what} {full!r} has an empty chunk (leading, trailing or double '/')")
-    bad = sorted(set(chunk) & _FORBIDDEN)
-    if bad:
-        raise ConfigError(f"zenoh {what} {full!r} contains forbidden character(s) {''.join(bad)!r}")
-    if any(c.isspace() for c in chunk):
-        raise ConfigError(f"zenoh {what} {full!r} contains whitespace")
+class _KeyedConfig(Protocol):
+    """What `Keys.from_config` reads (a `ZenohConfig`; the wire layer does not import the config)."""
 
+    @property
+    def prefix(self) -> str: ...
 
-def validate_prefix(prefix: str) -> str:
-    """A prefix is one or more '/'-separated chunks without wildcards (`*`, `$`), `#`, `?` or whitespace."""
-    if not isinstance(prefix, str) or not prefix:
-        raise ConfigError("zenoh prefix must be a non-empty string")
-    for chunk in prefix.split("/"):
-        _check_chunk("prefix", chunk, prefix)
-    return prefix
-
-
-def validate_limb(limb: str) -> str:
-    """A limb name is exactly one chunk: like a prefix chunk and additionally without '/'."""
-    if not isinstance(limb, str) or not limb:
-        raise ConfigError("zenoh limb must be a non-empty string")
-    if "/" in limb:
-        raise ConfigError(f"zenoh limb {limb!r} must not contain '/'")
-    _check_chunk("limb", limb, limb)
-    return limb
+    @property
+    def limb(self) -> str: ...
 
 
 @dataclass(frozen=True)
@@ -68,9 +78,9 @@ class Keys:
         return cls(prefix, limb, **{ch: f"{base}/{ch}" for ch in CHANNELS})
 
     @classmethod
-    def from_config(cls, zenoh_cfg: object) -> Keys:
+    def from_config(cls, zenoh_cfg: _KeyedConfig) -> Keys:
         """From a `sea_hil.config.ZenohConfig` (anything with `.prefix` and `.limb`)."""
-        return cls.make(getattr(zenoh_cfg, "prefix"), getattr(zenoh_cfg, "limb"))
+        return cls.make(zenoh_cfg.prefix, zenoh_cfg.limb)
 
     def all(self) -> dict[str, str]:
         """Channel name -> key expression."""

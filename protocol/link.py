@@ -22,13 +22,13 @@ from __future__ import annotations
 
 import heapq
 import random
-from pathlib import Path
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Generic, TypeVar
 
 from pydantic import ValidationError
 
-from sea_hil.config import LinkConfig, LinkDirectionConfig
+from sea_hil.config.comms import LinkConfig, LinkDirectionConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link_trace import load_trace
 
@@ -203,11 +203,11 @@ def _probability(text: str, what: str) -> float:
     return v
 
 
-def parse_link_spec(spec: str) -> dict[str, object]:
+def parse_link_spec(spec: str) -> dict[str, float | str | bool]:
     """`"delay=20ms,jitter=5ms,dist=normal,loss=1%,ge=0.01/0.3/0.8,rate=1Mbps,qlimit=50ms,reorder=on"` ->
     `LinkDirectionConfig` field overrides (validated). `ge=p_good_to_bad/p_bad_to_good[/loss_bad]`;
     `trace=FILE.csv` replays a per-packet trace (`sea_hil.protocol.link_trace`), optionally with rate/qlimit/reorder."""
-    out: dict[str, object] = {}
+    out: dict[str, float | str | bool] = {}
     for item in (s.strip() for s in spec.split(",")):
         if not item:
             continue
@@ -227,12 +227,12 @@ def parse_link_spec(spec: str) -> dict[str, object]:
             if len(parts) not in (2, 3):
                 raise ConfigError(f"link spec: ge={val!r} must be p_good_to_bad/p_bad_to_good[/loss_bad]")
             names = ("ge_p_good_to_bad", "ge_p_bad_to_good", "ge_loss_bad")
-            out.update({n: _probability(p, f"ge.{n}") for n, p in zip(names, parts)})
+            out.update({n: _probability(p, f"ge.{n}") for n, p in zip(names, parts, strict=False)})
         elif key == "rate":
             out["rate_bps"] = _with_unit(val, _RATE_UNITS, key)
         elif key == "trace":   # resolved (a config written for another process stays valid) and read at once
-            out["trace_path"] = str(Path(val).expanduser().resolve())
-            load_trace(out["trace_path"])
+            out["trace_path"] = trace_path = str(Path(val).expanduser().resolve())
+            load_trace(trace_path)
         elif key == "reorder":
             if val.lower() not in _BOOLS:
                 raise ConfigError(f"link spec: reorder={val!r} must be on/off")

@@ -16,6 +16,7 @@ import functools
 import math
 import statistics
 from dataclasses import dataclass
+from itertools import pairwise
 from pathlib import Path
 
 from sea_hil.errors import ConfigError
@@ -77,7 +78,7 @@ def parse_trace(lines: list[str], source: str = "trace") -> LinkTrace:
         raise ConfigError(f"{source}: a trace needs at least 2 packets, found {len(t_ns)}")
     origin = t_ns[0]
     rel = [t - origin for t in t_ns]
-    gaps = [b - a for a, b in zip(rel, rel[1:])]
+    gaps = [b - a for a, b in pairwise(rel)]
     median_gap = round(statistics.median(gaps))
     duration = rel[-1] + max(median_gap, 1)
     return LinkTrace(tuple(rel), tuple(delay_ns), tuple(lost), duration)
@@ -104,7 +105,7 @@ def load_trace(path: str | Path) -> LinkTrace:
 
 def describe(trace: LinkTrace) -> str:
     """One line: packets, duration, loss and the delay percentiles of the delivered packets."""
-    ds = sorted(d for d, lost in zip(trace.delay_ns, trace.lost) if not lost)
+    ds = sorted(d for d, lost in zip(trace.delay_ns, trace.lost, strict=True) if not lost)
     pct = {q: ds[min(int(len(ds) * q), len(ds) - 1)] / 1e6 for q in (0.5, 0.99)} if ds else {0.5: 0.0, 0.99: 0.0}
     return (f"{len(trace.t_ns)} packets over {trace.duration_ns / NS_PER_S:.1f} s, loss {100 * trace.loss_fraction:.2f} %,"
             f" delay p50 {pct[0.5]:.1f} ms, p99 {pct[0.99]:.1f} ms, max {(ds[-1] if ds else 0) / 1e6:.1f} ms")

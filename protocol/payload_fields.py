@@ -3,8 +3,8 @@ the `PayloadRejected` error with its machine-readable reason (for counters)."""
 from __future__ import annotations
 
 import math
-from math import isfinite
 from enum import StrEnum
+from math import isfinite
 
 from sea_hil.errors import MalformedPayload
 
@@ -20,6 +20,7 @@ class RejectReason(StrEnum):
     NONFINITE = "nonfinite"
     ENUM = "enum"
     RANGE = "range"
+    KEY = "key"             # well formed, but a type its key does not carry (protocol/keys.py, KEY_PAYLOADS)
 
 
 class PayloadRejected(MalformedPayload):
@@ -47,7 +48,7 @@ def pair_field(name: str, v: object) -> tuple[float, float]:
             return v
         raise PayloadRejected(RejectReason.NONFINITE, f"{name}={v!r} is not finite")
     try:
-        a, b = (float(x) for x in v)  # type: ignore[union-attr]
+        a, b = (float(x) for x in v)  # type: ignore[attr-defined]
     except (TypeError, ValueError) as err:
         raise PayloadRejected(RejectReason.RANGE, f"{name}={v!r} is not a pair of floats") from err
     if not (math.isfinite(a) and math.isfinite(b)):

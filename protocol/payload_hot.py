@@ -10,11 +10,19 @@ goes through the payload's constructor, which converts it or raises its exact `P
 from __future__ import annotations
 
 import struct
+from collections.abc import Sequence
 from math import isfinite
-from typing import Sequence
 
-from sea_hil.protocol.payloads import (MAGIC, VERSION, WHOLE, MsgType, SetpointPayload, StatePayload, TriggerReason,
-                                       encode)
+from sea_hil.protocol.payloads import (
+    MAGIC,
+    VERSION,
+    WHOLE,
+    MsgType,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+    encode,
+)
 
 __all__ = ["encode_setpoint", "encode_state"]
 

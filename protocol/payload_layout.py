@@ -1,11 +1,14 @@
 """The machine-readable payload layout (`protocol/payloads.toml`): loading it, deriving struct formats from its field
-lists, and rendering docs/zenoh-protocol.md's payload tables from it.
+lists, and rendering docs/zenoh-protocol.md's payload tables from it, and its key table (payload types, sizes, wire
+bytes and congestion control per key) from protocol/keys.py and payloads.py (issue 29: the hand-written sizes were
+stale).
 
     python -m sea_hil.protocol.payload_layout --write docs/zenoh-protocol.md   # regenerate the tables in place
     python -m sea_hil.protocol.payload_layout --check docs/zenoh-protocol.md   # exit 1 if they are out of date
 
-The tables sit between the `BEGIN`/`END` marker comments. tests/test_payload_layout.py checks the file against
-`sea_hil.protocol.payloads` and the docs against the file.
+The tables sit between the `BEGIN`/`END` marker comments (payload-layout, key-table). tests/test_payload_layout.py
+checks the file against `sea_hil.protocol.payloads` and the docs against the file (tests/test_key_table.py: the
+key table).
 """
 from __future__ import annotations
 
@@ -13,15 +16,21 @@ import argparse
 import struct
 import sys
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.keys import CHANNELS, KEY_CONGESTION, KEY_DIRECTION, KEY_PAYLOADS, KEY_RATES
+from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
+from sea_hil.protocol.wire_size import TCP_BATCH_PREFIX, ZENOH_MSG_OVERHEAD, estimate_wire_bytes
 
 LAYOUT_PATH = Path(__file__).with_name("payloads.toml")
 STRUCT_CODE = {"u8": "B", "u32": "I", "u64": "Q", "f64": "d", "bytes2": "2s"}
 BEGIN = "<!-- BEGIN payload-layout (generated from protocol/payloads.toml; do not edit by hand) -->"
 END = "<!-- END payload-layout -->"
+KEY_BEGIN = "<!-- BEGIN key-table (generated from protocol/keys.py and payloads.py; do not edit by hand) -->"
+KEY_END = "<!-- END key-table -->"
 
 
 def load_layout(path: Path = LAYOUT_PATH) -> dict[str, Any]:
@@ -80,12 +89,40 @@ def render_tables(layout: dict[str, Any]) -> str:
     return "\n".join(lines)
 
 
-def splice(doc: str, block: str) -> str:
+def render_key_table() -> str:
+    """The key table between the key-table markers, from the code: payload types (`KEY_PAYLOADS`), sizes
+    (`PAYLOAD_SIZE`), the wire-size estimate (`estimate_wire_bytes`) and congestion control (`KEY_CONGESTION`)."""
+    lines = [KEY_BEGIN, "", "| channel | direction | rate (defaults) | payload | payload bytes | TCP stream bytes | "
+             "IPv4 bytes | Ethernet bytes | congestion control (real time / lockstep) |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for ch in CHANNELS:
+        types = sorted(KEY_PAYLOADS.get(ch, ()), key=int)
+        payload = " / ".join(t.name for t in types) or "JSON object"
+        def size(f: Callable[[int], int], types: list[MsgType] = types) -> str:
+            return " / ".join(str(f(PAYLOAD_SIZE[t])) for t in types) or "variable"
+        rt, ls = KEY_CONGESTION[ch]
+        lines.append(f"| `{ch}` | {KEY_DIRECTION[ch]} | {KEY_RATES[ch]} | {payload} | {size(lambda n: n)} | "
+                     f"{size(lambda n: n + ZENOH_MSG_OVERHEAD + (n >= 128) + TCP_BATCH_PREFIX)} | "
+                     f"{size(lambda n: estimate_wire_bytes(n, ethernet=False))} | {size(estimate_wire_bytes)} | "
+                     f"{rt} / {ls} |")
+    return "\n".join([*lines, "", KEY_END])
+
+
+def splice(doc: str, block: str, begin: str = BEGIN, end_marker: str = END) -> str:
     """`doc` with the text between the markers (inclusive) replaced by `block`."""
-    start, end = doc.find(BEGIN), doc.find(END)
+    start, end = doc.find(begin), doc.find(end_marker)
     if start < 0 or end < start:
-        raise ConfigError("payload-layout markers not found (or out of order) in the document")
-    return doc[:start] + block + doc[end + len(END):]
+        raise ConfigError(f"markers {begin!r} not found (or out of order) in the document")
+    return doc[:start] + block + doc[end + len(end_marker):]
+
+
+def generated(doc: str) -> str:
+    """`doc` with every generated block it has marked rewritten: the payload layout, the key table."""
+    if BEGIN in doc:
+        doc = splice(doc, render_tables(load_layout()))
+    if KEY_BEGIN in doc:
+        doc = splice(doc, render_key_table(), KEY_BEGIN, KEY_END)
+    return doc
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -95,12 +132,12 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--check", action="store_true", help="exit 1 if the tables are out of date")
     args = ap.parse_args(argv)
     doc = args.doc.read_text(encoding="utf-8")
-    new = splice(doc, render_tables(load_layout()))
+    new = generated(doc)
     if args.write:
         args.doc.write_text(new, encoding="utf-8")
         return 0
     if new != doc:
-        print(f"{args.doc}: payload tables differ from protocol/payloads.toml (run with --write)", file=sys.stderr)
+        print(f"{args.doc}: generated tables differ from the code (run with --write)", file=sys.stderr)
         return 1
     return 0
 

@@ -20,21 +20,18 @@ from __future__ import annotations
 
 import logging
 import struct
-from math import isfinite
+import threading
 from collections import Counter
 from dataclasses import dataclass, field
 from enum import IntEnum
-from typing import ClassVar, Union
+from math import isfinite
+from typing import Any, ClassVar
 
-from sea_hil.protocol.payload_fields import (U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field,
-                                             uint_field)
-from sea_hil.protocol.sequence import SeqVerdict, SequenceTracker
-from sea_hil.protocol.wire_size import estimate_wire_bytes
+from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, RejectReason, pair_field, uint_field
 
-__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "U32_MAX", "U64_MAX", "VERSION",
-           "AckPayload", "EventStatePayload", "MsgType", "Payload", "PayloadCounters", "PayloadRejected",
-           "RejectReason", "SeqVerdict", "SequenceTracker", "SetpointPayload", "StatePayload", "TriggerReason",
-           "VoltagePayload", "decode", "encode", "estimate_wire_bytes"]
+__all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "VERSION", "AckPayload", "EventStatePayload",
+           "MsgType", "Payload", "PayloadCounters", "SetpointPayload", "StatePayload", "TriggerReason",
+           "VoltagePayload", "decode", "encode"]
 
 _log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"
@@ -65,8 +62,8 @@ _MSG_TYPES = {int(m): m for m in MsgType}   # dict lookups in `decode`: an enum 
 _REASONS = {int(r): r for r in TriggerReason}
 
 
-def trigger_reason(v: object) -> TriggerReason:
-    """`v` as a `TriggerReason`, else PayloadRejected(ENUM)."""
+def trigger_reason(v: int) -> TriggerReason:
+    """`v` as a `TriggerReason`, else PayloadRejected(ENUM) (`v` may be anything a sender put in the field)."""
     try:
         return TriggerReason(v)
     except ValueError as err:
@@ -171,7 +168,7 @@ class AckPayload(_Payload):
         object.__setattr__(self, "sent", bool(self.sent))
 
 
-Payload = Union[StatePayload, EventStatePayload, SetpointPayload, VoltagePayload, AckPayload]
+Payload = StatePayload | EventStatePayload | SetpointPayload | VoltagePayload | AckPayload
 
 _BODY = {
     MsgType.STATE: struct.Struct("<Q8d"),
@@ -227,7 +224,7 @@ def decode(b: bytes) -> Payload:
     mt = _MSG_TYPES.get(mtype)
     if mt is None:                  # rare: the enum's own error is the cause (the fast lookup has none to keep)
         try:
-            MsgType(mtype)
+            mt = MsgType(mtype)
         except ValueError as err:
             raise PayloadRejected(RejectReason.TYPE, f"unknown message type {mtype}") from err
     if len(b) != PAYLOAD_SIZE[mt]:
@@ -247,12 +244,12 @@ def decode(b: bytes) -> Payload:
     return VoltagePayload(seq, t_ns, f[0], f[1:3], epoch=epoch)
 
 
-def _hot(f: tuple) -> Payload | None:
+def _hot(f: tuple[Any, ...]) -> Payload | None:
     """A STATE or SETPOINT from its whole-message unpack `f` without re-running the constructors' checks, when they
     cannot fail: `struct` gives in-range unsigned integers, and one `isfinite` of the floats' sum is true only if
     every float is finite (an overflowing sum of finite floats is false: the constructor then decides). None: take
     the general path (whose constructor raises the exact rejection)."""
-    obj = object.__new__(_HOT_CLASS[f[2]])
+    obj: StatePayload | SetpointPayload = object.__new__(_HOT_CLASS[f[2]])
     if f[2] == MsgType.STATE:
         if not isfinite(sum(f[7:15])):
             return None
@@ -267,6 +264,35 @@ def _hot(f: tuple) -> Payload | None:
     return obj
 
 
+class OncePerVersion(logging.Filter):
+    """Lets the first "foreign payload version" line per version through, per process: the nodes of one `sea-hil
+    run` (edge, recorder, the external-controller watch) share a process and each decodes the same payload, so each
+    logged it once (issue 29: three lines for one foreign peer). Process-wide like the logger it is attached to."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self._seen: set[int] = set()
+        self._lock = threading.Lock()
+
+    def filter(self, record: logging.LogRecord) -> bool:
+        version = getattr(record, "payload_version", None)
+        if version is None:
+            return True
+        with self._lock:
+            new = version not in self._seen
+            self._seen.add(version)
+        return new
+
+    def reset(self) -> None:
+        """Forget the versions logged (a test that checks the one line runs after others that logged it)."""
+        with self._lock:
+            self._seen.clear()
+
+
+FOREIGN_VERSION_LOG = OncePerVersion()
+_log.addFilter(FOREIGN_VERSION_LOG)
+
+
 class PayloadCounters:
     """Accepted / rejected-by-reason counters around `decode` (never raises on bad input)."""
 
@@ -275,10 +301,13 @@ class PayloadCounters:
         self.rejected: Counter[str] = Counter()
         self.last_error = ""
         self._versions_logged: set[int] = set()
+        self._key_logged: set[tuple[int, frozenset[MsgType]]] = set()
 
-    def try_decode(self, b: bytes) -> Payload | None:
-        """Decode `b`, counting the outcome; None if it was rejected. The first payload of every foreign layout
-        version is logged once (a peer of another sea-hil release), later ones only counted."""
+    def try_decode(self, b: bytes, accepts: frozenset[MsgType] | None = None) -> Payload | None:
+        """Decode `b`, counting the outcome; None if it was rejected. `accepts`: the message types the key it came
+        on carries (protocol/keys.py, `KEY_PAYLOADS`); a well-formed payload of another type is rejected as KEY
+        before anything else sees it (so it never moves sequence state). The first payload of every foreign layout
+        version is logged once per process (a peer of another sea-hil release), later ones only counted."""
         try:
             p = decode(b)
         except PayloadRejected as err:
@@ -288,7 +317,16 @@ class PayloadCounters:
                 self._versions_logged.add(b[2])
                 _log.warning("a peer sends payload version %d, this node speaks %s: its messages are dropped and "
                              "counted (payload_rejected_version); run the same sea-hil release on both sides",
-                             b[2], "/".join(map(str, sorted(SUPPORTED_VERSIONS))))
+                             b[2], "/".join(map(str, sorted(SUPPORTED_VERSIONS))), extra={"payload_version": b[2]})
+            return None
+        mtype = _TYPE_OF[type(p)]
+        if accepts is not None and mtype not in accepts:
+            self.rejected[RejectReason.KEY.value] += 1
+            self.last_error = f"malformed payload (key): {mtype.name} on a key that carries " \
+                              f"{'/'.join(sorted(t.name for t in accepts))}"
+            if (mtype, accepts) not in self._key_logged:
+                self._key_logged.add((mtype, accepts))
+                _log.warning("%s: dropped and counted (payload_rejected_key)", self.last_error)
             return None
         self.accepted += 1
         return p

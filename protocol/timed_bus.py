@@ -49,7 +49,7 @@ class TimedBus:
         self.timeline.submit(self, msg)
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
-        if not self.simulated:
+        if not isinstance(self.timeline, LockstepTimeline):
             return self.raw.recv(timeout)
         return self.timeline.recv(self, timeout)
 
@@ -124,8 +124,8 @@ class RealTimeTimeline(_Timeline):
                     if in_flight is not None:
                         continue
                 wait_s = None if in_flight is None else max(in_flight.end_ns - now, 0) * 1e-9
-                if wait_s is None and self.arbiter.pending:
-                    wait_s = max(self.arbiter.next_start_ns() - now, 0) * 1e-9   # type: ignore[operator]
+                if wait_s is None and (start_ns := self.arbiter.next_start_ns()) is not None:
+                    wait_s = max(start_ns - now, 0) * 1e-9
                 self.cond.wait(wait_s)
             if in_flight is not None:
                 _deliver_raw(in_flight)

@@ -3,7 +3,7 @@
 `make_certs(out)` writes `ca.pem` (+ `ca.key`), and for every node `<node>.pem` / `<node>.key` (CN =
 `sea-hil-<node>`, signed by the CA, usable as TLS server and client, SANs localhost/127.0.0.1/::1 plus `hosts`) and
 a config overlay `<node>.toml` holding that node's `[zenoh.tls]` and `[zenoh.acl]` sections (see docs/security.md).
-Keys are ECDSA P-256; private key files are created with mode 0600. Needs the `cryptography` package. The CLI is
+Keys are ECDSA P-256; private key files are created with mode 0600 (`cryptography`). The CLI is
 `sea_hil/commands/certs.py`; `sea_hil/session/secure.py` uses it for `run --secure`.
 """
 from __future__ import annotations
@@ -14,6 +14,12 @@ import json
 import os
 from dataclasses import dataclass
 from pathlib import Path
+
+from cryptography import x509
+from cryptography.hazmat.primitives import hashes, serialization
+from cryptography.hazmat.primitives.asymmetric import ec
+from cryptography.hazmat.primitives.asymmetric.ec import EllipticCurvePrivateKey
+from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
 
 from sea_hil.errors import ConfigError
 
@@ -43,21 +49,8 @@ def node_cn(node: str) -> str:
     return CN_PREFIX + node
 
 
-def _crypto():  # local import: `cryptography` is only needed to generate certificates
-    try:
-        from cryptography import x509
-        from cryptography.hazmat.primitives import hashes, serialization
-        from cryptography.hazmat.primitives.asymmetric import ec
-        from cryptography.x509.oid import ExtendedKeyUsageOID, NameOID
-    except ImportError as err:
-        raise ConfigError("generating certificates needs the 'cryptography' package (pip install cryptography)") \
-            from err
-    return x509, hashes, serialization, ec, ExtendedKeyUsageOID, NameOID
-
-
-def _san(hosts: tuple[str, ...]) -> list[object]:
-    x509 = _crypto()[0]
-    out: list[object] = []
+def _san(hosts: tuple[str, ...]) -> list[x509.GeneralName]:
+    out: list[x509.GeneralName] = []
     for h in dict.fromkeys(hosts):
         try:
             out.append(x509.IPAddress(ipaddress.ip_address(h)))
@@ -75,9 +68,9 @@ def _write(path: Path, data: bytes, private: bool = False) -> None:
         path.write_bytes(data)
 
 
-def _key_pem(key: object) -> bytes:
-    _, _, ser, _, _, _ = _crypto()
-    return key.private_bytes(ser.Encoding.PEM, ser.PrivateFormat.PKCS8, ser.NoEncryption())  # type: ignore[attr-defined]
+def _key_pem(key: EllipticCurvePrivateKey) -> bytes:
+    ser = serialization
+    return key.private_bytes(ser.Encoding.PEM, ser.PrivateFormat.PKCS8, ser.NoEncryption())
 
 
 def profile_toml(tls_dir: Path, node: str, *, controller_cn: str, edge_cn: str, acl: bool) -> str:
@@ -94,14 +87,14 @@ def profile_toml(tls_dir: Path, node: str, *, controller_cn: str, edge_cn: str, 
 def make_certs(out: Path, nodes: tuple[str, ...] = DEFAULT_NODES, *, hosts: tuple[str, ...] = (),
                valid_days: int = 30, ca_name: str = "sea-hil throwaway CA", acl: bool = True) -> CertSet:
     """Generate a CA and one certificate per node in `out` (created if missing); returns their paths."""
-    x509, hashes, _, ec, eku, oid = _crypto()
+    eku, oid = ExtendedKeyUsageOID, NameOID
     if not nodes or len(set(nodes)) != len(nodes):
         raise ConfigError("certs: node names must be distinct and non-empty")
     for n in nodes:
         if not n or not all(c.isalnum() or c in "-_" for c in n):
             raise ConfigError(f"certs: node name {n!r} may contain only letters, digits, '-' and '_'")
     out.mkdir(parents=True, exist_ok=True)
-    now = dt.datetime.now(dt.timezone.utc) - dt.timedelta(minutes=5)
+    now = dt.datetime.now(dt.UTC) - dt.timedelta(minutes=5)
     until = now + dt.timedelta(days=valid_days)
     ca_key = ec.generate_private_key(ec.SECP256R1())
     ca_subject = x509.Name([x509.NameAttribute(oid.COMMON_NAME, ca_name)])
@@ -116,7 +109,7 @@ def make_certs(out: Path, nodes: tuple[str, ...] = DEFAULT_NODES, *, hosts: tupl
                .add_extension(x509.SubjectKeyIdentifier.from_public_key(ca_key.public_key()), critical=False)
                .sign(ca_key, hashes.SHA256()))
     ca_pem, ca_key_path = out / "ca.pem", out / "ca.key"
-    _write(ca_pem, ca_cert.public_bytes(_crypto()[2].Encoding.PEM))
+    _write(ca_pem, ca_cert.public_bytes(serialization.Encoding.PEM))
     _write(ca_key_path, _key_pem(ca_key), private=True)
     result: dict[str, NodeCert] = {}
     for node in nodes:
@@ -132,7 +125,7 @@ def make_certs(out: Path, nodes: tuple[str, ...] = DEFAULT_NODES, *, hosts: tupl
                                critical=False)
                 .sign(ca_key, hashes.SHA256()))
         nc = NodeCert(node, node_cn(node), out / f"{node}.pem", out / f"{node}.key", out / f"{node}.toml")
-        _write(nc.certificate, cert.public_bytes(_crypto()[2].Encoding.PEM))
+        _write(nc.certificate, cert.public_bytes(serialization.Encoding.PEM))
         _write(nc.private_key, _key_pem(key), private=True)
         nc.profile.write_text(profile_toml(out, node, controller_cn=node_cn("controller"),
                                            edge_cn=node_cn("edge"), acl=acl), encoding="utf-8")

@@ -18,7 +18,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from sea_hil.config import ZenohAclConfig, ZenohConfig, ZenohTlsConfig
+from sea_hil.config.comms import ZenohAclConfig, ZenohConfig, ZenohTlsConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.keys import Keys, any_limb, everything
 

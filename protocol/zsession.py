@@ -10,15 +10,15 @@ from __future__ import annotations
 import json
 import re
 import socket
-from collections.abc import Mapping
-from typing import Any, Callable, Protocol
+from collections.abc import Callable, Mapping
+from typing import Any, Protocol
 
 import zenoh
 
-from sea_hil.config import ZenohConfig
+from sea_hil.config.comms import ZenohConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
-from sea_hil.protocol.payloads import estimate_wire_bytes
+from sea_hil.protocol.wire_size import estimate_wire_bytes
 from sea_hil.protocol.zsecurity import check_tls_files, security_settings
 
 _ENDPOINT = re.compile(r"^[a-z0-9\-]+/\S+$")
@@ -107,9 +107,10 @@ class LinkedPublisher:
         """Submit `data` at `now_ns`; returns its delivery time, or None if the link dropped it. `data` may be a
         function of the delivery time that makes the bytes (`wire_bytes` then required): a sender that stamps
         messages with the emulated link's delivery time (lockstep's simulated clock)."""
-        if callable(data):
-            assert wire_bytes is not None, "a deferred message needs wire_bytes"
-        at = self.link.submit(now_ns, estimate_wire_bytes(len(data)) if wire_bytes is None else wire_bytes)
+        if wire_bytes is None:
+            assert not callable(data), "a deferred message needs wire_bytes"
+            wire_bytes = estimate_wire_bytes(len(data))
+        at = self.link.submit(now_ns, wire_bytes)
         if at is None:
             return None
         if callable(data):

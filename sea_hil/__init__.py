@@ -8,18 +8,24 @@ remote controller). Shared below them: `sea_hil.errors`, `sea_hil.config`, `sea_
 `sea_hil.offline` (offline closed loop), `sea_hil.sweep`, `sea_hil.report`, `sea_hil.commands` and `sea_hil.cli`.
 """
 
-# The public API (docs/api.md), loaded on first use so that importing any part of the package stays light.
-__all__ = ["DriveSnapshot", "EmulatedDriver", "SeaHilConfig", "SeaHilError", "Session", "__version__", "load_config"]
+from importlib import import_module as _import_module
+from importlib import metadata as _metadata
+
+# The public API (docs/api.md): each name from the module that defines it, imported on first use, so that importing
+# any part of the package stays light (every `import sea_hil.x` runs this file first). The one re-export of the
+# package (tests/test_import_graph.py): inside it, every module imports a name from where it is defined.
+_PUBLIC = {"DriveSnapshot": "sea_hil.api", "EmulatedDriver": "sea_hil.api", "Session": "sea_hil.api",
+           "SeaHilConfig": "sea_hil.config.root", "load_config": "sea_hil.config.loader",
+           "SeaHilError": "sea_hil.errors"}
+__all__ = [*sorted(_PUBLIC), "__version__"]
 
 
 def __getattr__(name: str) -> object:
     if name == "__version__":
-        from importlib.metadata import PackageNotFoundError, version
         try:
-            return version("sea-hil")
-        except PackageNotFoundError:   # a source tree that is not installed
+            return _metadata.version("sea-hil")
+        except _metadata.PackageNotFoundError:   # a source tree that is not installed
             return "0+unknown"
-    if name in __all__:
-        from sea_hil import api
-        return getattr(api, name)
+    if name in _PUBLIC:
+        return getattr(_import_module(_PUBLIC[name]), name)
     raise AttributeError(f"module 'sea_hil' has no attribute {name!r}")

@@ -14,16 +14,22 @@ from __future__ import annotations
 
 import tempfile
 import threading
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import can
 
-from sea_hil.config import SeaHilConfig, load_config
-from sea_hil.errors import SeaHilError
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.errors import SeaHilError, VerdictError
+from sea_hil.input_check import enforce
+from sea_hil.runtime.processes import end_process
+from sea_hil.session.builder import SessionBuilder
+from sea_hil.session.run import RunOptions, run_session
 
-__all__ = ["DriveSnapshot", "EmulatedDriver", "SeaHilConfig", "SeaHilError", "Session", "load_config"]
+__all__ = ["DriveSnapshot", "EmulatedDriver", "Session"]
 
 
 def _config(config: SeaHilConfig | str | Path | None) -> SeaHilConfig:
@@ -63,7 +69,6 @@ class EmulatedDriver:
 
     def __init__(self, bus: str | can.BusABC = "virtual:sea-hil", node_ids: int | Sequence[int] = 1, *,
                  config: SeaHilConfig | str | Path | None = None, lockstep: bool = False) -> None:
-        from sea_hil.session.builder import SessionBuilder
         self.config = _config(config)
         self.node_ids = (node_ids,) if isinstance(node_ids, int) else tuple(node_ids)
         self.lockstep = lockstep
@@ -123,21 +128,32 @@ class Session:
     """A whole session, as `sea-hil run` runs it: `run()` blocks until the cycles are done and returns the summary
     (`summary.json`); `start()` runs it in a background thread (`wait()` for the summary). Outputs (MCAP recording,
     summary.json, figures) go to `out` (default: a temporary directory removed by `close()`). `close()` before the
-    end stops the session early (its controller process is ended; `summary` stays None)."""
+    end stops the session early (its controller process is ended; `summary` stays None). `controller="external"`:
+    no controller is started, the session waits up to `join_timeout_s` for your own at `endpoint`, exactly as
+    `sea-hil run --controller external` (docs/external-controller.md; like it, with the trigger at the controller).
+    The config's inputs are checked at construction (ConfigError; `allow_unsafe_start=True` runs it anyway);
+    `strict=True`: `run()` and `wait()` raise `VerdictError` (the summary in its `summary`) when the verdict is not
+    ok (docs/verdict.md)."""
 
     def __init__(self, config: SeaHilConfig | str | Path | None = None, *, controller: str = "et", cycles: int = 1,
                  lockstep: bool = True, out: str | Path | None = None, can: str | None = None,
-                 progress: bool = False) -> None:
-        from sea_hil.session.run import RunOptions
-        if controller not in ("et", "tt"):
-            raise SeaHilError(f"controller must be 'et' or 'tt', not {controller!r}")
+                 progress: bool = False, join_timeout_s: float = 300.0, strict: bool = False,
+                 allow_unsafe_start: bool = False) -> None:
+        if controller not in ("et", "tt", "external"):
+            raise SeaHilError(f"controller must be 'et', 'tt' or 'external', not {controller!r}")
         if cycles < 1:
             raise SeaHilError(f"cycles must be >= 1, not {cycles}")
-        self.config = _config(config)
+        self.config = enforce(_config(config), force=allow_unsafe_start)   # ConfigError: docs/verdict.md
+        self.strict = strict
+        if controller == "external" and self.config.trigger.placement == "edge":
+            # as `sea-hil run --controller external`: your controller speaks the documented STATE protocol (every
+            # state up, docs/external-controller.md), so the trigger runs at the controller
+            trigger = self.config.trigger.model_copy(update={"placement": "controller"})
+            self.config = self.config.model_copy(update={"trigger": trigger})
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
-        self.out = Path(out) if out is not None else Path(self._tmp.name)   # type: ignore[union-attr]
+        self.out = Path(out) if out is not None else Path(self._tmp.name) if self._tmp is not None else Path()
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,
-                                progress=progress, on_nodes=self._on_nodes)
+                                progress=progress, on_nodes=self._on_nodes, join_timeout_s=join_timeout_s)
         self.summary: dict[str, Any] | None = None
         self.error: BaseException | None = None
         self._parts: tuple[Any, Any, Any] | None = None
@@ -151,9 +167,12 @@ class Session:
 
     def run(self) -> dict[str, Any]:
         """Run the session to its end in this thread; its summary."""
-        from sea_hil.session.run import run_session
         try:
             self.summary = run_session(self.config, self._opts, log=lambda _msg: None)
+            verdict = self.summary.get("verdict") or {}
+            if self.strict and verdict.get("status") != "ok":
+                raise VerdictError(self.summary, f"verdict {verdict.get('status')}: " + "; ".join(
+                    r["message"] for r in verdict.get("reasons", [])))
         except SeaHilError as err:
             if not self._closing:
                 self.error = err
@@ -182,6 +201,8 @@ class Session:
         self._thread.join(timeout_s)
         if self._thread.is_alive():
             raise SeaHilError(f"the session did not end within {timeout_s} s")
+        if isinstance(self.error, VerdictError):
+            raise self.error
         if self.error is not None:
             raise SeaHilError(f"the session failed: {self.error}") from self.error
         return self.summary or {}
@@ -189,6 +210,13 @@ class Session:
     def wait_until_running(self, timeout_s: float = 60.0) -> bool:
         """Wait until the session's nodes are up (True), or it ended first / the timeout passed (False)."""
         return self._ready.wait(timeout_s) and self._parts is not None
+
+    @property
+    def endpoint(self) -> str | None:
+        """`controller="external"`: the Zenoh endpoint your controller connects to, once the nodes run (else None);
+        the session's config for it is `out/config.toml` (docs/external-controller.md)."""
+        proc = self._parts[2] if self._parts is not None else None
+        return getattr(proc, "endpoint", None)
 
     def snapshot(self, node_id: int | None = None) -> DriveSnapshot:
         """The latest state of the session's emulated drive."""
@@ -207,7 +235,6 @@ class Session:
         if self._thread is not None and self._thread.is_alive():
             self._ready.wait(60.0)        # nodes still being built: stop it once they are
             if self._parts is not None:
-                from sea_hil.session.processes import end_process
                 end_process(self._parts[2])   # the controller ends: the session stops, the recording is closed
         if self._thread is not None:
             self._thread.join(120.0)

@@ -1,7 +1,9 @@
 """The `sea-hil` console script: one entry point, one subcommand per node or job.
 
-Each subcommand lives in its own module `sea_hil/commands/<name>.py` exposing `register(subparsers)`; the module is
-imported only when listed here. Errors derived from SeaHilError print one line and exit 2 (no traceback).
+Each subcommand lives in its own module `sea_hil/commands/<name>.py` exposing `register(subparsers)`; only the
+module of the command being run is imported (a node process loads what its node needs, not the sweep's Dask or the
+report's matplotlib), every module for `sea-hil --help`. Errors derived from SeaHilError print one line and exit 2
+(no traceback).
 """
 from __future__ import annotations
 
@@ -12,9 +14,10 @@ import sys
 from typing import NoReturn
 
 from sea_hil.errors import SeaHilError, Terminated
+from sea_hil.runtime.processes import exit_with_parent
 
-COMMANDS = ("simulate", "plant", "edge", "controller", "record", "run", "report", "export", "sweep", "robustness",
-            "certs")
+COMMANDS = ("simulate", "plant", "edge", "controller", "record", "router", "run", "report", "export", "sweep",
+            "robustness", "certs", "check")
 
 
 class OneLineParser(argparse.ArgumentParser):
@@ -24,12 +27,13 @@ class OneLineParser(argparse.ArgumentParser):
         self.exit(2, f"{self.prog}: error: {message} (see {self.prog} --help)\n")
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = None) -> argparse.ArgumentParser:
+    """The parser of every command, or of `command` alone (when it is one of COMMANDS)."""
     parser = OneLineParser(prog="sea-hil", description=(
         "Networked HIL emulator: event-triggered SMC of a 2-DOF SEA lower limb over CAN and Zenoh."))
     parser.add_argument("-v", "--verbose", action="count", default=0, help="more logging (-v info, -vv debug)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
-    for name in COMMANDS:
+    for name in (command,) if command in COMMANDS else COMMANDS:
         try:
             module = importlib.import_module(f"sea_hil.commands.{name}")
         except ModuleNotFoundError as err:
@@ -40,10 +44,15 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+def command_of(argv: list[str]) -> str | None:
+    """The subcommand named in `argv` (its first word that is not an option: the top level takes only -v)."""
+    return next((a for a in argv if not a.startswith("-")), None)
+
+
 def main(argv: list[str] | None = None) -> int:
-    from sea_hil.session.processes import exit_with_parent
     exit_with_parent()   # a child of a sea-hil session (`spawn_child`) ends when its parent dies
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else argv
+    parser = build_parser(command_of(argv))
     args = parser.parse_args(argv)
     level = logging.WARNING - 10 * min(args.verbose, 2)
     logging.basicConfig(level=level, format="%(asctime)s %(name)s %(levelname)s: %(message)s")

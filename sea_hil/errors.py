@@ -1,4 +1,7 @@
 """The single exception root of sea-hil. Every error the project raises on purpose derives from SeaHilError."""
+from __future__ import annotations
+
+from typing import Any
 
 
 class SeaHilError(Exception):
@@ -36,3 +39,12 @@ class Terminated(SeaHilError):
     def __init__(self, signum: int, message: str) -> None:
         super().__init__(message)
         self.signum = signum
+
+
+class VerdictError(SeaHilError):
+    """A strict session (`Session(strict=True)`, the pytest plugin's `sea_session`) ended with a verdict that is not
+    ok (docs/verdict.md); `summary` is its summary.json, the message lists the verdict's reasons."""
+
+    def __init__(self, summary: dict[str, Any], message: str) -> None:
+        super().__init__(message)
+        self.summary = summary

@@ -17,14 +17,15 @@ import inspect
 import logging
 import sys
 import types
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any, TypeGuard
 
 log = logging.getLogger(__name__)
 
 PROJECT_PACKAGES = ("sea_hil",)
 
 
-def _is_project_function(obj: object) -> bool:
+def _is_project_function(obj: object) -> TypeGuard[types.FunctionType]:
     return isinstance(obj, types.FunctionType) and obj.__module__.split(".")[0] in PROJECT_PACKAGES
 
 
@@ -37,12 +38,12 @@ def project_callees(fn: types.FunctionType) -> list[types.FunctionType]:
         for name in cur.__code__.co_names:
             obj = cur.__globals__.get(name)
             if _is_project_function(obj) and id(obj) not in seen and obj is not fn:
-                seen[id(obj)] = obj  # type: ignore[assignment]
-                stack.append(obj)  # type: ignore[arg-type]
+                seen[id(obj)] = obj
+                stack.append(obj)
     return list(seen.values())
 
 
-def source_fingerprint(functions: list[types.FunctionType]) -> str:
+def source_fingerprint(functions: list[Callable[..., Any]]) -> str:
     """sha256 over the source files of the modules defining `functions` (module constants included)."""
     digest = hashlib.sha256()
     for module_name in sorted({f.__module__ for f in functions}):
@@ -75,10 +76,11 @@ def _dispatcher(factory: Callable[[str], Callable[..., Any]]) -> Any:
     from numba.extending import register_jitable
 
     probe = factory("")
+    assert isinstance(probe, types.FunctionType), f"{factory.__qualname__} must return a plain function"
     callees = project_callees(probe)
     for fn in callees:
         register_jitable(fn)
-    fingerprint = source_fingerprint([factory, *callees])  # type: ignore[list-item]
+    fingerprint = source_fingerprint([factory, *callees])
     return numba.njit(cache=True)(factory(fingerprint))
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-from sea_hil.config import PlantConfig
+from sea_hil.config.model import PlantConfig
 
 
 class LimbParams(NamedTuple):
@@ -65,7 +65,7 @@ def limb_params(cfg: PlantConfig) -> LimbParams:
         d=d, r1=cfg.r1_m, r2=cfg.r2_m, l1=cfg.l1_m, m1=cfg.m1_kg, m2=cfg.m2_kg, i1=cfg.i1_kgm2, i2=cfg.i2_kgm2,
         k1=cfg.k1_n_per_m, k2=cfg.k2_n_per_m, b1=cfg.b1_nms, b2=cfg.b2_nms, g=cfg.g_m_s2,
         alpha1=cfg.alpha1_rad, alpha2=cfg.alpha2_rad, sigma1=sigma1, sigma2=sigma2,
-        theta_ref=tuple(cfg.theta_ref_rad), l_ref=(0.0, 0.0),
+        theta_ref=cfg.theta_ref_rad, l_ref=(0.0, 0.0),
         nut_damping=cfg.nut_damping_per_s, voltage_limit=cfg.voltage_limit_v,
         m11_const=cfg.m1_kg * cfg.r1_m**2 + cfg.i1_kgm2 + cfg.m2_kg * cfg.l1_m**2 + m2r2sq + i2_c,
         m12_const=m2r2sq + i2_c,
@@ -76,9 +76,9 @@ def limb_params(cfg: PlantConfig) -> LimbParams:
     )
     stops = cfg.end_stops
     if stops.enabled:
-        partial = partial._replace(stop_min_rad=tuple(stops.min_rad), stop_max_rad=tuple(stops.max_rad),
-                                   stop_k_nm_per_rad=tuple(stops.stiffness_nm_per_rad),
-                                   stop_c_nms_per_rad=tuple(stops.damping_nms_per_rad))
+        partial = partial._replace(stop_min_rad=stops.min_rad, stop_max_rad=stops.max_rad,
+                                   stop_k_nm_per_rad=stops.stiffness_nm_per_rad,
+                                   stop_c_nms_per_rad=stops.damping_nms_per_rad)
     return partial._replace(l_ref=sea_lengths(partial.theta_ref[0], partial.theta_ref[1], partial))
 
 

@@ -9,7 +9,8 @@ Fixtures:
 - `sea_bus`: a python-can bus on the same channel, for the test's own controller; shut down after the test.
 - `sea_session`: a factory, `sea_session(controller="et", cycles=1, lockstep=True, ...)` -> a started `Session`
   (its own free loopback port and Zenoh sessions, outputs in the test's tmp_path); every session it made is
-  closed after the test, also when the test fails.
+  closed after the test, also when the test fails. Strict by default: `wait()` raises `VerdictError` when the
+  session's verdict is not ok (docs/verdict.md); `sea_session(strict=False)` returns the summary whatever it says.
 
 Marker: `sea_vcan` — needs SocketCAN vcan0 (`ip link add dev vcan0 type vcan`); skipped when it is absent.
 """
@@ -40,7 +41,7 @@ def pytest_runtest_setup(item: pytest.Item) -> None:
 
 @pytest.fixture
 def sea_config() -> Any:
-    from sea_hil.api import load_config
+    from sea_hil.config.loader import load_config
     return load_config()
 
 
@@ -75,6 +76,7 @@ def sea_session(sea_config: Any, tmp_path: Any) -> Iterator[Callable[..., Any]]:
 
     def make(controller: str = "et", cycles: int = 1, lockstep: bool = True, **kw: Any) -> Any:
         kw.setdefault("config", sea_config)
+        kw.setdefault("strict", True)   # a session whose verdict is not ok fails the test (VerdictError)
         kw.setdefault("out", tmp_path / f"session{len(made)}")
         session = Session(controller=controller, cycles=cycles, lockstep=lockstep, **kw)
         made.append(session)

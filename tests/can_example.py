@@ -13,9 +13,10 @@ from typing import Any
 
 import can
 
-from sea_hil.config import SeaHilConfig, config_to_toml
+from sea_hil.config.loader import config_to_toml
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.runtime.clock import clock_for
+from sea_hil.runtime.lockstep import clock_for
 
 CAN_EXAMPLE = Path(__file__).resolve().parents[1] / "examples" / "can_controller"
 

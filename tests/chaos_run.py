@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-from background import AfterRun, BackgroundRun
+from background import BackgroundRun
 
 REPO = Path(__file__).resolve().parents[1]
 CHAOS = REPO / "tests" / "multicast" / "chaos.py"

@@ -16,17 +16,19 @@ from pathlib import Path
 
 from paper_scheme import paper
 
+from sea_hil.config.comms import LinkDirectionConfig
+from sea_hil.config.loader import config_to_toml, load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.can_codec import DriverState
+from sea_hil.protocol.can_frames import DriverState
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import LinkDirectionConfig, SeaHilConfig, config_to_toml, load_config
 from sea_hil.protocol.link import LinkCounters, LinkEmulator
+from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.runtime.processes import end_process as _end_process
 from sea_hil.session.builder import SessionBuilder
-from sea_hil.session.processes import end_process as _end_process
 
 REPO = Path(__file__).resolve().parents[1]
 NODE = 1
@@ -46,7 +48,7 @@ def wait_for(cond: Callable[[], bool], timeout_s: float, poll_s: float = 0.002) 
 
 
 def end_process(proc: subprocess.Popen[bytes] | subprocess.Popen[str]) -> None:
-    """`sea_hil.session.processes.end_process` with this module's stop timeout; safe to call twice."""
+    """`sea_hil.runtime.processes.end_process` with this module's stop timeout; safe to call twice."""
     _end_process(proc, STOP_TIMEOUT_S)
 
 
@@ -89,7 +91,7 @@ class Rig:
     _builder: SessionBuilder
 
     @classmethod
-    def start(cls, tmp: Path, overrides: dict | None = None) -> "Rig":
+    def start(cls, tmp: Path, overrides: dict | None = None) -> Rig:
         # the paper's scheme (a state every sample: the outage and kill counts of tests/test_faults.py are its)
         cfg = load_config(None, paper({"can": {"interface": f"virtual:faults-{uuid.uuid4().hex[:8]}"},
                                        **(overrides or {})}))
@@ -154,8 +156,10 @@ def _edge_kill_main(group: str) -> dict[str, float]:
     """Plant, controller and edge as separate `sea-hil` processes; SIGKILL the edge, then restart it. Times from
     the kill to the driver's FAULT heartbeat and from the restart to its RUNNING heartbeat."""
     import signal
-    from sea_hil.protocol.can_codec import Heartbeat, SeaCodec
+
     from sea_hil.errors import MalformedFrame
+    from sea_hil.protocol.can_codec import SeaCodec
+    from sea_hil.protocol.can_frames import Heartbeat
     spec = f"udp_multicast:{group}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     codec, bus = SeaCodec([NODE]), open_bus(spec)

@@ -50,7 +50,7 @@ async def receive(url: str, topics: set[str], *, end_message: str, timeout_s: fl
             wanted = [c for c in out.channels.values() if c["topic"] in topics]
             subs = {i + 1: c["topic"] for i, c in enumerate(wanted)}
             await ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                {"id": sid, "channelId": c["id"]} for sid, c in zip(subs, wanted)]}))
+                {"id": sid, "channelId": c["id"]} for sid, c in zip(subs, wanted, strict=True)]}))
             try:
                 async for frame in ws:
                     if isinstance(frame, str):

@@ -10,7 +10,7 @@ import uuid
 from dataclasses import dataclass, field
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.disturbance import make_disturbance
@@ -110,7 +110,7 @@ class RecoveryRig:
             fb = self.step(edge_alive=kind == "controller" or not n_fault <= k < n_back)
             if k >= n_back:
                 out.peak_force_n = max(out.peak_force_n, *(abs(kk * d) for kk, d in
-                                                           zip((self.params.k1, self.params.k2), fb.delta_m)))
+                                                           zip((self.params.k1, self.params.k2), fb.delta_m, strict=True)))
                 out.peak_velocity_rad_s = max(out.peak_velocity_rad_s, *map(abs, fb.omega_rad_s))
                 out.peak_voltage_v = max(out.peak_voltage_v, *map(abs, self.drv.voltage_v))
         c = self.drv.counters

@@ -59,7 +59,7 @@ def test_public_surface_is_the_documented_one(tmp_path):
     finally:
         session.close()
     with pytest.raises(AttributeError):
-        sea_hil.not_public   # noqa: B018
+        _ = sea_hil.not_public
 
 
 def test_driver_snapshot_and_counters_and_bad_input():

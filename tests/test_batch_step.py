@@ -7,12 +7,12 @@ import random
 
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
+from sea_hil.jit import loaded
 from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.batch import make_batch_kernel, prepare_batch, step_all
 from sea_hil.plant_emulator.driver import DriverCore
 from sea_hil.plant_emulator.integrator import make_advance_kernel, prepare_advance
-from sea_hil.jit import loaded
 from sea_hil.protocol.can_frames import VoltageCmd
 
 PERIOD_NS = 1_000_000
@@ -40,7 +40,7 @@ def _run(cores: list[DriverCore], plan, batch: bool) -> list:
     out = []
     for k, per_limb in enumerate(plan):
         start = k * PERIOD_NS
-        for drv, cmds in zip(cores, per_limb):
+        for drv, cmds in zip(cores, per_limb, strict=True):
             drv.period_start_ns = start
             for offset, u in cmds:
                 drv.handle(VoltageCmd(drv.node_id, u, drv.seq & 0xFF), start + offset)

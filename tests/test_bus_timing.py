@@ -5,11 +5,12 @@ import logging
 import threading
 import time
 import uuid
+from itertools import pairwise
 
 import can
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.bus_timing import BusArbiter, BusRates, planned_load_pct, warn_if_overloaded
 from sea_hil.protocol.canbus import open_bus
@@ -162,9 +163,9 @@ def test_real_time_timeline_never_delivers_early_and_orders_by_id() -> None:
             assert msg is not None
             arrivals.append((msg.arbitration_id, time.monotonic_ns()))
         assert [i for i, _ in arrivals] == [tx.msg.arbitration_id for tx in decided]
-        assert all(t_ns >= tx.end_ns for (_, t_ns), tx in zip(arrivals, decided))          # never early
+        assert all(t_ns >= tx.end_ns for (_, t_ns), tx in zip(arrivals, decided, strict=True))          # never early
         assert all(tx.end_ns - tx.start_ns == 1_080_000 for tx in decided)
-        assert all(nxt.start_ns >= prev.end_ns for prev, nxt in zip(decided, decided[1:]))  # one at a time
+        assert all(nxt.start_ns >= prev.end_ns for prev, nxt in pairwise(decided))  # one at a time
         for i, tx in enumerate(decided):        # the winner: lowest id of the frames ready at its start
             ready = [t.msg.arbitration_id for t in decided[i:] if t.ready_ns <= tx.start_ns]
             assert tx.msg.arbitration_id == min(ready) and tx.start_ns >= tx.ready_ns

@@ -7,10 +7,10 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
+from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_assembly import FeedbackAssembler, seq_gap, unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import T_US_MODULUS, EStop, Feedback
-from sea_hil.errors import MalformedFrame
 
 
 @pytest.fixture(scope="module")

@@ -12,11 +12,26 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sea_hil.protocol.can_codec import (FEEDBACK_PARTS, FRAME_TYPES, SEQ_MODULUS, ClearErrors, DeflectionSetpoint,
-                                DriverState, ErrorFlags, EStop, Feedback, FeedbackAngle, FeedbackJoint1,
-                                FeedbackJoint2, Heartbeat, SeaCodec, VoltageCmd, can_id_of, load_database)
-from sea_hil.protocol.can_frames import T_US_MODULUS
 from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import (
+    FEEDBACK_PARTS,
+    FRAME_TYPES,
+    SEQ_MODULUS,
+    T_US_MODULUS,
+    ClearErrors,
+    DeflectionSetpoint,
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Heartbeat,
+    VoltageCmd,
+    can_id_of,
+)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -215,8 +230,11 @@ def test_quantisation_error_bounds(codec: SeaCodec) -> None:
     rng = random.Random(7)
     half_lsb = {"voltage_v": 0.5e-3, "deflection_m": 0.5e-6, "theta_rad": 0.5e-5, "omega_rad_s": 1.25e-4,
                 "delta_m": 0.625e-7, "nut_vel_m_s": 1.25e-6}
+
+    def u(lim: float) -> tuple[float, float]:
+        return (rng.uniform(-lim, lim), rng.uniform(-lim, lim))
+
     for _ in range(300):
-        u = lambda lim: (rng.uniform(-lim, lim), rng.uniform(-lim, lim))  # noqa: E731
         objs = [VoltageCmd(1, u(30.0), 1), DeflectionSetpoint(1, u(0.03), 1),
                 *Feedback(1, 9, 77, u(3.2), u(30.0), u(0.03), u(0.6)).parts()]
         for obj in objs:
@@ -224,7 +242,7 @@ def test_quantisation_error_bounds(codec: SeaCodec) -> None:
             for name, bound in half_lsb.items():
                 if hasattr(obj, name):
                     sent, got = getattr(obj, name), getattr(back, name)
-                    pairs = zip(sent, got) if isinstance(sent, tuple) else [(sent, got)]
+                    pairs = zip(sent, got, strict=True) if isinstance(sent, tuple) else [(sent, got)]
                     err = max(abs(a - b) for a, b in pairs)
                     assert err <= bound * (1 + 1e-6), (name, err)
 

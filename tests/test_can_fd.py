@@ -8,10 +8,19 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import MalformedFrame
-from sea_hil.protocol.can_codec import EStop, Feedback, FeedbackAngle, Heartbeat, SeaCodec, VoltageCmd, load_database
-from sea_hil.protocol.can_frames import DriverState, ErrorFlags, profile_messages
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import (
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Feedback,
+    FeedbackAngle,
+    Heartbeat,
+    VoltageCmd,
+    profile_messages,
+)
 
 
 @pytest.fixture(scope="module")
@@ -46,7 +55,7 @@ def test_feedback_fd_exact_bytes(fd: SeaCodec) -> None:
     back = fd.decode(msg)
     assert isinstance(back, Feedback) and back.seq == 7 and back.t_us == 0xBEEF
     for got, ref in zip((*back.theta_rad, *back.omega_rad_s, *back.delta_m, *back.nut_vel_m_s),
-                        (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s)):
+                        (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s), strict=True):
         assert got == pytest.approx(ref, abs=1e-12)
 
 
@@ -120,5 +129,5 @@ def test_fd_feedback_round_trip_within_half_an_lsb(node: int, seq: int, t_us: in
     assert (back.node_id, back.seq, back.t_us) == (node, seq, t_us)
     for got, ref, lsb in zip((*back.theta_rad, *back.omega_rad_s, *back.delta_m, *back.nut_vel_m_s),
                              (*fb.theta_rad, *fb.omega_rad_s, *fb.delta_m, *fb.nut_vel_m_s),
-                             (1e-6, 1e-6, 5e-6, 5e-6, 5e-9, 5e-9, 1e-7, 1e-7)):
+                             (1e-6, 1e-6, 5e-6, 5e-6, 5e-9, 5e-9, 1e-7, 1e-7), strict=True):
         assert abs(got - ref) <= lsb / 2 * (1 + 1e-6)

@@ -11,9 +11,9 @@ from pathlib import Path
 import cantools
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import run_engine
-from sea_hil.recorder.writer import read_session
+from sea_hil.recorder.reader import read_session
 from sea_hil.report.session_summary import session_summary
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -11,9 +11,11 @@ import can
 import pytest
 from can.interfaces.socketcan.socketcan import SocketcanBus
 
-from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd, load_database
-from sea_hil.protocol.canbus import is_buffer_full, open_bus, parse_can_spec, send_with_retry
+from sea_hil.config.wire_names import parse_can_spec
 from sea_hil.errors import BusError, ConfigError
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import VoltageCmd
+from sea_hil.protocol.canbus import is_buffer_full, open_bus, send_with_retry
 from sea_hil.stats.can_bits import can_frame_bits
 
 

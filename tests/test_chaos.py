@@ -9,14 +9,14 @@ import os
 from pathlib import Path
 
 import pytest
-
 from chaos_run import CHAOS_RUN_KEY, SEED, chaos_run, config_path, report_of
 from paper_scheme import paper
 from recovery_rig import RecoveryRig
-from sea_hil.config import load_config
+from test_udp_multicast import require_netns
+
+from sea_hil.config.loader import load_config
 from sea_hil.controller.trajectory import LeadIn, lead_in_duration_s, make_trajectory
 from sea_hil.session.builder import SessionBuilder
-from test_udp_multicast import require_netns
 
 LIMITS_OFF_OPT_IN = pytest.mark.skipif(not os.environ.get("SEA_HIL_CHAOS_LIMITS_OFF"), reason=(
     "covered by the limits-on variant (the same invariants, no soft-limit trip); SEA_HIL_CHAOS_LIMITS_OFF=1 runs it"))
@@ -117,6 +117,7 @@ def test_a_starved_edge_answers_only_fresh_samples() -> None:
     1 kHz inner loop went unstable into the spring-force limit) gets no VOLTAGE_CMD, only the inner loop's update;
     counted `late_samples`. A fresh sample is answered. Lockstep never skips one."""
     import time
+
     from sea_hil.protocol.can_frames import VoltageCmd
 
     cfg = load_config()
@@ -152,6 +153,7 @@ def test_standalone_nodes_take_the_sessions_realtime_tier(monkeypatch) -> None:
     standalone edge takes SCHED_FIFO one below the driver and a standalone controller two below (as in `sea-hil run`'s
     process and children), after their start-up; undone when the loop ends. Another scope or priority 0: nothing."""
     from types import SimpleNamespace
+
     from sea_hil.config.timing import TimingConfig
     from sea_hil.runtime import realtime
 

@@ -5,17 +5,16 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import initial_state
-from sea_hil.plant_emulator.integrator import advance
+from sea_hil import jit
 from sea_hil.config.loader import load_config
 from sea_hil.config.root import SeaHilConfig
+from sea_hil.dynamics import initial_state
 from sea_hil.errors import SeaHilError
 from sea_hil.mechanics import limb_params
-from sea_hil import jit
 from sea_hil.offline.closed_loop import simulate
 from sea_hil.offline.drive_kernel import make_session_steps
-from sea_hil.plant_emulator.disturbance import DisturbanceTable
+from sea_hil.plant_emulator.disturbance import DisturbanceTable, make_disturbance
+from sea_hil.plant_emulator.integrator import advance
 
 pytest.importorskip("numba")
 

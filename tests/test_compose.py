@@ -8,8 +8,8 @@ from pathlib import Path
 
 import yaml
 
-from sea_hil.config import load_config
 from sea_hil.cli import build_parser
+from sea_hil.config.loader import load_config
 
 ROOT = Path(__file__).resolve().parents[1]
 

@@ -7,6 +7,9 @@ counters), i.e. all but the wall-clock ones (`TIMING`, `EDGE_TIMING_PREFIX`, the
 comparison drops, and `RESEND_COPIES`, duplicates caused by wall-clock resends) and `max_abs_voltage_v`, which
 comes from the recorded CAN frames: the compose recorder has no CAN bus (its container is not on the host
 network), so it records the Zenoh side only.
+
+The README's peer-to-peer topology (issue 32, tests/multicast/peer_topology.py: no router, the edge listens) is
+compared the same way, CAN side included, and checked for a complete recording and every node's own result.
 """
 from __future__ import annotations
 
@@ -17,16 +20,21 @@ import sys
 from pathlib import Path
 from typing import Any
 
+import jsonschema
 import pytest
-
 from test_udp_multicast import require_netns
 
-from sea_hil.config import load_config
+from sea_hil.cli import main
+from sea_hil.config.loader import load_config
+from sea_hil.report.node_summary import NODE_SUMMARY_SCHEMA
 from sea_hil.report.summary import deterministic as summary_deterministic
+from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.session.run import RunOptions, run_session
 
 TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "topology.py"
+PEER_TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "peer_topology.py"
 GROUP = "239.74.163.19"
+PEER_GROUP = "239.74.163.20"
 REPO = Path(__file__).resolve().parents[1]
 # configs/session.toml (the compose services' shared config: client mode) plus a short session: a 1 s gait after a
 # 0.25 s lead-in; the drive limits and the setpoint envelope are derived for the default 10 s gait
@@ -45,33 +53,105 @@ enabled = false
 # wall-clock fields are under `timing` (sea_hil.report.summary.deterministic drops them); the compose recorder has
 # no CAN bus, so it records no voltage commands and knows no limb's bus (a deployment fact, not a result)
 NOT_COMPARED = ("max_abs_voltage_v",)
+CAN_COMPLETENESS = ("can_command", "can_frames")
 
 
-def deterministic(summary: dict[str, Any]) -> dict[str, Any]:
-    out = {k: v for k, v in summary_deterministic(summary).items() if k not in NOT_COMPARED}
+def deterministic(summary: dict[str, Any], *, can: bool = True) -> dict[str, Any]:
+    """Every deterministic field but each limb's bus (the topologies run on udp_multicast, `run` on its virtual bus);
+    without `can` also what only a recorder on the CAN bus has."""
+    out = dict(summary_deterministic(summary))
     out["limbs"] = [{k: v for k, v in limb.items() if k != "bus"} for limb in out.get("limbs", [])]
+    if not can:
+        out = {k: v for k, v in out.items() if k not in NOT_COMPARED}
+        comp = dict(out["completeness"])
+        comp["channels"] = {k: v for k, v in comp["channels"].items() if k not in CAN_COMPLETENESS}
+        comp.pop("can_frames_lost")
+        out["completeness"] = comp
     return out
 
 
-@pytest.mark.slow
-def test_compose_topology_through_a_router_equals_peer_to_peer(tmp_path: Path) -> None:
-    require_netns("compose topology")
-    config = tmp_path / "compose.toml"
+@pytest.fixture(scope="module")
+def short_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    config = tmp_path_factory.mktemp("topology") / "compose.toml"
     config.write_text((REPO / "configs" / "session.toml").read_text() + SHORT, encoding="utf-8")
-    out = tmp_path / "compose"
-    out.mkdir()
+    return config
+
+
+@pytest.fixture(scope="module")
+def lockstep_run(short_config: Path, tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
+    """`sea-hil run --lockstep` on the topologies' config: what every topology's summary must equal."""
+    peer = run_session(load_config(short_config), RunOptions(controller="et", cycles=1,
+                                                             out=tmp_path_factory.mktemp("run") / "peer",
+                                                             lockstep=True, progress=False, figures=False))
+    return json.loads(json.dumps(peer))
+
+
+def _in_netns(script_path: Path, config: Path, out: Path, group: str) -> dict[str, Any]:
+    """Run a topology script in its own network and PID namespaces; its JSON line."""
     script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(TOPOLOGY))} {shlex.quote(str(config))} {shlex.quote(str(out))} {GROUP}")
+              f"{shlex.quote(str(script_path))} {shlex.quote(str(config))} {shlex.quote(str(out))} {group}")
     # its own PID namespace too: if the script dies (even by SIGKILL on the timeout) every node process dies with it
     result = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "sh", "-c", script],
                             capture_output=True, text=True, timeout=400, check=False, stdin=subprocess.DEVNULL)
     assert result.returncode == 0, result.stderr[-3000:]
-    report = json.loads(result.stdout.strip().splitlines()[-1])
+    return dict(json.loads(result.stdout.strip().splitlines()[-1]))
+
+
+@pytest.mark.slow
+def test_compose_topology_through_a_router_equals_peer_to_peer(short_config: Path, lockstep_run: dict[str, Any],
+                                                              tmp_path: Path) -> None:
+    require_netns("compose topology")
+    out = tmp_path / "compose"
+    out.mkdir()
+    report = _in_netns(TOPOLOGY, short_config, out, GROUP)
     assert report["codes"] == {"controller": 0, "edge": 0, "plant": 0, "recorder": 0}, report
     compose = json.loads(Path(report["summary"]).read_text())
-    assert load_config(config).zenoh.mode == "client"
-
-    peer = run_session(load_config(config), RunOptions(controller="et", cycles=1, out=tmp_path / "peer",
-                                                       lockstep=True, progress=False, figures=False))
+    assert load_config(short_config).zenoh.mode == "client"
     assert compose["transmissions"]["downlink_msgs"] > 10 and compose["edge"]["feedback_samples"] > 1000
-    assert deterministic(compose) == deterministic(json.loads(json.dumps(peer)))
+    assert compose["completeness"]["complete"], compose["completeness"]
+    assert deterministic(compose, can=False) == deterministic(lockstep_run, can=False)
+
+
+@pytest.mark.slow
+def test_readme_peer_to_peer_topology_records_every_channel(short_config: Path, lockstep_run: dict[str, Any],
+                                                           tmp_path: Path) -> None:
+    """Issue 32: the README's four commands with no router (the edge listens, recorder and controller connect):
+    the recording's per-channel counts equal what the nodes say they sent, the summary equals `run --lockstep`'s
+    in every deterministic field (the CAN side included: this recorder taps the bus), no figure is -1, each node
+    ends with its result (`--json` validating against the node schema), and a recorder started after the
+    controller had finished says which channels it lacks and by how much."""
+    require_netns("peer-to-peer topology")
+    peer_config = tmp_path / "peer.toml"    # the topologies' config without session.toml's client mode
+    peer_config.write_text(SHORT, encoding="utf-8")
+    out = tmp_path / "peer"
+    out.mkdir()
+    report = _in_netns(PEER_TOPOLOGY, peer_config, out, PEER_GROUP)
+    assert report["codes"] == {"controller": 0, "edge": 0, "plant": 0, "recorder": 0, "late": 0}, report
+    edge, ctrl, late = (json.loads(report["stdout"][n]) for n in ("edge", "controller", "late"))
+    for node in (edge, ctrl, late):
+        jsonschema.validate(node, NODE_SUMMARY_SCHEMA)
+    assert "recording complete" in report["stdout"]["recorder"] and "│ yes" in report["stdout"]["recorder"]
+    summary = report["summary"]
+    jsonschema.validate(summary, SUMMARY_SCHEMA)
+    comp = summary["completeness"]
+    assert comp["complete"] and comp["can_frames_lost"] == 0, comp
+    channels = comp["channels"]
+    assert channels["state"]["recorded"] == edge["counters"]["uplink_msgs"] > 100
+    assert channels["downlink"]["recorded"] == ctrl["counters"]["setpoints_sent"] == \
+        edge["counters"]["downlink_applied"] > 100
+    assert channels["can_command"]["recorded"] == edge["counters"]["commands_sent"] > 1000
+    assert all(v >= 0 for v in summary["timing"]["latency_us"].values()), summary["timing"]
+    assert ctrl["finished"] and "latency_us" in edge
+    assert deterministic(summary) == deterministic(lockstep_run)
+    # the late recorder: only the edge's final statistics reached it
+    missing = late["completeness"]
+    assert missing["incomplete"] == ["state"] and missing["unverified"] == ["downlink"], missing
+    assert missing["channels"]["state"]["missing"] == edge["counters"]["uplink_msgs"]
+    assert missing["never_seen"] == ["controller final stats"]
+    # ... and with the controller's own --json result from its host, how much of the downlink it lacks
+    (tmp_path / "controller.json").write_text(report["stdout"]["controller"], encoding="utf-8")
+    assert main(["report", str(out / "late.mcap"), "--out", str(tmp_path / "late"), "--json",
+                 "--node-summary", str(tmp_path / "controller.json")]) == 0
+    checked = json.loads((tmp_path / "late" / "summary.json").read_text())["completeness"]
+    assert checked["incomplete"] == ["state", "downlink"] and checked["unverified"] == [], checked
+    assert checked["channels"]["downlink"]["missing"] == ctrl["counters"]["setpoints_sent"]

@@ -7,7 +7,8 @@ from pathlib import Path
 import pydantic
 import pytest
 
-from sea_hil.config import SeaHilConfig, config_from_dict, config_to_toml, default_toml_text, load_config
+from sea_hil.config.loader import config_from_dict, config_to_toml, default_toml_text, load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
 
 REPO = Path(__file__).resolve().parent.parent

@@ -8,7 +8,7 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError
 from sea_hil.offline.closed_loop import inner_ratio, simulate
 

@@ -6,15 +6,17 @@ import math
 import numpy as np
 import pytest
 
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.backstepping import InnerGains, backstepping_voltage, cross_term_weight
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.smc import JointState, sliding_surface, smc_deflection, switching, tracking_errors
 from sea_hil.controller.trajectory import DesiredSample, GaitTrajectory
-from sea_hil.controller.trigger import EventTrigger, TimeTrigger, TriggerReason, epsilon, error_threshold
-from sea_hil.plant_emulator.dynamics import deflections, f, initial_state
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.controller.trigger import EventTrigger, TimeTrigger, epsilon, error_threshold
+from sea_hil.dynamics import deflections, f, initial_state
 from sea_hil.mechanics import LimbParams, fx_gx, limb_params, mass_matrix, sea_geometry, sea_lengths
+from sea_hil.protocol.payloads import TriggerReason
 
 S = 1_000_000_000
 
@@ -185,8 +187,8 @@ def test_backstepping_gives_the_designed_deflection_dynamics(cfg: SeaHilConfig, 
         # Delta_dd along the plant's motion: directional derivative of Delta_dot(x) along f(x, u), d = 0
         xdot = f(0.0, x, u, p)
         h = 1e-6
-        ddp = deflections(tuple(a + h * b for a, b in zip(x, xdot)), p)[2:4]
-        ddm = deflections(tuple(a - h * b for a, b in zip(x, xdot)), p)[2:4]
+        ddp = deflections(tuple(a + h * b for a, b in zip(x, xdot, strict=True)), p)[2:4]
+        ddm = deflections(tuple(a - h * b for a, b in zip(x, xdot, strict=True)), p)[2:4]
         delta_dd = (np.array(ddp) - np.array(ddm)) / (2 * h)
         # designed v1 and v1_dot (s and v_x held): g_dot by a central difference along the joint velocity
         hg = 1e-6

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 from sea_hil.commands.common import config_from_args
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError
 from sea_hil.session.run import RunOptions, run_session
 

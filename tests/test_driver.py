@@ -3,13 +3,21 @@ from __future__ import annotations
 
 import pytest
 
-from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.plant_emulator.dynamics import initial_state
-from sea_hil.plant_emulator.integrator import advance
-from sea_hil.protocol.can_codec import (ClearErrors, DeflectionSetpoint, DriverState, EStop, ErrorFlags, Heartbeat, SeaCodec,
-                                VoltageCmd)
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
+from sea_hil.dynamics import initial_state
 from sea_hil.mechanics import limb_params
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.plant_emulator.integrator import advance
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import (
+    ClearErrors,
+    DeflectionSetpoint,
+    DriverState,
+    ErrorFlags,
+    EStop,
+    Heartbeat,
+    VoltageCmd,
+)
 
 PERIOD_NS = 1_000_000
 WATCHDOG_NS = 100_000_000

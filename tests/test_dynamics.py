@@ -7,11 +7,12 @@ import numpy as np
 import pytest
 from scipy.integrate import solve_ivp
 
-from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import deflections, f, initial_state, is_finite, saturate
-from sea_hil.plant_emulator.integrator import advance
-from sea_hil.config import DisturbanceConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.model import DisturbanceConfig
+from sea_hil.dynamics import deflections, f, initial_state, is_finite, saturate
 from sea_hil.mechanics import LimbParams, energy, limb_params, sea_lengths
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.integrator import advance
 
 
 def _params(**plant: object) -> LimbParams:
@@ -86,7 +87,7 @@ def test_lagrangian_check_can_fail_without_i2_coupling() -> None:
     p = _params(include_i2_in_coupling=False)
     x = _random_states(1, 2, p)[0]
     dx = f(0.0, x, (0.0, 0.0), p)
-    assert max(abs(a - b) for a, b in zip(dx[2:4], _lagrange_acc(x, (0.0, 0.0), p))) > 1e-2
+    assert max(abs(a - b) for a, b in zip(dx[2:4], _lagrange_acc(x, (0.0, 0.0), p), strict=True)) > 1e-2
 
 
 def test_energy_function_matches_the_independent_lagrangian(p: LimbParams) -> None:
@@ -164,7 +165,7 @@ def test_initial_state_is_a_static_equilibrium(p: LimbParams, q: tuple[float, fl
     if q[0] != 0.0:  # away from hanging straight down, the springs really hold gravity
         assert abs(deflections(x, p)[0]) > 1e-5
     x_end = advance(0.0, x, (0.0, 0.0), 0.1, 200, p)
-    assert max(abs(a - b) for a, b in zip(x, x_end)) < 1e-9
+    assert max(abs(a - b) for a, b in zip(x, x_end, strict=True)) < 1e-9
 
 
 def test_deflections_follow_eq7(p: LimbParams) -> None:
@@ -173,7 +174,7 @@ def test_deflections_follow_eq7(p: LimbParams) -> None:
     d1, d2, dd1, dd2 = deflections(x, p)
     assert (d1, d2) == pytest.approx((len1 - p.l_ref[0] - x[4], len2 - p.l_ref[1] - x[5]), abs=1e-15)
     h = 1e-7  # Delta_dot is the time derivative along the state's motion
-    xp = tuple(a + h * b for a, b in zip(x, f(0.0, x, (0.0, 0.0), p)))
+    xp = tuple(a + h * b for a, b in zip(x, f(0.0, x, (0.0, 0.0), p), strict=True))
     assert dd1 == pytest.approx((deflections(xp, p)[0] - d1) / h, rel=1e-4)
     assert dd2 == pytest.approx((deflections(xp, p)[1] - d2) / h, rel=1e-4)
 

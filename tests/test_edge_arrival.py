@@ -8,12 +8,13 @@ from collections.abc import Iterator
 import can
 import pytest
 
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
-from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
-from sea_hil.config import load_config
 from sea_hil.mechanics import limb_params
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
 from sea_hil.session.builder import SessionBuilder
 

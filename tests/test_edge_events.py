@@ -10,11 +10,12 @@ import uuid
 
 from paper_scheme import paper
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.trajectory import trajectory_id
+from sea_hil.controller.trigger import EventTrigger
 from sea_hil.protocol.payloads import EventStatePayload, StatePayload, TriggerReason, encode
 from sea_hil.session.builder import SessionBuilder
 
@@ -71,13 +72,43 @@ def test_a_drive_cleared_inside_the_lead_in_re_anchors_from_the_state_it_runs_ag
 
 
 def test_edge_core_retriggers_when_the_answer_is_lost():
-    core = _core("tt")            # every outer sample would be an event, but not while an answer is in flight
+    core = _core("et")
+    # a trigger whose r rule fires on every sample (r < 0): the gate alone keeps duplicates back while in flight
+    core.generator.trigger = EventTrigger(float("inf"), -1.0, 10**18)
     fb = _rest(tuple(load_config().plant.initial_theta_rad))
     assert core.on_sample(0, fb).reason is TriggerReason.INITIAL    # type: ignore[union-attr]  (the anchor)
     core.answered(1, 0)
     reasons = [core.on_sample(k * 10 * MS, fb).reason for k in range(1, 6)]  # type: ignore[union-attr]
-    assert reasons == [TriggerReason.TIME, None, TriggerReason.TIME, None, TriggerReason.TIME]
+    bound = TriggerReason.TRACKING_BOUND
+    assert reasons == [bound, None, bound, None, bound]
     assert core.stats()["edge_retriggers"] == 2          # lost after the 20 ms minimum timeout: re-triggered
+
+
+def test_tt_at_the_edge_publishes_every_outer_sample_whatever_is_in_flight():
+    """Issue 29: a time-triggered sensor does not wait for answers (the ET gate made TT stop-and-wait): every outer
+    sample is published, also before the anchor is answered and with every earlier state unanswered; answers to
+    several states in flight are matched by state_seq; 1 kHz samples between outer ones are not checked even with
+    `trigger.edge_check = "sample"`."""
+    cfg = load_config(overrides={**EDGE, "trigger": {**EDGE["trigger"], "edge_check": "sample"}})
+    inner = InnerLoop(cfg, nominal_params(cfg), tuple(cfg.plant.initial_theta_rad), 1e-3)
+    core = EdgeEvents(cfg, "tt", inner, MS, 10, jit=False)
+    fb = _rest(tuple(cfg.plant.initial_theta_rad))
+    published = []
+    for k in range(0, 101):
+        d = core.on_sample(k * MS, fb)
+        if k % 10:
+            assert d is None                             # not an outer sample: not checked
+            continue
+        assert d is not None and d.reason is not None    # (EdgeEvents tells its generator it was sent)
+        published.append((d.seq, d.reason))
+    assert [seq for seq, _ in published] == list(range(1, 102, 10))
+    assert published[0][1] is TriggerReason.INITIAL
+    assert {r for _, r in published[1:]} == {TriggerReason.TIME}
+    assert len(core.generator.outstanding) == 11          # nothing answered: all in flight, none held back
+    core.answered(1, 101 * MS)                            # the anchor's answer, then a later one (31): by state_seq
+    core.answered(31, 102 * MS)
+    assert core.generator.anchored and [s for s, _ in core.generator.outstanding] == list(range(41, 102, 10))
+    assert core.stats()["edge_retriggers"] == 0 and core.stats()["edge_reanchors"] == 0
 
 
 def test_trajectory_identity(tmp_path):

@@ -8,18 +8,19 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
-
 from edge_lockstep_run import run_live_edge_lockstep
-from sea_hil.config import load_config
+
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.smc import JointState, smc_deflection
 from sea_hil.controller.trajectory import make_trajectory
-from sea_hil.controller.trigger import EventTrigger, TriggerReason
+from sea_hil.controller.trigger import EventTrigger
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.protocol.link import parse_link_spec
+from sea_hil.protocol.payloads import TriggerReason
 from sea_hil.report.session_summary import session_summary
 
 ROOT = Path(__file__).resolve().parents[1]

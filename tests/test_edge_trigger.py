@@ -1,14 +1,14 @@
 """The sensor-side event generator (trigger at the edge) and the placements of the offline engine."""
 from __future__ import annotations
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import make_trajectory
-from sea_hil.controller.trigger import EventTrigger, TriggerReason
-from sea_hil.offline.session_engine import run_engine
-from sea_hil.offline.session_engine import EngineOptions
+from sea_hil.controller.trigger import EventTrigger
+from sea_hil.offline.session_engine import EngineOptions, run_engine
 from sea_hil.protocol.link import parse_link_spec
+from sea_hil.protocol.payloads import TriggerReason
 from sea_hil.report.session_summary import session_summary
 
 MS = 1_000_000

@@ -11,7 +11,6 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from paper_scheme import paper
 
 from sea_hil.config.loader import load_config

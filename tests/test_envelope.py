@@ -6,16 +6,16 @@ import logging
 import math
 
 import pytest
+from test_edge_arrival import rig  # noqa: F401  (fixture: an EdgeNode on a virtual bus + a DriverCore)
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import limited_voltage
 from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Heartbeat, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import ClearErrors, DriverState, ErrorFlags, Heartbeat, VoltageCmd
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
-
-from test_edge_arrival import rig  # noqa: F401  (fixture: an EdgeNode on a virtual bus + a DriverCore)
 
 NODE = 1
 CFG = load_config()

@@ -9,17 +9,15 @@ import threading
 import uuid
 
 import zenoh
-
 from faults_helpers import wait_for
+from paper_scheme import paper  # these nodes speak the paper's STATE protocol
 
-from paper_scheme import paper   # these nodes speak the paper's STATE protocol
-
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
 from sea_hil.protocol.can_frames import Feedback
 from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
-from sea_hil.protocol.payloads import HEADER_SIZE, decode
+from sea_hil.protocol.payloads import FOREIGN_VERSION_LOG, HEADER_SIZE, decode
 from sea_hil.session.builder import SessionBuilder
 
 MS = 1_000_000
@@ -120,6 +118,7 @@ def test_rejections_and_foreign_versions_are_logged_once_not_per_message(caplog)
     with SessionBuilder(load_config(overrides=paper())) as b:
         edge = b.edge(b.bus(f"virtual:epochv-{uuid.uuid4().hex[:8]}"), b.zenoh(), 1)
         old = struct.pack("<2sBBIQ", b"SH", 1, 2, 5, 0) + struct.pack("<I4dB", 5, 1e-3, 0.0, 0.0, 0.0, 1)  # version 1
+        FOREIGN_VERSION_LOG.reset()             # once per process: forget what earlier tests logged
         with caplog.at_level(logging.WARNING):
             assert not any(edge.on_downlink(old) for _ in range(500))
         assert edge.core.payloads.as_dict()["rejected"] == {"version": 500}

@@ -9,7 +9,7 @@ from pathlib import Path
 import pydantic
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError, MalformedPayload, RecordingError
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.protocol.payloads import MAGIC, VERSION, decode

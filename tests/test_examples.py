@@ -23,15 +23,17 @@ import zenoh
 from can_example import CAN_EXAMPLE, load_example, run_on_virtual
 from paper_scheme import paper
 
-from sea_hil.config import config_to_toml, load_config
+from sea_hil.config.loader import config_to_toml, load_config
 from sea_hil.errors import SeaHilError
 from sea_hil.offline.session_engine import run_engine
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Heartbeat, SeaCodec
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import ClearErrors, DriverState, ErrorFlags, Heartbeat
 from sea_hil.protocol.payloads import HEADER_SIZE, AckPayload, StatePayload, decode, encode
 from sea_hil.protocol.zsession import free_tcp_port, make_config
+from sea_hil.report.console import ProgressSample
 from sea_hil.report.session_summary import session_summary
+from sea_hil.runtime.processes import end_process
 from sea_hil.session.external import ExternalWatch
-from sea_hil.session.processes import end_process
 from sea_hil.session.run import RunOptions, run_session
 
 REPO = Path(__file__).resolve().parents[1]
@@ -150,6 +152,20 @@ def test_no_controller_joining_is_a_clear_error(tmp_path) -> None:
                                     join_timeout_s=1.0), log=lambda s: None)
 
 
+def test_progress_says_waiting_for_controller_until_one_joins(tmp_path) -> None:
+    """Issue 29: before any external controller had joined, the progress showed "lead-in", "cycle 1/1" and the
+    edge's sample clock ("sim 18.30/10.50 s"); now every line says it waits, until the join timeout."""
+    cfg = load_config(overrides=TEST_CFG)
+    lines: list[object] = []
+    with pytest.raises(SeaHilError, match="no external controller answered"):
+        run_session(cfg, RunOptions(controller="external", out=tmp_path / "alone", lockstep=True, progress=True,
+                                    join_timeout_s=2.5), log=lines.append)
+    samples = [x for x in lines if isinstance(x, ProgressSample)]
+    assert samples and all(s.waiting and s.phase == "waiting for controller" for s in samples)
+    assert all("waiting for controller" in str(s) and "lead-in" not in str(s) and "sim" not in str(s)
+               for s in samples)
+
+
 def test_external_example_answers_a_resent_state_again_and_ignores_stale_and_malformed_ones() -> None:
     sys.path.insert(0, str(EXAMPLE))
     try:
@@ -206,3 +222,27 @@ def test_can_example_clears_a_fault_and_counts_bad_frames() -> None:
     finally:
         ctrl_bus.shutdown()
         driver_bus.shutdown()
+
+
+@pytest.mark.slow
+def test_api_session_runs_an_external_controller(builtin, tmp_path) -> None:
+    """Issue 29: `Session(controller="external")` was refused though docs/api.md describes Session as the session
+    `sea-hil run` runs; now it waits for the shipped example at `Session.endpoint`, which does its cycles."""
+    import sea_hil
+    cfg = load_config(overrides={**TEST_CFG, "trigger": {**TEST_CFG["trigger"], "placement": "edge"}})
+    session = sea_hil.Session(cfg, controller="external", lockstep=True, out=tmp_path / "api", join_timeout_s=60)
+    with session:
+        session.start()
+        assert session.wait_until_running(60) and session.endpoint is not None
+        assert session.config.trigger.placement == "controller"    # as `sea-hil run --controller external`
+        ctrl = subprocess.Popen([sys.executable, "-c", BLOCKED, str(EXAMPLE / "controller.py"), "--connect",
+                                 session.endpoint, "--config", str(tmp_path / "api" / "config.toml"), "--lockstep",
+                                 "--timeout", "120"], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                                stderr=subprocess.PIPE, text=True)
+        try:
+            _, ctrl_err = ctrl.communicate(timeout=150)
+            summary = session.wait(60)
+        finally:
+            end_process(ctrl)
+    assert ctrl.returncode == 0, ctrl_err[-3000:]
+    assert summary["tracking"] == builtin["tracking"]

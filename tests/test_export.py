@@ -8,13 +8,14 @@ import pandas as pd
 import pytest
 
 from sea_hil.cli import main
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
+from sea_hil.protocol.payloads import StatePayload, encode
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.export import BASE_COLUMNS, csv_name, export_can
 from sea_hil.recorder.reader import read_session
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.zenoh_tap import ZenohTap
-from sea_hil.protocol.payloads import StatePayload, encode
 
 T0_NS = 1_700_000_000_123_456_000
 
@@ -47,7 +48,7 @@ def recording(tmp_path: Path) -> tuple[Path, list[can.Message]]:
 
 def _same_frames(got: list[can.Message], want: list[can.Message], abs_s: float) -> None:
     assert len(got) == len(want)
-    for g, w in zip(got, want):
+    for g, w in zip(got, want, strict=True):
         assert (g.arbitration_id, g.is_extended_id, g.dlc, bytes(g.data)) == \
             (w.arbitration_id, w.is_extended_id, w.dlc, bytes(w.data))
         assert g.timestamp == pytest.approx(w.timestamp, abs=abs_s)

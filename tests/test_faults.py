@@ -18,14 +18,14 @@ from pathlib import Path
 
 import pytest
 import zenoh
-
 from faults_helpers import REPO, OutageLink, Rig, end_process, sea_hil_cmd, wait_for
-from sea_hil.protocol.can_codec import DriverState, ErrorFlags
-from sea_hil.config import load_config
+
+from sea_hil.config.loader import load_config
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import StatePayload, encode
-from sea_hil.recorder.writer import read_session
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.recorder.reader import read_session
 
 START_S = 30.0      # controller start (python + zenoh) on a loaded 2-core machine
 SAFE_S = 5.0        # generous bound; the expected figure (0.5 s + 0.1 s) is asserted separately below

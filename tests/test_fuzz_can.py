@@ -7,23 +7,23 @@ feedback afterwards is still handled."""
 from __future__ import annotations
 
 import struct
-import uuid
-
 import time
+import uuid
 from collections.abc import Callable
 
 import can
+from fuzz_budget import cases
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sea_hil.controller.edge_core import EdgeCore, FreeRunning
-from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, Feedback, SeaCodec, VoltageCmd, load_database
-from sea_hil.protocol.canbus import open_bus
 from sea_hil.config.loader import load_config
+from sea_hil.controller.edge_core import EdgeCore, FreeRunning
 from sea_hil.errors import MalformedFrame
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import ClearErrors, DriverState, ErrorFlags, Feedback, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, encode
-from fuzz_budget import cases
 
 CASES = cases(10_000)   # tests/fuzz_budget.py: SEA_HIL_FUZZ_SCALE=1 for the depth of docs/reliability.md
 NODE = 1

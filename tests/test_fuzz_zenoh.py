@@ -9,23 +9,36 @@ import struct
 from collections.abc import Iterator
 
 import pytest
+from fuzz_budget import cases
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-
 from paper_scheme import paper
 
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_core import EdgeCore, FreeRunning
 from sea_hil.controller.remote import RemoteController
+from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator.disturbance import make_disturbance
 from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
-from sea_hil.config.loader import load_config
-from sea_hil.mechanics import limb_params
-from sea_hil.protocol.payloads import (MAGIC, PAYLOAD_SIZE, U32_MAX, VERSION, AckPayload, MsgType, PayloadRejected,
-                               SetpointPayload, StatePayload, TriggerReason, VoltagePayload, decode, encode)
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import VoltageCmd
+from sea_hil.protocol.keys import KEY_PAYLOADS
+from sea_hil.protocol.payload_fields import U32_MAX, PayloadRejected
+from sea_hil.protocol.payloads import (
+    MAGIC,
+    PAYLOAD_SIZE,
+    VERSION,
+    AckPayload,
+    MsgType,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+    VoltagePayload,
+    decode,
+    encode,
+)
 from sea_hil.protocol.zsession import make_config, open_session
 from sea_hil.runtime.clock import control_payload
-from fuzz_budget import cases
 
 CASES = cases(10_000)   # tests/fuzz_budget.py: SEA_HIL_FUZZ_SCALE=1 for the depth of docs/reliability.md
 FUZZ = settings(max_examples=CASES, deadline=None, database=None, derandomize=True,
@@ -81,10 +94,20 @@ def _is_malformed(data: bytes) -> bool:
     return False
 
 
+def _wrong_key(data: bytes, channel: str) -> bool:
+    """Well formed, but not a type key `channel` carries (rejected as KEY, issue 29)."""
+    try:
+        p = decode(data)
+    except PayloadRejected:
+        return False
+    return MsgType[type(p).__name__.removesuffix("Payload").replace("EventState", "EVENT_STATE").upper()] \
+        not in KEY_PAYLOADS[channel]
+
+
 def test_edge_downlink_and_ack_handlers_survive_and_count() -> None:
     """The edge core's payload inputs (no Zenoh session): setpoint/voltage payloads and the control key's."""
     core = EdgeCore(load_config(), 1)
-    calls = {"n": 0, "malformed": 0}
+    calls = {"n": 0, "malformed": 0, "wrong_key": 0}
 
     @FUZZ
     @given(data=payloads(), ack=st.booleans())
@@ -98,16 +121,19 @@ def test_edge_downlink_and_ack_handlers_survive_and_count() -> None:
                  core.envelope.rejected, ep.old + ep.foreign)
         calls["n"] += 1
         calls["malformed"] += _is_malformed(data)
-        assert sum(a - b for a, b in zip(after, before)) == (0 if ok else 1)
+        calls["wrong_key"] += _wrong_key(data, "control" if ack else "setpoint")
+        assert sum(a - b for a, b in zip(after, before, strict=True)) == (0 if ok else 1)
     run()
     pc = core.payloads.as_dict()
     assert calls["n"] >= CASES and pc["accepted"] + pc["rejected_total"] == calls["n"]
-    assert pc["rejected_total"] == calls["malformed"] and core.stats()["payload_rejected"] == calls["malformed"]
+    rejected = calls["malformed"] + calls["wrong_key"]
+    assert pc["rejected_total"] == rejected and core.stats()["payload_rejected"] == rejected
+    assert core.stats()["payload_rejected_key"] == calls["wrong_key"]
     nxt = ((core.intake.sp_seq.last or 0) + 1) & U32_MAX
     assert core.on_downlink(encode(SetpointPayload(nxt, 0, 0, (1e-3, 0.0), (0.0, 0.0), TriggerReason.TIME,
                                                    epoch=core.intake.epoch.current or 0)))
     print(f"\nedge: {calls['n']} payloads, {calls['malformed']} malformed, "
-          f"{core.counters.unexpected_payloads} wrong type, {core.counters.stale_setpoints} stale")
+          f"{calls['wrong_key']} wrong type for the key, {core.counters.stale_setpoints} stale")
 
 
 def test_edge_applies_only_valid_setpoints_on_arrival() -> None:
@@ -151,7 +177,7 @@ def session() -> Iterator[object]:
 def test_controller_state_handler_survives_and_counts(session: object) -> None:
     # the paper's STATE stream (the default edge trigger's EVENT_STATE needs an anchor first)
     ctrl = RemoteController(load_config(overrides=paper()), session, "et", cycles=10**6)  # type: ignore[arg-type]
-    calls = {"n": 0, "malformed": 0, "t": 0}
+    calls = {"n": 0, "malformed": 0, "wrong_key": 0, "t": 0}
     try:
         @FUZZ
         @given(data=payloads(), fresh=st.booleans())
@@ -166,10 +192,12 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
                      ctrl.states + ctrl.unusable_states)
             calls["n"] += 1
             calls["malformed"] += _is_malformed(data)
-            assert sum(a - b for a, b in zip(after, before)) <= 1   # at most one outcome (a late state may end it)
+            calls["wrong_key"] += _wrong_key(data, "state")
+            assert sum(a - b for a, b in zip(after, before, strict=True)) <= 1   # at most one outcome (a late state may end it)
         run()
         st_ = ctrl.stats_dict()
-        assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"]
+        assert calls["n"] >= CASES and st_["payload_rejected"] == calls["malformed"] + calls["wrong_key"]
+        assert st_.get("payload_rejected_key", 0) == calls["wrong_key"]
         assert st_["payload_accepted"] == st_["unexpected_payloads"] + st_["ignored_states"] + ctrl.seq.accepted \
             + st_["epoch_old"] + st_["epoch_foreign"]
         states = ctrl.states
@@ -180,7 +208,8 @@ def test_controller_state_handler_survives_and_counts(session: object) -> None:
                                         epoch=ctrl.edge_epoch.current or 0)), calls["t"])
         assert ctrl.states == states + 1
         print(f"\ncontroller: {calls['n']} payloads, {calls['malformed']} malformed, "
-              f"{st_['unexpected_payloads']} wrong type, {st_['ignored_states']} stale, {states} states handled, "
+              f"{calls['wrong_key']} wrong type for the key, {st_['unexpected_payloads']} EVENT_STATE on the paper's "
+              f"path, {st_['ignored_states']} stale, {states} states handled, "
               f"{st_['unusable_states']} unusable")
     finally:
         ctrl.close()

@@ -6,20 +6,21 @@ from typing import Any
 
 import can
 import pytest
-from hypothesis import given, settings
 from cantools.database import DecodeError, EncodeError
+from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.plant_emulator.disturbance import make_disturbance
-from sea_hil.plant_emulator.dynamics import initial_state
-from sea_hil.plant_emulator.integrator import advance, make_advance_kernel, prepare_advance, rk4_step
-from sea_hil.protocol import can_codec
-from sea_hil.protocol.can_codec import FeedbackAngle, FeedbackJoint1, Heartbeat, SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import FastVirtualBus, open_bus
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
+from sea_hil.dynamics import initial_state
 from sea_hil.errors import MalformedFrame
 from sea_hil.jit import loaded
 from sea_hil.mechanics import limb_params
+from sea_hil.plant_emulator.disturbance import make_disturbance
+from sea_hil.plant_emulator.integrator import advance, make_advance_kernel, prepare_advance, rk4_step
+from sea_hil.protocol import can_codec
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import FeedbackAngle, FeedbackJoint1, Heartbeat, VoltageCmd
+from sea_hil.protocol.canbus import FastVirtualBus, open_bus
 
 CODEC = SeaCodec()
 

@@ -8,7 +8,7 @@ import random
 import numpy as np
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.jit import loaded
 from sea_hil.mechanics import limb_params
 from sea_hil.plant_emulator import integrator

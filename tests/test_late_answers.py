@@ -13,9 +13,9 @@ from sea_hil.config.loader import load_config
 from sea_hil.controller.edge_core import EdgeCounters, SetpointIntake
 from sea_hil.controller.edge_trigger import EdgeEventGenerator
 from sea_hil.controller.trajectory import make_trajectory
-from sea_hil.controller.trigger import EventTrigger, TriggerReason
+from sea_hil.controller.trigger import EventTrigger
 from sea_hil.protocol.link import LinkEmulator
-from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, encode
+from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, TriggerReason, encode
 
 MS = 1_000_000
 

@@ -11,15 +11,24 @@ from pathlib import Path
 import can
 import pytest
 
-from sea_hil.config import config_to_toml, load_config
+from sea_hil.config.loader import config_to_toml, load_config
 from sea_hil.controller.edge_mux import EdgeMux
 from sea_hil.errors import ConfigError
-from sea_hil.protocol.can_codec import Feedback, SeaCodec
 from sea_hil.offline.session_engine import run_engine
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic
-from sea_hil.session.limbs import (Limb, buses_of, bus_specs, expand_limbs, limb_config, limb_load_pct,
-                                   limbs_per_bus, session_limbs)
+from sea_hil.session.limbs import (
+    Limb,
+    bus_specs,
+    buses_of,
+    expand_limbs,
+    limb_config,
+    limb_load_pct,
+    limbs_per_bus,
+    session_limbs,
+)
 from sea_hil.session.run import RunOptions, run_session
 
 SHORT = {"trajectory": {"period_s": 2.0}, "safety": {"drive": {"enabled": False}, "setpoint": {"enabled": False}}}
@@ -99,7 +108,10 @@ class _Core:
 def test_edge_mux_dispatches_by_node_id() -> None:
     a, b = _Core(1), _Core(2)
     mux = EdgeMux(None, [a, b])  # type: ignore[arg-type,list-item]
-    frame = lambda can_id, n=8: can.Message(arbitration_id=can_id, data=bytes(n), is_extended_id=False)  # noqa: E731
+
+    def frame(can_id: int, n: int = 8) -> can.Message:
+        return can.Message(arbitration_id=can_id, data=bytes(n), is_extended_id=False)
+
     for can_id in (1 << 5 | 0x01, 2 << 5 | 0x01, 2 << 5 | 0x02):
         mux.dispatch(frame(can_id), 0)
     zero = (0.0, 0.0)

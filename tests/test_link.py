@@ -7,10 +7,11 @@ from __future__ import annotations
 
 import math
 import statistics
+from itertools import pairwise
 
 import pytest
 
-from sea_hil.config import LinkConfig, LinkDirectionConfig
+from sea_hil.config.comms import LinkConfig, LinkDirectionConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import DelayQueue, LinkEmulator, link_pair, parse_link_spec
 
@@ -84,7 +85,7 @@ def test_rate_limit_serialises_and_queues():
     link = LinkEmulator(cfg, 0)
     out = [link.submit(i * MS // 2, 125) for i in range(1000)]  # offered at 2x the link rate
     assert out[0] == 1 * MS and out[-1] == 1000 * MS
-    assert all(b - a == MS for a, b in zip(out, out[1:]))  # throughput = rate exactly
+    assert all(b - a == MS for a, b in pairwise(out))  # throughput = rate exactly
     assert link.counters().mean_added_delay_s == pytest.approx((1 + 0.5 * 499.5) * 1e-3, rel=1e-9)  # (i+1) - i/2 ms
 
 
@@ -111,10 +112,10 @@ def test_order_preserved_unless_reorder():
     period = MS  # jitter >> period, so reordering would be common
     fifo = LinkEmulator(LinkDirectionConfig(**base), 2)
     out = [fifo.submit(i * period, 10) for i in range(2000)]
-    assert all(b >= a for a, b in zip(out, out[1:]))
+    assert all(b >= a for a, b in pairwise(out))
     loose = LinkEmulator(LinkDirectionConfig(**base, reorder=True), 2)
     out = [loose.submit(i * period, 10) for i in range(2000)]
-    assert any(b < a for a, b in zip(out, out[1:]))
+    assert any(b < a for a, b in pairwise(out))
     assert all(d >= i * period for i, d in enumerate(out))  # never before it was sent
 
 

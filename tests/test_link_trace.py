@@ -5,7 +5,7 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import LinkDirectionConfig
+from sea_hil.config.comms import LinkDirectionConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link import LinkEmulator, parse_link_spec
 from sea_hil.protocol.link_trace import load_trace, parse_trace

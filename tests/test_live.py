@@ -12,13 +12,13 @@ import sys
 import threading
 
 import pytest
-
 from foxglove_ws_client import receive
+
 from sea_hil.live.channels import CHANNELS, END_MESSAGE, LOG_LEVELS
 from sea_hil.protocol.can_codec import load_database
 from sea_hil.protocol.can_frames import CMD_MASK
 from sea_hil.recorder.reader import read_session
-from sea_hil.session.processes import end_process
+from sea_hil.runtime.processes import end_process
 
 pytestmark = pytest.mark.slow
 URL = re.compile(r"Foxglove live view: (ws://\S+)")
@@ -131,12 +131,12 @@ def test_events_driver_state_and_statistics_match_the_recording(watched):
 def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
     """`sea-hil controller --foxglove`: its `record` child joins as a Zenoh client of the controller, so it also sees
     the state the edge (a peer connected to the controller) publishes; plant and edge run here, in lockstep."""
-    from sea_hil.config import load_config
+    from sea_hil.config.loader import load_config
     from sea_hil.controller.edge import EdgeNode
     from sea_hil.plant_emulator.node import PlantNode
-    from sea_hil.runtime.clock import clock_for
     from sea_hil.protocol.canbus import open_bus
     from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+    from sea_hil.runtime.lockstep import clock_for
     (tmp_path / "short.toml").write_text("[trajectory]\nperiod_s = 1.0\n", encoding="utf-8")
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     ctl = subprocess.Popen([sys.executable, "-m", "sea_hil.cli", "controller", "--listen", endpoint, "--config",

@@ -10,7 +10,8 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import LiveConfig, load_config
+from sea_hil.config.live import LiveConfig
+from sea_hil.config.loader import load_config
 from sea_hil.live import layout
 from sea_hil.live.channels import CHANNELS, LOG_LEVELS
 from sea_hil.live.cli import add_live_args, live_overrides
@@ -134,8 +135,8 @@ def test_non_finite_values_are_sent_as_null_and_bad_messages_counted():
 
 
 def test_a_node_serves_through_a_record_child_on_its_own_zenoh_network():
-    from sea_hil.live.child import reachable, record_cmd
     from sea_hil.errors import ConfigError
+    from sea_hil.live.child import reachable, record_cmd
     assert reachable("tcp/0.0.0.0:7447") == "tcp/127.0.0.1:7447"
     assert reachable("tcp/10.0.0.2:7447") == "tcp/10.0.0.2:7447"
     args = argparse.Namespace(config="x.toml", foxglove_record=None)
@@ -154,8 +155,10 @@ def test_a_node_serves_through_a_record_child_on_its_own_zenoh_network():
 def test_close_sends_the_end_line_and_waits_for_the_clients_to_leave():
     import asyncio
     import threading
+
     import websockets
     from foxglove_ws_client import SUBPROTOCOLS
+
     from sea_hil.live.channels import END_MESSAGE
     from sea_hil.live.server import LiveServer
     srv = LiveServer(LiveConfig(port=0))

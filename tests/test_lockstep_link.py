@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 from paper_scheme import paper
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import deterministic
@@ -71,8 +71,10 @@ def test_delay_up_equals_the_same_delay_down(runs):
     """The controller's answer depends only on the state's content, so D on the uplink and D on the downlink apply
     the same setpoints at the same samples: identical tracking, as in real time up to processing jitter."""
     up, down = runs["up_a"], runs["down"]
-    def control(s: dict) -> dict:      # the edge's link counters say which direction was delayed
-        return {k: v for k, v in deterministic(s).items() if k != "edge"}
+    def control(s: dict) -> dict:      # the edge's link counters say which direction was delayed (and so do the
+        return {k: v for k, v in deterministic(s).items() if k not in ("edge", "completeness")}   # counts checked
+    assert up["completeness"]["complete"] and down["completeness"]["complete"], (up["completeness"],
+                                                                               down["completeness"])
     assert control(up) == control(down)
     assert down["edge"]["sim_latency_us_min"] == up["edge"]["sim_latency_us_min"]
     # and the delay matters: the tracking differs from the ideal link's (0.033 rad on this short cycle)

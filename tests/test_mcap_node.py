@@ -1,5 +1,6 @@
 """An independent reader (npm `@mcap/core` under node, zstd through `fzstd`, JSON Schema through `ajv`) reads a
-short lockstep session file: every channel's messages decode and validate against their own schemas, log times are
+short lockstep session file: every channel's messages decode and validate against their own schemas (the protobuf
+CAN channels decoded by protobufjs from the file's FileDescriptorSet, equal to what sea-hil's reader gives), log times are
 monotonic per channel and in the session's sample time, the well-known schemas are Foxglove's, the chunk count in
 the final metadata is the file's. The JS lives in tests/js (`npm ci` there; scripts/test does it)."""
 from __future__ import annotations
@@ -11,8 +12,10 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import load_config
-from sea_hil.recorder.schemas import TOPICS
+from sea_hil.config.loader import load_config
+from sea_hil.recorder.binary import BINARY_TOPICS
+from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.schemas import TOPICS, encodings
 from sea_hil.session.run import RunOptions, run_session
 
 JS = Path(__file__).resolve().parent / "js"
@@ -31,20 +34,20 @@ def checked(tmp_path_factory):
     res = subprocess.run([NODE, str(JS / "check_mcap.mjs"), str(out / "session.mcap")], capture_output=True,
                          text=True, timeout=120)
     assert res.returncode == 0, res.stderr
-    return json.loads(res.stdout), summary, cfg
+    return json.loads(res.stdout), summary, cfg, out / "session.mcap"
 
 
 @pytest.mark.parametrize("topic", TOPICS)
 def test_every_message_decodes_and_validates_in_log_time_order(checked, topic):
     report = checked[0]
     ch = report["channels"][topic]
-    assert (ch["schemaEncoding"], ch["messageEncoding"]) == ("jsonschema", "json")
+    assert (ch["schemaEncoding"], ch["messageEncoding"]) == encodings(topic)
     assert (ch["undecodable"], ch["invalid"], ch["nonMonotonic"]) == (0, 0, 0), ch["firstErrors"]
     assert ch["publishEqualsLog"] == ch["messages"]
 
 
 def test_file_is_whole_and_recorded_what_the_session_sent(checked):
-    report, summary, _ = checked
+    report, summary, _, _ = checked
     assert report["errors"] == [] and report["indexedMessages"] == sum(c["messages"] for c in
                                                                        report["channels"].values())
     final = report["metadata"]["sea-hil.final"]
@@ -71,3 +74,14 @@ def test_lockstep_log_time_is_the_sample_time(checked):
     for topic in ("/can/feedback", "/zenoh/state", "/tracking"):
         lo, hi = int(ch[topic]["logTimeMin"]), int(ch[topic]["logTimeMax"])
         assert lo < 0.05e9 and hi * 1e-9 == pytest.approx(simulated_s, abs=0.03), topic
+
+
+def test_binary_channels_decode_independently_to_what_the_reader_gives(checked):
+    report, path = checked[0], checked[3]
+    data = read_session(path)
+    for topic in BINARY_TOPICS:
+        assert report["channels"][topic]["messageEncoding"] == "protobuf"
+        js = report["channels"][topic]["decoded"]
+        ours = [m.payload for m in data.messages[topic]]   # log-time order = file order (monotonic per channel)
+        assert len(js) == len(ours) == report["channels"][topic]["messages"] > 100, topic
+        assert js == ours, topic   # every field and value (doubles through JSON's shortest repr: exact)

@@ -6,10 +6,19 @@ import math
 import numpy as np
 import pytest
 
+from sea_hil.config.loader import load_config
 from sea_hil.controller.trajectory import GaitTrajectory
-from sea_hil.config import load_config
-from sea_hil.mechanics import (LimbParams, fx_gx, limb_params, mass_matrix, n_terms, sea_geometry, sea_lengths,
-                                sea_lengths_expanded, solve_m)
+from sea_hil.mechanics import (
+    LimbParams,
+    fx_gx,
+    limb_params,
+    mass_matrix,
+    n_terms,
+    sea_geometry,
+    sea_lengths,
+    sea_lengths_expanded,
+    solve_m,
+)
 
 GRID = np.linspace(-1.5, 1.5, 31)
 

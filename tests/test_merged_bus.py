@@ -66,7 +66,7 @@ def test_what_cannot_be_merged_is_refused() -> None:
 
 
 def _compose(lockstep: bool = False, merge: bool = True):  # type: ignore[no-untyped-def]
-    from sea_hil.config import load_config
+    from sea_hil.config.loader import load_config
     from sea_hil.session.builder import SessionBuilder
     from sea_hil.session.limb_nodes import build_limb_nodes
     from sea_hil.session.limbs import expand_limbs
@@ -104,7 +104,7 @@ def test_lockstep_and_merge_off_keep_one_driver_per_bus() -> None:
 
 
 def test_a_failed_send_flags_only_the_drivers_on_that_bus() -> None:
-    from sea_hil.config import load_config
+    from sea_hil.config.loader import load_config
     from sea_hil.plant_emulator.node import PlantNode
     from sea_hil.protocol.can_frames import ErrorFlags
     names, mine, peers = _two_buses()

@@ -49,7 +49,9 @@ def test_the_only_top_level_package_is_sea_hil(wheel: zipfile.ZipFile) -> None:
 
 def test_data_files_and_every_module_are_inside(wheel: zipfile.ZipFile) -> None:
     names = set(wheel.namelist())
-    assert {"sea_hil/protocol/sea.dbc", "sea_hil/config/default_config.toml"} <= names
+    assert {"sea_hil/protocol/sea.dbc", "sea_hil/config/default_config.toml",
+            "sea_hil/ros2/sea_hil_msgs/msg/LimbState.msg", "sea_hil/ros2/sea_hil_msgs/msg/Setpoint.msg",
+            "sea_hil/py.typed"} <= names
     expected = {f"{pkg}/{p.relative_to(REPO / folder).as_posix()}"
                 for folder, pkg in SOURCES.items() for p in (REPO / folder).rglob("*.py")
                 if "__pycache__" not in p.parts}

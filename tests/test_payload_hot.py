@@ -8,9 +8,9 @@ import struct
 import numpy as np
 import pytest
 
+from sea_hil.protocol.payload_fields import PayloadRejected
 from sea_hil.protocol.payload_hot import encode_setpoint, encode_state
-from sea_hil.protocol.payloads import (EventStatePayload, PayloadRejected, SetpointPayload, StatePayload,
-                                       TriggerReason, decode, encode)
+from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, TriggerReason, decode, encode
 
 GOOD = (0.1, -0.2)
 PAIRS = [GOOD, [1, 2], (np.float64(0.5), np.float32(0.25)), np.array([0.3, 0.4]), (True, False), (1e308, 1e308),
@@ -52,10 +52,10 @@ def test_encode_state_matches_the_constructor_for_every_integer(field: str, valu
 def test_encode_setpoint_matches_the_constructor(pair: object, reason: object) -> None:
     for args in ((5, 6, 7, pair, GOOD, reason), (5, 6, 7, GOOD, pair, reason)):
         hot = _outcome(encode_setpoint, *args, epoch=8)
-        assert hot == _outcome(lambda: encode(SetpointPayload(*args, epoch=8)))   # noqa: B023
+        assert hot == _outcome(lambda args=args: encode(SetpointPayload(*args, epoch=8)))
     for value in INTS:
         args = (5, value, 7, GOOD, GOOD, reason)
-        assert _outcome(encode_setpoint, *args) == _outcome(lambda: encode(SetpointPayload(*args)))  # noqa: B023
+        assert _outcome(encode_setpoint, *args) == _outcome(lambda args=args: encode(SetpointPayload(*args)))
 
 
 def test_one_call_decode_equals_the_general_payloads() -> None:

@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from sea_hil.protocol import payloads as pl
-from sea_hil.protocol.payload_layout import (fields_format, load_layout, main, messages, render_tables, splice)
+from sea_hil.protocol.payload_layout import fields_format, load_layout, main, messages, render_tables, splice
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "zenoh-protocol.md"

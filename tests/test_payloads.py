@@ -5,13 +5,28 @@ import math
 import struct
 
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
 from sea_hil.errors import ConfigError, MalformedPayload
 from sea_hil.protocol.keys import Keys, any_limb
-from sea_hil.protocol.payloads import (AckPayload, HEADER_SIZE, MAGIC, PAYLOAD_SIZE, MsgType, PayloadCounters, PayloadRejected,
-                               RejectReason, SeqVerdict, SequenceTracker, SetpointPayload, StatePayload,
-                               TriggerReason, VoltagePayload, decode, encode, estimate_wire_bytes)
+from sea_hil.protocol.payload_fields import PayloadRejected, RejectReason
+from sea_hil.protocol.payloads import (
+    HEADER_SIZE,
+    MAGIC,
+    PAYLOAD_SIZE,
+    AckPayload,
+    MsgType,
+    PayloadCounters,
+    SetpointPayload,
+    StatePayload,
+    TriggerReason,
+    VoltagePayload,
+    decode,
+    encode,
+)
+from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
+from sea_hil.protocol.wire_size import estimate_wire_bytes
 
 finite = st.floats(allow_nan=False, allow_infinity=False)
 pair = st.tuples(finite, finite)

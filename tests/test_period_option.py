@@ -9,7 +9,7 @@ import pytest
 
 from sea_hil.cli import main
 from sea_hil.commands.common import check_period_ms
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError
 
 

@@ -18,16 +18,27 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from sea_hil.plant_emulator.dynamics import initial_state
-from sea_hil.plant_emulator.integrator import advance
-from sea_hil.session.builder import SessionBuilder
-from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.can_codec import (ClearErrors, DriverState, ErrorFlags, Feedback, FeedbackAngle, FeedbackAssembler,
-                                FEEDBACK_PARTS, Heartbeat, SeaCodec, VoltageCmd, load_database)
-from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import SeaHilConfig, load_config
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.dynamics import initial_state
 from sea_hil.errors import MalformedFrame
 from sea_hil.mechanics import limb_params
+from sea_hil.plant_emulator.integrator import advance
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_assembly import FeedbackAssembler
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import (
+    FEEDBACK_PARTS,
+    ClearErrors,
+    DriverState,
+    ErrorFlags,
+    Feedback,
+    FeedbackAngle,
+    Heartbeat,
+    VoltageCmd,
+)
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.session.builder import SessionBuilder
 
 NODE = 1
 THETA_LSB_RAD = 1e-4
@@ -69,7 +80,7 @@ def running_plants(cfg: SeaHilConfig, served: tuple[tuple[int, ...], ...], *,
     channel = f"virtual:plant-test-{uuid.uuid4().hex}"
     builder = SessionBuilder(cfg, lockstep=lockstep)
     buses = [builder.bus(channel) for _ in range(len(served) + 1)]
-    nodes = [builder.plant(bus, ids) for bus, ids in zip(buses, served)]
+    nodes = [builder.plant(bus, ids) for bus, ids in zip(buses, served, strict=False)]   # the last bus: the peer's
     errors: list[BaseException] = []
 
     def target(node: PlantNode) -> None:

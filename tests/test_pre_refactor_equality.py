@@ -28,7 +28,9 @@ import jsonschema
 import pytest
 
 from sea_hil.cli import main
+from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
+from sea_hil.report.session_summary import rejections_blocks
 from sea_hil.report.summary import deterministic
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 
@@ -54,7 +56,9 @@ EDGE_RENAMED: dict[str, str] = {}
 EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0,   # issue 19: the edge's setpoint envelope
                                  "epoch_old": 0, "epoch_foreign": 0,  # issue 19: session epochs (no replays here)
                                  "late_samples": 0,   # issue 19: real time only, lockstep answers every sample
-                                 "late_setpoints": 0}  # issue 19: no answer older than max_answer_age_s here
+                                 "late_setpoints": 0,  # issue 19: no answer older than max_answer_age_s here
+                                 # issue 29: the edge's payload rejections by class (none on the paper's path)
+                                 **{f"payload_rejected_{r.value}": 0 for r in RejectReason}}
 # The one documented difference: payload version 2 (issue 19) added the 8-byte session epoch to every payload header,
 # so every payload byte count is 8 bytes per message larger (docs/deviations.md, "Session epoch"). Only these byte
 # fields are rewritten, each checked to be exactly its message count times the old size first; message counts and
@@ -69,7 +73,15 @@ SAMPLE_PERIOD_S = 0.01
 # blocks added since (issue 17: every limb): with one limb, `limbs` holds that limb's transmissions and tracking and
 # `limbs_total` the same, derived from the top-level blocks below (checked, never dropped); timing.driver is new too
 SESSION_ADDED = ("limbs", "limbs_total")
-TIMING_ADDED = ("driver",)
+TIMING_ADDED = ("driver", "rejections")
+# issue 29: `rejections` (every class the edge rejects, from its counters: checked against them, never dropped)
+# issue 29 (docs/verdict.md): every summary's verdict, and the session blocks it reads; the paper's path in lockstep
+# must be `ok` with nothing lost and no drive latch (never drop one)
+VERDICT_OK = {"status": "ok", "reasons": []}
+VERDICT_ADDED: dict[str, Any] = {
+    "verdict": VERDICT_OK, "drive_faults": [], "link_losses": {"uplink_beyond_model": 0},
+    "recording": {"dropped": 0, "write_errors": 0, "can_frames_missed": 0, "recorder_dropped_ops": 0,
+                  "can_tap_unfinished": 0, "lost": 0, "complete": True}}
 
 
 def one_limb_blocks(summary: dict[str, Any]) -> dict[str, Any]:
@@ -147,7 +159,8 @@ def old_offline_as_new(old: dict[str, Any]) -> dict[str, Any]:
     down, up = old["transmissions"], round(old["duration_s"] / SAMPLE_PERIOD_S)
     tx = {"downlink_msgs": down, "downlink_bytes": down * PAYLOAD_SIZE[MsgType.SETPOINT],
           "uplink_msgs": up, "uplink_bytes": up * PAYLOAD_SIZE[MsgType.STATE]}
-    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": with_totals(tx)}
+    return {**{k: v for k, v in old.items() if k != "cpu_s"}, "transmissions": with_totals(tx),
+            "verdict": VERDICT_OK, "inner_steps": round(old["duration_s"] * 1000)}   # issue 29: added
 
 
 def _param(run: tuple[str, str]) -> Any:
@@ -163,7 +176,12 @@ def test_lockstep_session_equals_pre_refactor(lockstep_runs, controller: str, li
     jsonschema.validate(new, SUMMARY_SCHEMA)
     assert set(new["timing"]) == timing_keys and set(new["timing"]["edge"]) == edge_timing_keys
     got = deterministic(new)
+    completeness = got.pop("completeness")   # issue 32: the recording against the nodes' counters (new; all there)
+    assert completeness["complete"], completeness
     assert {k: got.pop(k) for k in SESSION_ADDED} == one_limb_blocks(got)
+    assert got.pop("rejections") == rejections_blocks(got["edge"])[0]
+    assert new["timing"]["rejections"] == rejections_blocks(new["timing"]["edge"])[1]
+    assert {k: got.pop(k) for k in VERDICT_ADDED} == VERDICT_ADDED
     assert set(got) == set(expected) and set(got["edge"]) == set(expected["edge"])
     diff = {k: (got[k], expected[k]) for k in expected if got[k] != expected[k]}
     assert not diff, diff

@@ -8,14 +8,13 @@ checks that the savings and the RMS error stay within 5 %. Figures: docs/can-pro
 from __future__ import annotations
 
 import numpy as np
-import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.protocol.can_codec import load_database
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.closed_loop import simulate
 from sea_hil.offline.wire_quantiser import WireQuantiser, dbc_resolutions, quantised
+from sea_hil.protocol.can_codec import load_database
 
 TOLERANCE = 0.01
 ET_SPREAD = 0.05  # ET moves by ~2 % under a 1e-12 rad perturbation (docs/can-protocol.md)
@@ -47,14 +46,14 @@ def test_quantised_equals_the_codec_round_trip(meas: tuple[float, ...], volts: t
     th, om, de, nv, vo = dbc_resolutions(fd)
     lsbs = (th, th, om, om, de, de, nv, nv)
     got = wire.measurement(meas)  # type: ignore[arg-type]
-    for value, lsb, ref in zip(meas, lsbs, got):
+    for value, lsb, ref in zip(meas, lsbs, got, strict=True):
         assert quantised(value, lsb) == ref   # bit for bit: offline == lockstep rests on it
-    for value, ref in zip(volts, wire.voltage(volts)):
+    for value, ref in zip(volts, wire.voltage(volts), strict=True):
         assert quantised(value, vo) == ref
 
 
 def test_fd_profile_is_at_least_as_fine_as_classic() -> None:
-    assert all(f <= c for f, c in zip(dbc_resolutions(True), dbc_resolutions(False)))
+    assert all(f <= c for f, c in zip(dbc_resolutions(True), dbc_resolutions(False), strict=True))
     assert dbc_resolutions(True) != dbc_resolutions(False)
 
 

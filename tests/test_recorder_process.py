@@ -14,14 +14,17 @@ from pathlib import Path
 import can
 import pytest
 
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import open_bus
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import RecordingError
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
+from sea_hil.recorder.meta import META_FINAL
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
-from sea_hil.recorder.writer import META_FINAL, SessionRecorder, read_session
-from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
+from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.writer import SessionRecorder
 
 CFG = load_config().record
 CAN_TOPICS = ("/can/raw", "/can/feedback", "/can/command")

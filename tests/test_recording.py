@@ -14,12 +14,13 @@ import jsonschema
 import pytest
 from mcap.reader import make_reader
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.writer import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, SessionRecorder,
-                                install_finalizer, read_session)
-from sea_hil.recorder.schemas import TOPICS, schema_for
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION
+from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.schemas import TOPICS, encodings, schema_for
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
+from sea_hil.recorder.writer import SessionRecorder, install_finalizer
 
 REPO = Path(__file__).resolve().parents[1]
 TIMEOUT_S = 20.0
@@ -62,7 +63,8 @@ def test_session_round_trip(tmp_path: Path, compression: str) -> None:
     assert data.complete and data.tail_error is None and data.undecodable == 0
     assert set(data.messages) == set(TOPICS) and set(data.schemas) == set(TOPICS)
     for topic, msgs in expected.items():
-        assert data.encodings[topic] == ("jsonschema", "json")
+        assert data.encodings[topic] == encodings(topic) == (("protobuf", "protobuf") if topic.startswith("/can/")
+                                                              else ("jsonschema", "json"))
         assert data.schemas[topic] == schema_for(topic)
         got = data.messages[topic]
         assert [(m.log_time_ns, m.payload) for m in got] == msgs
@@ -82,7 +84,7 @@ def test_session_round_trip(tmp_path: Path, compression: str) -> None:
         reader = make_reader(f)
         summary = reader.get_summary()
         assert summary is not None and summary.statistics.message_count == 40 * len(TOPICS)
-        assert all(summary.schemas[c.schema_id].encoding == "jsonschema" for c in summary.channels.values())
+        assert all(summary.schemas[c.schema_id].encoding == encodings(c.topic)[0] for c in summary.channels.values())
         assert sum(1 for _ in reader.iter_messages()) == 40 * len(TOPICS)
         assert [a.name for a in reader.iter_attachments()] == [CONFIG_ATTACHMENT]
 

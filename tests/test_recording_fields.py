@@ -8,13 +8,14 @@ import jsonschema
 import pytest
 from mcap.reader import make_reader
 
-from sea_hil.protocol.can_codec import Feedback, Heartbeat, SeaCodec, VoltageCmd
-from sea_hil.protocol.can_frames import DriverState, ErrorFlags
-from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, encode
-from sea_hil.controller.trigger import TriggerReason
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat, VoltageCmd
+from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, TriggerReason, encode
 from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.meta import META_FINAL
+from sea_hil.recorder.reader import read_session
 from sea_hil.recorder.schemas import schema_for
-from sea_hil.recorder.writer import META_FINAL, SessionRecorder, read_session
+from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.zenoh_tap import ZenohTap
 
 CODEC = SeaCodec()

@@ -7,12 +7,11 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+from paper_scheme import paper  # these nodes speak the paper's STATE protocol
 
-from paper_scheme import paper   # these nodes speak the paper's STATE protocol
-
+from sea_hil.config.loader import load_config
 from sea_hil.controller.edge import EdgeNode
 from sea_hil.controller.remote import RemoteController
-from sea_hil.config import load_config
 from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, VoltagePayload, encode
 from sea_hil.session.builder import SessionBuilder
 
@@ -51,12 +50,14 @@ def test_edge_ignores_and_counts_duplicated_and_older_setpoints(nodes: tuple[Edg
     assert (st["stale_setpoints"], st["seq_duplicates"], st["seq_reordered"]) == (4, 3, 1)
 
 
-def test_edge_voltage_stream_shares_the_replay_guard(nodes: tuple[EdgeNode, RemoteController]) -> None:
-    edge, _ = nodes
-    v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
-    assert [edge.on_downlink(x) for x in v] == [True, False, False, True]
-    apply(edge, 0)
-    assert edge.core.counters.voltages == 2 and edge.core.voltage == (11.0, 0.0) and edge.core.counters.stale_setpoints == 2
+def test_edge_voltage_stream_shares_the_replay_guard() -> None:
+    with SessionBuilder(load_config(overrides=paper())) as b:   # voltages: the inner loop in the controller
+        edge = b.edge(b.bus(f"virtual:replay-{uuid.uuid4().hex[:8]}"), b.zenoh(), 1, inner="remote")
+        v = [encode(VoltagePayload(s, 0, s, (float(s), 0.0))) for s in (10, 10, 9, 11)]
+        assert [edge.on_downlink(x, channel="voltage") for x in v] == [True, False, False, True]
+        apply(edge, 0)
+        assert edge.core.counters.voltages == 2 and edge.core.voltage == (11.0, 0.0)
+        assert edge.core.counters.stale_setpoints == 2
 
 
 def test_restarted_controller_is_accepted_only_after_the_stream_timed_out(

@@ -4,18 +4,17 @@ Bounds are the issue's acceptance: max tracking error <= 0.01 rad for TT and ET,
 under a constant disturbance ET sends <= 0.40 of TT's setpoints (docs/deviations.md section 10)."""
 from __future__ import annotations
 
-
 import numpy as np
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.controller.backstepping import InnerGains, backstepping_voltage
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.observer import OBSERVER_UNSTARTED, observer_step
+from sea_hil.dynamics import deflections, initial_state
 from sea_hil.mechanics import limb_params, sea_geometry
 from sea_hil.offline.closed_loop import SimResult, simulate
-from sea_hil.plant_emulator.dynamics import deflections, initial_state
 from sea_hil.plant_emulator.integrator import rk4_step
 
 BOUND_RAD = 0.01

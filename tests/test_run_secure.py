@@ -20,15 +20,14 @@ from pathlib import Path
 from typing import Any
 
 import pytest
-
 from faults_helpers import wait_for
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import run_engine
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
-from sea_hil.recorder.writer import read_session
+from sea_hil.recorder.reader import read_session
 from sea_hil.report.session_summary import session_summary
 from sea_hil.session.run import RunOptions, run_session
 

@@ -8,11 +8,13 @@ import uuid
 import jsonschema
 import pytest
 
-from sea_hil.config import load_config
-from sea_hil.recorder.node import zenoh_record
-from sea_hil.recorder.schemas import schema_for
-from sea_hil.runtime import LockstepClock, Node, RealTimeClock, clock_for
+from sea_hil.config.loader import load_config
 from sea_hil.protocol.payloads import PayloadCounters
+from sea_hil.recorder.schemas import schema_for
+from sea_hil.recorder.zenoh_tap import zenoh_record
+from sea_hil.runtime.clock import RealTimeClock
+from sea_hil.runtime.lockstep import LockstepClock, clock_for
+from sea_hil.runtime.node import Node
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.run import RunOptions, controller_config, listen_endpoints
 from sea_hil.stats.schema import STATS_JSON_SCHEMA, StatsError, stats_record, validate_stats

@@ -9,15 +9,16 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
+from sea_hil.dynamics import end_stop_energy, end_stop_torque, f, initial_state
 from sea_hil.errors import ConfigError
+from sea_hil.jit import loaded
 from sea_hil.mechanics import energy, limb_params
 from sea_hil.plant_emulator.driver import DriverCore
-from sea_hil.plant_emulator.dynamics import end_stop_energy, end_stop_torque, f, initial_state
 from sea_hil.plant_emulator.integrator import advance, make_advance_kernel, prepare_advance
 from sea_hil.plant_emulator.soft_limits import DriveLimits
-from sea_hil.protocol.can_codec import ClearErrors, DriverState, ErrorFlags, FeedbackAngle, SeaCodec, VoltageCmd
-from sea_hil.jit import loaded
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import ClearErrors, DriverState, ErrorFlags, FeedbackAngle, VoltageCmd
 
 NODE = 1
 CFG = load_config()
@@ -165,7 +166,7 @@ def test_limit_config_is_validated() -> None:
 def test_plant_node_reports_a_limit_fault_over_can() -> None:
     """End to end on a CAN bus (lockstep `PlantNode`, a peer answering every feedback with a 24 V hip step like a
     runaway edge): the heartbeat reports FAULT with err_force_limit and the limb never reaches its end stops."""
-    from test_plant_node import is_hb, running_node   # the node test's virtual-bus helpers
+    from test_plant_node import is_hb, running_node  # the node test's virtual-bus helpers
 
     seen: list[float] = []
     with running_node(CFG, lockstep=True) as (node, peer):

@@ -18,18 +18,20 @@ from typing import Any, TypeVar
 
 import pytest
 import zenoh
-
 from paper_scheme import paper
 
-from sea_hil.protocol.can_codec import FeedbackAssembler, FEEDBACK_PARTS, SeaCodec, VoltageCmd
-from sea_hil.config import ZenohConfig, load_config
+from sea_hil.commands.certs import register
+from sea_hil.config.comms import ZenohConfig
+from sea_hil.config.loader import load_config
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.can_assembly import FeedbackAssembler
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import FEEDBACK_PARTS, VoltageCmd
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import SetpointPayload, TriggerReason, VoltagePayload, encode
+from sea_hil.protocol.zcerts import CertSet, make_certs, node_cn
 from sea_hil.protocol.zsecurity import acl_document, security_settings
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, session_config
-from sea_hil.commands.certs import register
-from sea_hil.protocol.zcerts import CertSet, make_certs, node_cn
 
 DEADLINE_S = 20.0
 KEYS = Keys.make("sea", "limb1")
@@ -88,7 +90,7 @@ def _matched(session: zenoh.Session, *keys: str) -> dict[str, zenoh.Publisher]:
     """Publishers on `keys`, once each knows a matching remote subscriber (so a put is really sent, not dropped)."""
     pubs = {k: session.declare_publisher(k) for k in keys}
     for k, pub in pubs.items():
-        _until(lambda: pub.matching_status.matching, f"a subscriber of {k} known to the publisher")
+        _until(lambda pub=pub: pub.matching_status.matching, f"a subscriber of {k} known to the publisher")
     return pubs
 
 
@@ -154,7 +156,7 @@ def test_shipped_profiles_load(certs: CertSet, monkeypatch: pytest.MonkeyPatch) 
     cfg = load_config(repo / "configs" / "secure.toml")
     assert cfg.zenoh.tls.enabled and cfg.zenoh.acl.enabled and cfg.zenoh.tls.certificate == "certs/edge.pem"
     session_config(cfg.zenoh)
-    for node, nc in certs.nodes.items():
+    for nc in certs.nodes.values():
         z = load_config(nc.profile).zenoh
         assert Path(z.tls.certificate) == nc.certificate.resolve() and z.acl.controller_cn == node_cn("controller")
         session_config(z)
@@ -194,7 +196,7 @@ def test_only_controller_puts_reach_edge(certs: CertSet, rogue: CertSet, acl: bo
         outsiders = _outsiders(stack, certs, rogue, ep)
         got: dict[str, list[bytes]] = {k: [] for k in subs}
         for k, sub in subs.items():   # the authorised path works (and the subscription has propagated)
-            _until(lambda: (ctl.put(k, b"probe"), _drain(sub, got[k]))[1], f"controller probe on {k}")
+            _until(lambda k=k, sub=sub: (ctl.put(k, b"probe"), _drain(sub, got[k]))[1], f"controller probe on {k}")
         seen = intr.declare_subscriber(KEYS.state, zenoh.handlers.FifoChannel(64))
         _until(lambda: (edge.put(KEYS.state, b"s"), seen.try_recv())[1], "the intruder observing state (allowed)")
         attack = _matched(intr, KEYS.setpoint, KEYS.voltage, KEYS.stats)
@@ -208,7 +210,7 @@ def test_only_controller_puts_reach_edge(certs: CertSet, rogue: CertSet, acl: bo
         _until(lambda: any(s.payload.to_bytes() == b"intruder-done" for s in iter(barrier.try_recv, None)),
                "the intruder's barrier")
         for k, sub in subs.items():
-            _until(lambda: b"marker" in _drain(sub, got[k]), f"the controller's marker on {k}")
+            _until(lambda k=k, sub=sub: b"marker" in _drain(sub, got[k]), f"the controller's marker on {k}")
         peers = {str(z) for z in edge.info.peers_zid()}
         assert peers == {str(ctl.info.zid()), str(intr.info.zid())}
         assert all(not list(s.info.peers_zid()) for s in outsiders.values())

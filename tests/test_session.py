@@ -8,15 +8,14 @@ from pathlib import Path
 
 import pytest
 from mcap.reader import make_reader
-
 from paper_scheme import paper
 
-from sea_hil.config import load_config
-from sea_hil.recorder.writer import read_session
+from sea_hil.config.loader import load_config
+from sea_hil.offline.session_engine import run_engine
+from sea_hil.recorder.reader import read_session
+from sea_hil.report.session_summary import session_summary
 from sea_hil.report.writer import run_report
 from sea_hil.session.run import RunOptions, run_session
-from sea_hil.offline.session_engine import run_engine
-from sea_hil.report.session_summary import session_summary
 
 pytestmark = pytest.mark.slow
 FIGURES = ("tracking.png", "inter_event.png", "latency.png", "bandwidth.png", "bus_load.png")

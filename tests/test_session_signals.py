@@ -1,4 +1,4 @@
-"""`sea-hil run` stopped by a signal leaves no process behind (sea_hil/session/processes.py).
+"""`sea-hil run` stopped by a signal leaves no process behind (sea_hil/runtime/processes.py).
 
 - SIGTERM: the session's close path runs (controller ended, recording closed in order), exit status 143;
 - SIGKILL (no close path can run): the controller child gets SIGTERM from Linux (`PR_SET_PDEATHSIG`), the recorder
@@ -12,8 +12,8 @@ from pathlib import Path
 
 import psutil
 import pytest
-
 from faults_helpers import REPO, end_process, sea_hil_cmd, wait_for
+
 from sea_hil.recorder.reader import read_session
 
 START_S = 60.0   # interpreter + imports + zenoh of two children on a loaded 2-core machine

@@ -5,7 +5,8 @@ import tomllib
 
 import pytest
 
-from sea_hil.config import DisturbanceConfig, config_from_dict, config_to_toml, load_config
+from sea_hil.config.loader import config_from_dict, config_to_toml, load_config
+from sea_hil.config.model import DisturbanceConfig
 from sea_hil.config.shorthand import disturbance_overrides, mismatch_factors, scenario_config
 from sea_hil.errors import ConfigError
 from sea_hil.plant_emulator.disturbance import make_disturbance

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 from sea_hil.errors import MalformedFrame, MalformedPayload
-from sea_hil.stats.histogram import LogHistogram
 from sea_hil.stats.can_bits import can_frame_bits
+from sea_hil.stats.histogram import LogHistogram
 
 S = 1_000_000_000
 PCTS = (1, 10, 25, 50, 75, 90, 99, 99.9, 100)

@@ -7,12 +7,12 @@ from pathlib import Path
 
 import jsonschema
 import pytest
+from test_session_summary import _session  # a synthetic recording: states, tracking records, setpoints
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.offline.simulate import run_simulation
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
-from test_session_summary import _session     # a synthetic recording: states, tracking records, setpoints
 
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "pre_refactor"
 

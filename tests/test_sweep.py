@@ -11,15 +11,25 @@ import time
 from pathlib import Path
 
 import pytest
-from hypothesis import given, strategies as st
+from hypothesis import given
+from hypothesis import strategies as st
 
-from sea_hil.errors import ConfigError
 from sea_hil.cli import main
-from sea_hil.sweep.runner import SweepOptions, point_config, progress_line, run_sweep
-from sea_hil.sweep.grid import (CSV_COLUMNS, GridPoint, LinkCondition, csv_row, expand_grid, parse_axis,
-                                pareto_front, point_command, point_overrides)
+from sea_hil.errors import ConfigError
 from sea_hil.sweep.csvlog import write_csv
+from sea_hil.sweep.grid import (
+    CSV_COLUMNS,
+    GridPoint,
+    LinkCondition,
+    csv_row,
+    expand_grid,
+    pareto_front,
+    parse_axis,
+    point_command,
+    point_overrides,
+)
 from sea_hil.sweep.output import fronts_by_link, write_outputs
+from sea_hil.sweep.runner import SweepOptions, point_config, progress_line, run_sweep
 
 ROOT = Path(__file__).resolve().parents[1]
 RUN_SUMMARY = {"transmissions": {"downlink_msgs": 304, "downlink_bytes": 16112, "uplink_msgs": 1001},
@@ -114,8 +124,8 @@ def test_pareto_front_example():
 @given(st.lists(st.tuples(st.integers(0, 20), st.integers(0, 20)), min_size=1, max_size=25))
 def test_pareto_front_properties(xy):
     front = pareto_front(xy)
-    on = [p for p, f in zip(xy, front) if f]
-    for p, f in zip(xy, front):
+    on = [p for p, f in zip(xy, front, strict=True) if f]
+    for p, f in zip(xy, front, strict=True):
         beaten = any(q[0] <= p[0] and q[1] <= p[1] and q != p for q in on)
         assert beaten != f
     assert min(xy) in on and min(xy, key=lambda p: (p[1], p[0])) in on

@@ -11,7 +11,7 @@ import pytest
 from sea_hil.cli import main
 from sea_hil.commands.sweep import method_axes
 from sea_hil.errors import ConfigError
-from sea_hil.sweep.grid import CSV_COLUMNS, LinkCondition, expand_grid
+from sea_hil.sweep.grid import CSV_COLUMNS, expand_grid
 from sea_hil.sweep.methods import METHODS, Scheme, parse_choices, parse_links, schemes_from_axes
 from sea_hil.sweep.methods_output import curves_by_link, domination_markdown, methods_figure
 from sea_hil.sweep.runner import SweepOptions, point_config, point_spec
@@ -80,7 +80,7 @@ def test_tiny_method_sweep_on_the_offline_engine(tmp_path: Path):
     edge_base = tmp_path / "edge.toml"
     edge_base.write_text('[trigger]\nplacement = "edge"\n', encoding="utf-8")
     assert point_config(SweepOptions(out=tmp_path, config=edge_base), points[0]).trigger.placement == "controller"
-    rows = [run_point(point_spec(opts, p, c)) for p, c in zip(points, cfgs)]
+    rows = [run_point(point_spec(opts, p, c)) for p, c in zip(points, cfgs, strict=True)]
     assert all(r["status"] == "ok" for r in rows) and all(tuple(r) == CSV_COLUMNS for r in rows)
     assert [(r["trigger"], r["compensation"], r["edge_model"], r["period_ms"]) for r in rows] == \
         [("controller", "predict", False, 10.0), ("controller", "predict", False, 20.0),

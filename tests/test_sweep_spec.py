@@ -6,7 +6,7 @@ from __future__ import annotations
 import csv
 import tomllib
 
-from sea_hil.config import config_from_dict
+from sea_hil.config.loader import config_from_dict
 from sea_hil.sweep import csvlog
 from sea_hil.sweep.grid import CSV_COLUMNS, expand_grid
 from sea_hil.sweep.runner import SweepOptions, build_configs, point_spec

@@ -7,13 +7,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+from sea_hil.config.model import TrajectoryConfig
 from sea_hil.controller.trajectory import CsvTrajectory, GaitTrajectory, LeadIn, make_trajectory
-from sea_hil.config import TrajectoryConfig
 from sea_hil.errors import TrajectoryError
 
 
 def _fd(fn, t: float, h: float) -> tuple[float, float]:
-    return tuple((a - b) / (2 * h) for a, b in zip(fn(t + h), fn(t - h)))  # type: ignore[return-value]
+    return tuple((a - b) / (2 * h) for a, b in zip(fn(t + h), fn(t - h), strict=True))  # type: ignore[return-value]
 
 
 def test_gait_derivatives_match_finite_differences() -> None:

@@ -15,8 +15,17 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from uml_suite import (HOST_TIMEOUT_S, REPO, RUN_DIR_KEY, SUITE_ARGS, WITH_VCAN, guest_run, load_with_vcan, started,
-                       wait_result)
+from uml_suite import (
+    HOST_TIMEOUT_S,
+    REPO,
+    RUN_DIR_KEY,
+    SUITE_ARGS,
+    WITH_VCAN,
+    guest_run,
+    load_with_vcan,
+    started,
+    wait_result,
+)
 
 pytestmark = pytest.mark.uml
 

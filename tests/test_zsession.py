@@ -7,7 +7,7 @@ from collections.abc import Iterator
 import pytest
 import zenoh
 
-from sea_hil.config import LinkDirectionConfig, ZenohConfig
+from sea_hil.config.comms import LinkDirectionConfig, ZenohConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator

@@ -50,7 +50,7 @@ class InnerLoop:
         _, _, gp = lb.fx_gx(q1 + w1 * h, q2 + w2 * h, 0.0, 0.0, a1, a2)
         a1, a2, _, _ = lb.geometry(q1 - w1 * h, q2 - w2 * h)
         _, _, gm = lb.fx_gx(q1 - w1 * h, q2 - w2 * h, 0.0, 0.0, a1, a2)
-        return tuple((p - m) / (2.0 * h) for p, m in zip(gp, gm))
+        return tuple((p - m) / (2.0 * h) for p, m in zip(gp, gm, strict=True))
 
     def voltage(self, m: tuple[float, ...]) -> Pair:
         """Saturated voltages for measurement (theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2);

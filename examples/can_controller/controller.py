@@ -27,8 +27,8 @@ import cantools
 
 HERE = Path(__file__).resolve().parent
 sys.path[:0] = [str(HERE), str(HERE.parent / "external_controller")]
-from etsmc import OuterLoop  # noqa: E402  (the outer loop shared with the Zenoh example)
 from can_backstepping import InnerLoop  # noqa: E402
+from etsmc import OuterLoop  # noqa: E402  (the outer loop shared with the Zenoh example)
 
 DEFAULT_DBC = Path(__file__).resolve().parents[2] / "protocol" / "sea.dbc"
 CMD_BITS, CMD_MASK = 5, 0x1F

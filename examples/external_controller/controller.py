@@ -27,7 +27,6 @@ from pathlib import Path
 from typing import Any
 
 import zenoh
-
 from etsmc import OuterLoop
 
 DEFAULT_LAYOUT = Path(__file__).resolve().parents[2] / "protocol" / "payloads.toml"
@@ -52,7 +51,7 @@ class Wire:
         version, type, length, NaN)."""
         if len(data) < self.header.size:
             return None
-        head = dict(zip(self.header_names, self.header.unpack_from(data)))
+        head = dict(zip(self.header_names, self.header.unpack_from(data), strict=True))
         name = self.by_id.get(head["type"])
         if head["magic"] != self.magic or head["version"] != self.version or name is None \
                 or len(data) != self.msgs[name]["size"]:

@@ -161,7 +161,7 @@ class Trigger:
             reason: str | None = "INITIAL"
         else:
             acc = 0.0
-            for u, v in zip(self._eps_i, eps):
+            for u, v in zip(self._eps_i, eps, strict=True):
                 acc += (u - v) * (u - v)
             x_norm = math.sqrt(eps[0] * eps[0] + eps[1] * eps[1] + eps[2] * eps[2] + eps[3] * eps[3])
             if math.sqrt(acc) >= self.threshold:

@@ -5,15 +5,25 @@ import argparse
 import math
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.errors import ConfigError
+from sea_hil.input_check import enforce
 from sea_hil.protocol.link import parse_link_spec
 
 
 def add_config_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--config", metavar="FILE", help="TOML file overlaid on the embedded defaults")
     p.add_argument("--seed", type=int, help="seed for every RNG (link emulation, disturbance noise)")
+    p.add_argument("--allow-unsafe-start", action="store_true",
+                   help="run a config whose start pose or trajectory leaves the drive's soft limits, the end stops or "
+                        "the setpoint envelope (refused at load otherwise; `sea-hil check` says why): sets [verdict] "
+                        "check_inputs = false; such a run's verdict says what happened")
+
+
+def add_strict_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--strict", action="store_true",
+                   help="exit status 3 when the verdict (summary.json `verdict`, docs/verdict.md) is not ok")
 
 
 def add_zenoh_args(p: argparse.ArgumentParser) -> None:
@@ -22,6 +32,9 @@ def add_zenoh_args(p: argparse.ArgumentParser) -> None:
     p.add_argument("--listen", action="append", default=[], metavar="ENDPOINT",
                    help="Zenoh endpoint to listen on, e.g. tcp/0.0.0.0:7447 (repeatable)")
     p.add_argument("--limb", help="limb name in the Zenoh keys (default from config: limb1)")
+    p.add_argument("--mode", choices=("peer", "client"),
+                   help="Zenoh mode (zenoh.mode; default from config: peer; `record` with only --connect: client, "
+                        "docs/topologies.md)")
 
 
 def add_link_args(p: argparse.ArgumentParser) -> None:
@@ -84,8 +97,13 @@ def _paper_scheme_where_needed(args: argparse.Namespace, ov: dict[str, Any]) -> 
         ov.setdefault("controller", {})["compensation"] = "none"
 
 
-def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None) -> SeaHilConfig:
+def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None = None, *,
+                     check: str | None = None) -> SeaHilConfig:
+    """The config of a command's options; `check` = "session" or "offline": its inputs checked before anything moves
+    (sea_hil/input_check.py: ConfigError, exit 2), None: not checked (the single-node commands)."""
     ov: dict[str, Any] = dict(overrides or {})
+    if getattr(args, "allow_unsafe_start", False):   # carried in the config: a session's children see it too
+        ov["verdict"] = {**ov.get("verdict", {}), "check_inputs": False}
     if getattr(args, "seed", None) is not None:
         ov.setdefault("link", {})["seed"] = args.seed
         ov.setdefault("disturbance", {})["seed"] = args.seed
@@ -107,6 +125,8 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
         z["listen"] = list(args.listen)
     if getattr(args, "limb", None):
         z["limb"] = args.limb
+    if getattr(args, "mode", None):
+        z["mode"] = args.mode
     if z:
         ov["zenoh"] = {**ov.get("zenoh", {}), **z}
     if getattr(args, "can", None):
@@ -116,7 +136,9 @@ def config_from_args(args: argparse.Namespace, overrides: dict[str, Any] | None 
                                getattr(args, "mismatch", None))
     cfg = build(ov)
     period_ms = getattr(args, "period_ms", None)
-    if period_ms is None:
+    if period_ms is not None:
+        ctrl = {**ov.get("controller", {}), "sample_period_s": check_period_ms(period_ms, cfg)}
+        cfg = build({**ov, "controller": ctrl})
+    if check is None:
         return cfg
-    ctrl = {**ov.get("controller", {}), "sample_period_s": check_period_ms(period_ms, cfg)}
-    return build({**ov, "controller": ctrl})
+    return enforce(cfg, offline=check == "offline")

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import signal
 
-from sea_hil.commands.node_cli import add_node_args, node_session
+from sea_hil.commands.node_cli import add_node_args, node_session, print_result
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,5 +21,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     with node_session(args, "controller") as (b, _cfg, session):
         node = b.controller(session, args.controller, inner=args.inner, cycles=args.cycles)
-        done = b.serve(node, args.timeout)
+        done = b.serve(node, args.timeout, signals=(signal.SIGINT, signal.SIGTERM))
+        counters = node.stats_dict()
+    print_result(args, "controller", counters, done)
     return 0 if done else 3

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 import argparse
+import signal
 
-from sea_hil.commands.node_cli import add_node_args, node_session, raise_node
+from sea_hil.commands.node_cli import add_node_args, node_session, print_result, raise_node
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -20,5 +21,7 @@ def _main(args: argparse.Namespace) -> int:
     with node_session(args, "edge") as (b, cfg, session):
         node = b.edge(b.bus(), session, args.node, inner=args.inner, mode=args.controller)
         raise_node(args, node, cfg, "edge")
-        b.serve(node)
+        b.serve(node, signals=(signal.SIGINT, signal.SIGTERM))   # Ctrl-C too: final stats, then the result
+        counters = node.stats_dict()
+    print_result(args, "edge", counters, True)
     return 0

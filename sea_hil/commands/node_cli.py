@@ -8,9 +8,12 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from sea_hil.commands.common import (add_config_args, add_link_args, add_scheme_args, add_zenoh_args,
-                                     config_from_args)
+from sea_hil.commands.common import add_config_args, add_link_args, add_scheme_args, add_zenoh_args, config_from_args
+from sea_hil.live.child import attach_live_child
 from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.report.node_summary import node_summary, print_node_summary
+from sea_hil.runtime.realtime import node_priority, raise_node_process
+from sea_hil.session.builder import SessionBuilder
 
 
 def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
@@ -25,6 +28,17 @@ def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
     add_live_args(p, node=True)
     add_config_args(p)
     add_scheme_args(p)
+    add_json_arg(p)
+
+
+def add_json_arg(p: argparse.ArgumentParser) -> None:
+    p.add_argument("--json", action="store_true",
+                   help="at the end print the node's summary as JSON (one line) instead of its table")
+
+
+def print_result(args: argparse.Namespace, kind: str, counters: dict[str, Any], finished: bool) -> None:
+    """The node's own result at its end (`sea_hil.report.node_summary`)."""
+    print_node_summary(node_summary(kind, counters, finished=finished), as_json=args.json, command=args.command)
 
 
 @contextmanager
@@ -33,9 +47,6 @@ def node_session(args: argparse.Namespace, role: str) -> Iterator[tuple[Any, Any
     live-view recorder child also records its CAN bus. A real-time controller of its own (the compose topology;
     `sea-hil run` sets it for its children) takes SCHED_FIFO two below the driver after its start-up
     (`node_priority`, `RealTimeControllerSync.state_source`); the edge raises its loop once built (`raise_node`)."""
-    from sea_hil.live.child import attach_live_child
-    from sea_hil.runtime.realtime import node_priority
-    from sea_hil.session.builder import SessionBuilder
     cfg = config_from_args(args, live_overrides(args))
     if role == "controller" and not args.lockstep and not cfg.timing.controller_priority:
         priority = node_priority(cfg.timing, role)
@@ -51,5 +62,4 @@ def raise_node(args: argparse.Namespace, node: Any, cfg: Any, role: str) -> None
     """A real-time node process of its own (the compose topology): [timing] SCHED_FIFO for its loop, one below the
     driver for the edge (`raise_node_process`)."""
     if not args.lockstep:
-        from sea_hil.runtime.realtime import raise_node_process
         raise_node_process(node, cfg.timing, role)

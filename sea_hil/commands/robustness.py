@@ -9,6 +9,8 @@ from pathlib import Path
 from typing import Any
 
 from sea_hil.errors import ConfigError
+from sea_hil.offline.robustness import grid, run_grid
+from sea_hil.offline.robustness_output import write_csv, write_figure, write_markdown
 
 
 def _floats(name: str, text: str) -> tuple[float, ...]:
@@ -36,8 +38,6 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.offline.robustness import grid, run_grid
-    from sea_hil.offline.robustness_output import write_csv, write_figure, write_markdown
     ov: dict[str, Any] = {}
     if args.trajectory:
         ov["trajectory"] = {"kind": "csv", "csv_path": args.trajectory}

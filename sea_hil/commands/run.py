@@ -5,9 +5,20 @@ import argparse
 import sys
 from pathlib import Path
 
-from sea_hil.commands.common import (add_config_args, add_link_args, add_period_arg, add_scenario_args,
-                                     add_scheme_args, config_from_args)
+from sea_hil.commands.common import (
+    add_config_args,
+    add_link_args,
+    add_period_arg,
+    add_scenario_args,
+    add_scheme_args,
+    add_strict_arg,
+    config_from_args,
+)
+from sea_hil.errors import ConfigError
 from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
+from sea_hil.report.verdict import strict_status
+from sea_hil.session.run import RunOptions, print_summary, run_session
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -28,6 +39,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "controller at the 10 ms sample rate, voltages tunnelled to CAN)")
     p.add_argument("--can", metavar="SPEC", help="CAN bus: virtual:NAME (default), socketcan:vcan0, udp_multicast:GROUP")
     p.add_argument("--node", type=int, default=1, help="driver node id (of the first limb)")
+    p.add_argument("--can-profile", choices=("sea", "cia402"), help="sea = the DBC protocol; cia402 = CANopen "
+                   "CiA 402, the edge as the master of the limb's two nodes (--lockstep only; docs/cia402.md); "
+                   "default [can] profile")
     p.add_argument("--limbs", type=int, default=None, metavar="N",
                    help="emulate the default limb N times (node ids --node.., limb1..limbN), over as many CAN buses "
                         "as the bus-load model needs (docs/session.md, 'Several limbs'); default: [[limbs]] or 1")
@@ -44,6 +58,7 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write no PNG figures (about 1 s a session; `sea-hil report DIR` draws them from the "
                         "recording later): a sweep's points run with it")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
+    add_strict_arg(p)
     add_link_args(p)
     add_live_args(p)
     add_config_args(p)
@@ -54,17 +69,17 @@ def register(sub: argparse._SubParsersAction) -> None:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.session.run import RunOptions, print_summary, run_session
-    from sea_hil.errors import ConfigError
     if args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
-    cfg = config_from_args(args, live_overrides(args))
+    overrides = live_overrides(args)
+    if args.can_profile:
+        overrides = {**(overrides or {}), "can": {**(overrides or {}).get("can", {}), "profile": args.can_profile}}
+    cfg = config_from_args(args, overrides, check="session")
     opts = RunOptions(controller=args.controller, cycles=args.cycles, out=args.out, lockstep=args.lockstep,
                       inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,
                       join_timeout_s=args.join_timeout, secure=args.secure or args.certs is not None,
                       certs=args.certs, figures=args.figures)
-    from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
     with SessionProgress(sys.stderr) as progress:
         summary = run_session(cfg, opts, log=progress)
     if args.json:
@@ -73,4 +88,4 @@ def _main(args: argparse.Namespace) -> int:
         # TT publishes and answers a state at every sample of the cycle, both ends included
         samples = round(summary["duration_s"] / cfg.controller.sample_period_s) + 1
         print_end_of_run(summary, files_in(args.out), tt_msgs=samples)
-    return 0
+    return strict_status(summary) if args.strict else 0

@@ -5,7 +5,11 @@ import argparse
 import json
 from pathlib import Path
 
-from sea_hil.commands.common import add_config_args, add_period_arg, add_scenario_args, config_from_args
+from sea_hil.commands.common import add_config_args, add_period_arg, add_scenario_args, add_strict_arg, config_from_args
+from sea_hil.errors import ConfigError
+from sea_hil.offline.simulate import run_compare, run_simulation
+from sea_hil.report.console import files_in, print_end_of_run
+from sea_hil.report.verdict import strict_status
 
 
 def register(sub: argparse._SubParsersAction) -> None:
@@ -23,26 +27,25 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--out", required=True, type=Path, metavar="DIR", help="output directory")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     add_config_args(p)
+    add_strict_arg(p)
     add_period_arg(p)
     add_scenario_args(p)
     p.set_defaults(func=_main)
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.offline.simulate import run_compare, run_simulation
-    from sea_hil.errors import ConfigError
     if args.cycles is not None and args.cycles < 1:
         raise ConfigError("--cycles must be >= 1")
-    cfg = config_from_args(args)
+    cfg = config_from_args(args, check="offline")
     if args.compare:
-        _, _, table = run_compare(cfg, args.out, args.cycles, quantise=args.quantise)
+        tt, et, table = run_compare(cfg, args.out, args.cycles, quantise=args.quantise)
         print(table)
+        return max(strict_status(tt), strict_status(et)) if args.strict else 0
     else:
         summary = run_simulation(cfg, args.controller, args.out, args.cycles, quantise=args.quantise)
         if args.json:
             print(json.dumps(summary, indent=2, sort_keys=True))
         else:
-            from sea_hil.report.console import files_in, print_end_of_run
-            print_end_of_run(summary, files_in(args.out), command="simulate",
+                print_end_of_run(summary, files_in(args.out), command="simulate",
                              tt_msgs=round(summary["duration_s"] / cfg.controller.sample_period_s))
-    return 0
+    return strict_status(summary) if args.strict else 0

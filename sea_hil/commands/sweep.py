@@ -10,11 +10,25 @@ import shlex
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
-from sea_hil.commands.common import add_scenario_args
+from sea_hil.commands.common import add_scenario_args, check_period_ms
+from sea_hil.config.shorthand import scenario_config
 from sea_hil.errors import ConfigError
-from sea_hil.sweep.grid import DIRECTIONS, expand_grid, parse_axis, seed_axis
-from sea_hil.sweep.methods import METHODS
+from sea_hil.input_check import enforce
+from sea_hil.report.verdict import STRICT_EXIT
+from sea_hil.sweep.grid import DIRECTIONS, LinkCondition, expand_grid, parse_axis, seed_axis
+from sea_hil.sweep.methods import (
+    COMPENSATIONS,
+    METHODS,
+    TRIGGERS,
+    parse_choices,
+    parse_links,
+    schemes_from_axes,
+    schemes_from_methods,
+)
+from sea_hil.sweep.output import write_outputs
+from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
 
 LINK_AXIS_DEFAULTS = {"delay-ms": "0,10", "jitter-ms": "0", "loss": "0"}
 
@@ -60,6 +74,10 @@ def register(sub: argparse._SubParsersAction) -> None:
                         "timeline, links and quantisation; same summary, ~100x faster); lockstep = a `sea-hil run "
                         "--lockstep` session per point (the check that the real path behaves the same)")
     p.add_argument("--mode", choices=("lockstep", "offline"), default=None, help=argparse.SUPPRESS)  # old name
+    p.add_argument("--allow-unsafe-start", action="store_true",
+                   help="run points whose start pose, trajectory or links fail the input checks (sea-hil check)")
+    p.add_argument("--strict", action="store_true",
+                   help="exit status 3 at the end when a point's verdict is not ok (the list is printed)")
     add_scenario_args(p)
     p.set_defaults(func=_main)
 
@@ -84,11 +102,6 @@ def _command_line(args: argparse.Namespace) -> str:
 def method_axes(args: argparse.Namespace) -> tuple[list, list, list | None]:
     """(TT schemes, ET schemes, explicit link conditions or None) from --trigger/--compensation/--period-ms,
     --methods and --links; periods checked against the base config's inner period (commands/common.py)."""
-    from sea_hil.commands.common import check_period_ms
-    from sea_hil.config.shorthand import scenario_config
-    from sea_hil.sweep.grid import LinkCondition
-    from sea_hil.sweep.methods import (COMPENSATIONS, TRIGGERS, parse_choices, parse_links, schemes_from_axes,
-                                       schemes_from_methods)
     periods = parse_axis("period-ms", args.period_ms) if args.period_ms else None
     if periods:
         base = scenario_config(args.config, {})
@@ -107,8 +120,6 @@ def method_axes(args: argparse.Namespace) -> tuple[list, list, list | None]:
 
 
 def _main(args: argparse.Namespace) -> int:
-    from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
-    from sea_hil.sweep.output import write_outputs
     if args.links and any(getattr(args, n.replace("-", "_")) is not None for n in LINK_AXIS_DEFAULTS):
         raise ConfigError("--links replaces --delay-ms, --jitter-ms and --loss: give one or the other")
     for name, default in LINK_AXIS_DEFAULTS.items():
@@ -131,8 +142,12 @@ def _main(args: argparse.Namespace) -> int:
                         scheduler=args.scheduler, resume=args.resume, disturbance=args.disturbance,
                         mismatch=args.mismatch)
     configs = build_configs(points, opts)
+    configs = _checked(configs, args.allow_unsafe_start)
     command = _command_line(args)
-    log = lambda s: print(s, file=sys.stderr, flush=True)  # noqa: E731
+
+    def log(s: str) -> None:
+        print(s, file=sys.stderr, flush=True)
+
     where = f"cluster {args.scheduler}" if args.scheduler else f"{args.jobs} local jobs"
     log(f"sweep: {len(points)} points ({sum(p.controller == 'et' for p in points)} ET + "
         f"{sum(p.controller == 'tt' for p in points)} TT references), {where}, engine {args.engine} -> {args.out}")
@@ -145,4 +160,26 @@ def _main(args: argparse.Namespace) -> int:
         f"{args.out / 'pareto.png'}, {args.out / 'methods.png'}, {args.out / 'sweep.md'}")
     if interrupted:
         raise KeyboardInterrupt
-    return 0 if ok == len(rows) else 1
+    if ok != len(rows):
+        return 1
+    if args.strict:
+        bad = [r for r in rows if r.get("verdict") != "ok"]
+        for r in bad:
+            log(f"sweep --strict: point {r['point']}: verdict {r.get('verdict') or 'missing'}"
+                f"{': ' + r['verdict_reasons'] if r.get('verdict_reasons') else ''}")
+        if bad:
+            log(f"sweep --strict: {len(bad)} of {len(rows)} points not ok")
+            return STRICT_EXIT
+    return 0
+
+
+def _checked(configs: dict[int, Any], allow_unsafe: bool) -> dict[int, Any]:
+    """The points' configs after the input checks (sea_hil/input_check.py): the start pose and trajectory once (the
+    points share them), links and periods per point; with `allow_unsafe`, unchecked and marked so (a lockstep
+    point's `sea-hil run` reads `[verdict] check_inputs = false` from its config)."""
+    if allow_unsafe:
+        return {k: c.model_copy(update={"verdict": c.verdict.model_copy(update={"check_inputs": False})})
+                for k, c in configs.items()}
+    for i, (k, c) in enumerate(configs.items()):
+        enforce(c, motion=i == 0, where=f"sweep point {k}: ")
+    return configs

@@ -6,11 +6,30 @@ from typing import Any, Literal
 from pydantic import Field, field_validator, model_validator
 
 from sea_hil.config.base import _Frozen
+from sea_hil.config.wire_names import parse_can_spec, validate_limb, validate_prefix
 from sea_hil.errors import ConfigError
+
+
+class Cia402Config(_Frozen):
+    """`[can.cia402]`: the CANopen CiA 402 profile (`[can] profile = "cia402"`, docs/cia402.md)."""
+    node_ids: tuple[int, ...] = Field((1, 2), description="CANopen node ids, (hip, knee) per limb: each SEA is its "
+                                      "own node")
+    rated_torque_mnm: int = Field(1000, gt=0, le=2**32 - 1, description="0x6076: the motor torque the ideal "
+                                  "current loop delivers at the plant's voltage limit (docs/cia402.md)")
+
+    @field_validator("node_ids")
+    @classmethod
+    def _nodes(cls, v: tuple[int, ...]) -> tuple[int, ...]:
+        if not v or len(v) % 2 or len(set(v)) != len(v) or any(not 1 <= n <= 127 for n in v):
+            raise ValueError("cia402.node_ids must be distinct CANopen node ids in 1..127, two (hip, knee) per limb")
+        return v
 
 
 class CanConfig(_Frozen):
     interface: str = "virtual:sea-hil"
+    profile: Literal["sea", "cia402"] = Field("sea", description="sea = the DBC protocol (protocol/sea.dbc); "
+                                              "cia402 = CANopen CiA 301/402, one node per SEA (docs/cia402.md)")
+    cia402: Cia402Config = Cia402Config()
     bitrate_bps: int = Field(1_000_000, gt=0, description="nominal (arbitration-phase) bit rate; classic CAN's only "
                              "rate")
     fd: bool = Field(False, description="CAN FD profile: VOLTAGE_CMD_FD and one FEEDBACK_FD frame per sample, data "
@@ -32,7 +51,6 @@ class CanConfig(_Frozen):
     @field_validator("interface")
     @classmethod
     def _spec(cls, v: str) -> str:
-        from sea_hil.protocol.canbus import parse_can_spec  # local: keeps python-can out of config import time
         try:
             parse_can_spec(v)
         except ConfigError as err:
@@ -99,7 +117,6 @@ class ZenohConfig(_Frozen):
     @field_validator("prefix", "limb")
     @classmethod
     def _key_chunk(cls, v: str, info: Any) -> str:
-        from sea_hil.protocol.keys import validate_limb, validate_prefix
         try:
             return validate_prefix(v) if info.field_name == "prefix" else validate_limb(v)
         except ConfigError as err:

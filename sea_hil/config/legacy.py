@@ -19,6 +19,12 @@ RENAMED: dict[tuple[str, str], tuple[str, str]] = {
 REMOVED: dict[tuple[str, str], str] = {
     ("can", "send_backoff_s"): "read by nothing (the nodes pause 0.2 ms between CAN send retries)",
     ("record", "stats_period_s"): "read by nothing (nodes publish /stats at shutdown, docs/recording.md)",
+    # real-time levers measured as no gain once the session runs at SCHED_FIFO (docs/timing.md, "Measured")
+    ("timing", "spin_us"): "measured as no gain and removed (docs/timing.md); the driver sleeps to each deadline",
+    ("timing", "gc_in_slack"): "measured as no gain (twice the tick misses) and removed (docs/timing.md)",
+    ("timing", "gc_slack_us"): "belonged to the removed gc_in_slack (docs/timing.md)",
+    ("timing", "switch_interval_us"): "measured as no gain and removed (docs/timing.md); Python's default applies",
+    ("timing", "driver_cpu"): "measured as no gain and removed (docs/timing.md); no thread or process is pinned",
 }
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 from pydantic import Field, field_validator
 
 from sea_hil.config.base import _Frozen
+from sea_hil.config.wire_names import parse_can_spec, validate_limb
 from sea_hil.errors import ConfigError
 
 
@@ -21,7 +22,6 @@ class LimbConfig(_Frozen):
     @field_validator("name")
     @classmethod
     def _name(cls, v: str) -> str:
-        from sea_hil.protocol.keys import validate_limb
         try:
             return validate_limb(v)
         except ConfigError as err:
@@ -31,7 +31,6 @@ class LimbConfig(_Frozen):
     @classmethod
     def _bus(cls, v: str) -> str:
         if v:
-            from sea_hil.protocol.canbus import parse_can_spec  # local: keeps python-can out of config import time
             try:
                 parse_can_spec(v)
             except ConfigError as err:

@@ -140,7 +140,8 @@ class TriggerConfig(_Frozen):
         "edge", description="where Eq. 16-19 are evaluated: 'edge' (default) = the edge publishes a state only on an "
         "event (both directions event-triggered); 'controller' = the paper's (the edge publishes every outer sample)")
     edge_check: Literal["outer", "sample"] = Field(
-        "outer", description="edge placement: evaluate the trigger every outer sample or every inner (1 kHz) sample")
+        "outer", description="edge placement: evaluate the trigger every outer sample or every inner (1 kHz) sample "
+        "(ET only: TT publishes every outer sample, the periodic baseline, whatever this says)")
     edge_fallback: Literal["local", "hold"] = Field(
         "local", description="edge placement, a silent downlink: 'local' (default) = while an answer is overdue the "
         "edge computes v_x itself from the SMC law on its own samples (docs/deviations.md section 17); 'hold' = it "

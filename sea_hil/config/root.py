@@ -9,10 +9,17 @@ from sea_hil.config.base import _Frozen
 from sea_hil.config.comms import CanConfig, LinkConfig, RecordConfig, ZenohConfig
 from sea_hil.config.limbs import LimbConfig, check_limbs
 from sea_hil.config.live import LiveConfig
-from sea_hil.config.model import (ControllerConfig, DisturbanceConfig, PlantConfig, SimConfig, TrajectoryConfig,
-                                  TriggerConfig)
+from sea_hil.config.model import (
+    ControllerConfig,
+    DisturbanceConfig,
+    PlantConfig,
+    SimConfig,
+    TrajectoryConfig,
+    TriggerConfig,
+)
 from sea_hil.config.safety import SafetyConfig
 from sea_hil.config.timing import TimingConfig
+from sea_hil.config.verdict import VerdictConfig
 
 
 class SeaHilConfig(_Frozen):
@@ -29,6 +36,7 @@ class SeaHilConfig(_Frozen):
     live: LiveConfig = LiveConfig()
     safety: SafetyConfig = SafetyConfig()
     timing: TimingConfig = TimingConfig()   # [timing]: real-time levers of the 1 kHz loops (docs/timing.md)
+    verdict: VerdictConfig = VerdictConfig()   # [verdict]: ok / degraded / invalid thresholds (docs/verdict.md)
     limbs: tuple[LimbConfig, ...] = ()   # [[limbs]]; empty = the one default limb (sea_hil/config/limbs.py)
 
     @field_validator("limbs")

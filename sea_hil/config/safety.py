@@ -29,7 +29,7 @@ class EndStopConfig(_Frozen):
     damping_nms_per_rad: Pair = (2.0, 2.0)
 
     @model_validator(mode="after")
-    def _check(self) -> "EndStopConfig":
+    def _check(self) -> EndStopConfig:
         _ordered(self.min_rad, self.max_rad, "plant.end_stops")
         _positive(self.stiffness_nm_per_rad, "plant.end_stops.stiffness_nm_per_rad")
         if not all(c >= 0 for c in self.damping_nms_per_rad):
@@ -47,7 +47,7 @@ class DriveLimitsConfig(_Frozen):
     spring_force_max_n: Pair = (60.0, 60.0)
 
     @model_validator(mode="after")
-    def _check(self) -> "DriveLimitsConfig":
+    def _check(self) -> DriveLimitsConfig:
         _ordered(self.position_min_rad, self.position_max_rad, "safety.drive position")
         _positive(self.velocity_max_rad_s, "safety.drive.velocity_max_rad_s")
         _positive(self.spring_force_max_n, "safety.drive.spring_force_max_n")
@@ -72,7 +72,7 @@ class SetpointEnvelopeConfig(_Frozen):
                                     "path cannot steer the limb on old states; 0 = off")
 
     @model_validator(mode="after")
-    def _check(self) -> "SetpointEnvelopeConfig":
+    def _check(self) -> SetpointEnvelopeConfig:
         _positive(self.deflection_max_m, "safety.setpoint.deflection_max_m")
         return self
 

@@ -20,9 +20,9 @@ import threading
 from collections.abc import Callable
 from typing import IO, Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
-from sea_hil.session.processes import end_process
+from sea_hil.runtime.processes import end_process
 
 PR_SET_PDEATHSIG = 1
 PARENT_ENV = "SEA_HIL_LIVE_PARENT_PID"
@@ -110,7 +110,10 @@ def start_live_child(args: argparse.Namespace, cfg: SeaHilConfig, can_spec: str 
     exits — else None. Start it once the node's Zenoh session is open (it may be what the child connects to)."""
     if not cfg.live.enabled:
         return None
-    echo = (lambda s: print(s, file=sys.stderr, flush=True))
+
+    def echo(s: str) -> None:
+        print(s, file=sys.stderr, flush=True)
+
     if can_spec is not None and can_spec.startswith("virtual:"):
         echo(f"live view: the CAN bus {can_spec} exists in this process only; bus load and driver state not shown")
     child = LiveChild(record_cmd(args, cfg, can_spec), echo)

@@ -15,6 +15,7 @@ from typing import Any
 
 from sea_hil.config.live import LiveConfig
 from sea_hil.errors import SeaHilError
+from sea_hil.live.feed import LiveSpec
 
 STARTUP_TIMEOUT_S = 60.0   # interpreter + SDK import + bind, on a loaded machine
 
@@ -23,7 +24,6 @@ def live_child_argv(live: tuple[LiveConfig, int] | None) -> tuple[list[str], Liv
     """(extra argv of the recorder child, the parent's link) for `live` = (live config, CAN bitrate), or ([], None)."""
     if live is None:
         return [], None
-    from sea_hil.live.feed import LiveSpec
     link = LiveLink.open()
     return [LiveSpec(live=live[0], bitrate_bps=live[1], notify_fd=link.write_fd).model_dump_json()], link
 

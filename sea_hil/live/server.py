@@ -18,7 +18,7 @@ from collections.abc import Callable
 from typing import Any
 
 import foxglove
-from foxglove.websocket import ChannelView, Client
+from foxglove.websocket import ChannelView, Client, ServerListener
 
 from sea_hil.config.live import LiveConfig
 from sea_hil.errors import SeaHilError
@@ -34,7 +34,7 @@ class LiveError(SeaHilError):
     """The live view could not be served (port taken, bad host, ...)."""
 
 
-class _Listener:
+class _Listener(ServerListener):
     """Counts subscriptions (total and active); the SDK calls it from its own threads."""
 
     def __init__(self, notify: Notify) -> None:

@@ -11,6 +11,7 @@ from __future__ import annotations
 from typing import Any, NamedTuple
 
 from sea_hil.errors import MalformedFrame
+from sea_hil.fault_explain import LATCH_WORD
 from sea_hil.live.events import DriverWatch, event_log
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
@@ -133,8 +134,13 @@ class LiveView:
         flat = {k: v for k, v in p.items() if isinstance(v, (int, float, bool))}
         return [LiveMessage("/live/node_stats", t_ns, flat)]
 
+    def _fault(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        """A drive latch explained (limit, measured value, who clears it: sea_hil/fault_explain.py) goes to the Log
+        panel as it is; the plain state changes are `_can`'s own."""
+        return [LiveMessage("/live/events", t_ns, p)] if LATCH_WORD in str(p.get("message", "")) else []
+
     _HANDLERS = {"/tracking": _tracking, "/zenoh/state": _state, "/zenoh/setpoint": _setpoint,
-                 "/zenoh/voltage": _voltage, "/can/raw": _can, "/stats": _stats}
+                 "/zenoh/voltage": _voltage, "/can/raw": _can, "/stats": _stats, "/log/faults": _fault}
 
     # -- statistics ----------------------------------------------------------------------------------------------
     def _round_trip(self, t_ns: int, state_seq: Any) -> None:

@@ -10,8 +10,8 @@ DBC-quantised feedback), compiled with numba when it is installed (sea_hil/jit.p
 """
 from __future__ import annotations
 
-from typing import Any
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -21,13 +21,13 @@ from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.outer import OuterController
 from sea_hil.controller.smc import JointState
 from sea_hil.controller.trajectory import make_trajectory
+from sea_hil.dynamics import State, initial_state
 from sea_hil.errors import SeaHilError
 from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import make_session_steps
 from sea_hil.offline.wire_quantiser import EXACT, dbc_resolutions, quantised
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
-from sea_hil.dynamics import State, initial_state
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 
 

@@ -5,12 +5,12 @@ the offline session engine (between the samples at which the edge's and the cont
 `simulate`, compiled by numba (sea_hil/jit.py) or run as plain Python."""
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 from sea_hil.controller.inner import inner_step
+from sea_hil.dynamics import State, deflections, is_finite, rk4_core, saturate
 from sea_hil.offline.wire_quantiser import quantised
-from sea_hil.plant_emulator.dynamics import State, deflections, is_finite, saturate
-from sea_hil.plant_emulator.integrator import rk4_core
 from sea_hil.plant_emulator.soft_limits import limit_bits
 
 
@@ -23,7 +23,7 @@ def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float
             quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
 
 
-def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
+def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,
                       limit_v, dist_tab, lsb, lim, faulted):
     """Sample k from the plant state x and its decoded feedback m: the edge's inner step on its nominal model pn
     (`inner_step`: disturbance observer state obs, backstepping voltage) -> quantised, saturated VOLTAGE_CMD -> one
@@ -54,7 +54,7 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
 def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
     """The per-run kernel; `fingerprint` (see sea_hil/jit.py) only keys numba's disk cache."""
 
-    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,  # noqa
+    def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,
                       limit_v, dist_tab, lsb, lim, faulted):
         """Samples k0 .. k0 + n_steps - 1 (`edge_drive_sample`) from the state x of sample k0. Returns (x, m of the
         new x, saturated steps, max |u1|, max |u2| commanded, first non-finite sample or -1, obs, faulted)."""

@@ -7,8 +7,9 @@ on, as the networked path), so the whole grid is deterministic and takes seconds
 """
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 

@@ -29,6 +29,7 @@ from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
 from sea_hil.dynamics import initial_state
 from sea_hil.errors import SeaHilError
+from sea_hil.fault_explain import POLICY_USER
 from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
@@ -41,6 +42,7 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, decode
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.session_summary import session_summary
+from sea_hil.report.verdict import verdict
 
 STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
 
@@ -124,7 +126,22 @@ def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, A
     """summary.json of the session `run_engine(cfg, mode, cycles)` (what a sweep point needs), its messages built and
     summarised without cyclic garbage collection too (sea_hil/offline/gc_pause.py)."""
     with gc_paused():
-        return session_summary(run_session(cfg, mode, cycles).data, mode)
+        res = run_session(cfg, mode, cycles)
+        return engine_verdict(session_summary(res.data, mode), res.drive_faulted, res.saturated_steps, res.samples,
+                              cfg)
+
+
+def engine_verdict(summary: dict[str, Any], faulted: bool, saturated_steps: int, samples: int, cfg: SeaHilConfig
+                   ) -> dict[str, Any]:
+    """`summary` with the engine's `drive_faults` (the engine knows only whether a soft limit faulted the drive, not
+    when: `t_s` None; it records no heartbeats) and its `verdict` under `cfg`'s `[verdict]`, judging the saturated
+    inner steps too (of `samples` driver periods; the engine's summary has no edge `/stats`)."""
+    faults = [{"node_id": 1, "t_s": None, "state": "FAULT", "flags": ["soft limit"], "in_fault_s": None,
+               "cleared": False, "clear_policy": POLICY_USER}] if faulted else []
+    out = {**summary, "drive_faults": faults}
+    edge = {**out.get("edge", {}), "saturated_steps": saturated_steps, "commands_sent": samples}
+    out["verdict"] = verdict({**out, "lockstep": True, "edge": edge}, cfg.verdict)
+    return out
 
 
 def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOptions | None = None) -> EngineResult:
@@ -141,7 +158,7 @@ def _lead_in_stretch_samples(cfg: SeaHilConfig, traj: Any, period_ns: int) -> in
     """Samples the lead-in from the start pose adds beyond `lead_in_s` (`lead_in_duration_s`: a start far from the
     trajectory stretches it)."""
     tc = cfg.trajectory
-    lead_s = lead_in_duration_s(tuple(cfg.plant.initial_theta_rad), traj.sample(0.0), tc.lead_in_s,
+    lead_s = lead_in_duration_s(cfg.plant.initial_theta_rad, traj.sample(0.0), tc.lead_in_s,
                                 tc.lead_in_max_velocity_rad_s)
     return int((lead_s - tc.lead_in_s) * 1e9) // period_ns + 1
 
@@ -156,7 +173,6 @@ class _Session:
         traj = make_trajectory(cfg.trajectory)
         self.period_ns = period = int(round(1e9 / cfg.can.feedback_rate_hz))
         self.outer_every = max(1, int(round(cfg.controller.sample_period_s * cfg.can.feedback_rate_hz)))
-        self.every_sample = cfg.trigger.placement == "edge" and cfg.trigger.edge_check == "sample"
         duration_ns = int(round(traj.period_s * cycles * 1e9))
         lead_in_ns = int(round(cfg.trajectory.lead_in_s * 1e9))
         # the controller stops at its first state after the cycles (lockstep runs until it does): lost states delay
@@ -173,6 +189,8 @@ class _Session:
                              stamp=lambda at_ns: -(-at_ns // period) * period,   # `LockstepEdgeSync.state_stamp`
                              restart_possible=lambda timed_out: False, epoch=0, wall_ns=lambda: self.now)
         self.controller = ControllerCore(cfg, mode, cycles=cycles)
+        # the edge core's trigger checks every 1 kHz sample (`trigger.edge_check = "sample"`; never TT: EdgeEvents)
+        self.every_sample = self.edge.events is not None and self.edge.events.every_sample
         self.newest = 0
         self.p = limb_params(cfg.plant)
         theta0 = tuple(cfg.plant.initial_theta_rad)

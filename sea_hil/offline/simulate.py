@@ -11,8 +11,15 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.offline.closed_loop import SimResult, simulate
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, TriggerReason
 from sea_hil.report.figures import inter_event_figure, tracking_figure
-from sea_hil.report.summary import (TIMING_KEY, compare_table, inter_event_block, tracking_block,
-                                    transmissions_block, write_summary)
+from sea_hil.report.summary import (
+    TIMING_KEY,
+    compare_table,
+    inter_event_block,
+    tracking_block,
+    transmissions_block,
+    write_summary,
+)
+from sea_hil.report.verdict import verdict
 
 
 def offline_transmissions(res: SimResult) -> dict[str, int]:
@@ -24,7 +31,7 @@ def offline_transmissions(res: SimResult) -> dict[str, int]:
 
 
 def summarize(res: SimResult, cpu_s: float) -> dict[str, Any]:
-    reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True))}
+    reasons = {int(k): int(v) for k, v in zip(*np.unique(res.event_reason, return_counts=True), strict=True)}
     return {
         "controller": res.mode,
         "duration_s": res.duration_s,
@@ -43,7 +50,9 @@ def run_simulation(cfg: SeaHilConfig, mode: str, out: Path, cycles: int | None, 
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.process_time()
     res = simulate(cfg, mode, cycles, quantise=quantise)
-    summary = {**summarize(res, time.process_time() - t0), "quantised": quantise}
+    summary = {**summarize(res, time.process_time() - t0), "quantised": quantise,
+               "inner_steps": int(round(res.duration_s * cfg.can.feedback_rate_hz))}
+    summary["verdict"] = verdict(summary, cfg.verdict)   # offline: saturated inner steps (no drive, no link)
     title = "ET-SMC" if mode == "et" else "TT-SMC"
     tracking_figure(out / f"tracking_{mode}.png", res.t_s, res.theta_rad, res.desired_rad, title)
     inter_event_figure(out / f"inter_event_{mode}.png", res.event_t_s, title)

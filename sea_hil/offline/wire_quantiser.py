@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import functools
 
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd, load_database
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd
 
 Measurement = tuple[float, float, float, float, float, float, float, float]
 Resolutions = tuple[float, float, float, float, float]
@@ -27,8 +28,9 @@ def dbc_resolutions(fd: bool = False) -> Resolutions:
     """(theta rad, omega rad/s, delta m, nut velocity m/s, voltage V) per LSB of the classic (`fd` False) or the CAN
     FD profile, from the DBC; joint 2 signals share joint 1's scale (checked by tests/test_quantisation.py)."""
     db = load_database()
-    res = tuple(float(db.get_message_by_name(msg).get_signal_by_name(sig).scale) for msg, sig in _SIGNALS[bool(fd)])
-    return res  # type: ignore[return-value]
+    theta, omega, delta, nut_vel, voltage = (float(db.get_message_by_name(msg).get_signal_by_name(sig).scale)
+                                             for msg, sig in _SIGNALS[bool(fd)])
+    return theta, omega, delta, nut_vel, voltage
 
 
 def quantised(value: float, lsb: float) -> float:
@@ -50,10 +52,17 @@ class WireQuantiser:
         fb = Feedback(_NODE, 0, 0, (meas[0], meas[1]), (meas[2], meas[3]), (meas[4], meas[5]), (meas[6], meas[7]))
         sent, _ = self.codec.saturate(fb)
         frames = [self.codec.decode(m) for m in self.codec.encode_feedback(sent)]
-        got = frames[0] if len(frames) == 1 else Feedback.from_parts(*frames)
+        if len(frames) == 1:
+            got = frames[0]
+        else:
+            a, j1, j2 = frames
+            assert isinstance(a, FeedbackAngle) and isinstance(j1, FeedbackJoint1) and isinstance(j2, FeedbackJoint2)
+            got = Feedback.from_parts(a, j1, j2)
+        assert isinstance(got, Feedback)
         return (*got.theta_rad, *got.omega_rad_s, *got.delta_m, *got.nut_vel_m_s)
 
     def voltage(self, voltage_v: tuple[float, float]) -> tuple[float, float]:
         sent, _ = self.codec.saturate(VoltageCmd(_NODE, (float(voltage_v[0]), float(voltage_v[1])), 0))
         got = self.codec.decode(self.codec.encode(sent))
+        assert isinstance(got, VoltageCmd)
         return got.voltage_v

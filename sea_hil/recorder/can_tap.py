@@ -5,7 +5,8 @@ process alike (through `CanTap`, which also keeps the CAN counters), so both wri
 Time (`sea_hil.recorder.clock`): with `time_base="wall"` a frame is logged at its bus timestamp, with "sample" at the
 drive's sample time (its node's latest FEEDBACK_ANGLE `t_us`, unwrapped). The MCAP `sequence` of a frame's messages
 is the frame's own 8-bit `seq` (0 for frames without one). Faults go to `/log/faults` (`foxglove.Log`) as well: a
-driver's state or error flags changing (HEARTBEAT), a frame the DBC refuses, frames missed.
+driver's state or error flags changing (HEARTBEAT), a frame the DBC refuses, frames missed; with the session's
+config (`configure`), once per latch of a drive's safe state the limit, the measured value and who clears it.
 
 Missed frames: feedback and voltage frames carry an 8-bit `seq` that steps by one per sample, and CAN keeps the
 order of one id's frames, so a forward step of n > 1 on one id means n - 1 frames of that id never reached the
@@ -15,18 +16,30 @@ that restarts its count (or skips a sample it did not answer) shows up as a gap 
 """
 from __future__ import annotations
 
+import logging
+import tomllib
 from typing import Any, NamedTuple
 
 import can
 
+from sea_hil.config.loader import config_from_dict
+from sea_hil.errors import MalformedFrame, SeaHilError
+from sea_hil.fault_explain import LatchWatch, Measured, latch_level
 from sea_hil.protocol.can_assembly import seq_gap
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import (CMD_BITS, DriverState, ErrorFlags, Feedback, FeedbackAngle,
-                                         FeedbackJoint1, FeedbackJoint2, Heartbeat, VoltageCmd)
-from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_frames import (
+    CMD_BITS,
+    DriverState,
+    ErrorFlags,
+    Feedback,
+    FeedbackAngle,
+    FeedbackJoint1,
+    FeedbackJoint2,
+    Heartbeat,
+    VoltageCmd,
+)
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, log_message
-
 
 _FD_FIELDS = (("theta", "theta_rad", "rad"), ("omega", "omega_rad_s", "rad_s"), ("delta", "delta_m", "m"),
               ("nut_vel", "nut_vel_m_s", "m_s"))
@@ -61,10 +74,11 @@ class RawFrame(NamedTuple):
 def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str, Any]]], bool, Any]:
     """((topic, payload) messages to record, rejected?, the decoded frame or the DBC's error) for one frame;
     rejected frames keep their `/can/raw`."""
-    out: list[tuple[str, dict[str, Any]]] = [
-        ("/can/raw", {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
-                      "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS,
-                      **({"is_fd": True} if f.is_fd else {})})]
+    raw = {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
+           "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS}
+    if f.is_fd:
+        raw["is_fd"] = True
+    out: list[tuple[str, dict[str, Any]]] = [("/can/raw", raw)]
     try:
         d = codec.decode_raw(f.can_id, f.data, f.dlc, is_extended=f.is_extended, is_error=f.is_error,
                              is_remote=f.is_remote, is_fd=f.is_fd)
@@ -113,6 +127,19 @@ class CanTap:
         self.gaps = SeqGapCounter()
         self.frames = self.rejected = 0
         self._driver: dict[int, tuple[DriverState, ErrorFlags]] = {}
+        self.latches: LatchWatch | None = None   # `configure`: the session's drive limits explain each latch
+
+    def configure(self, config_toml: str) -> None:
+        """The session's config (its attached config.toml): from now on a drive's latch gets one `/log/faults` line
+        naming the limit, the measured value and who clears it (sea_hil/fault_explain.py). A config that does not
+        load leaves the plain state-change lines."""
+
+        try:
+            cfg = config_from_dict(tomllib.loads(config_toml))
+        except (tomllib.TOMLDecodeError, SeaHilError):
+            return
+        self.latches = LatchWatch(cfg.safety.drive if cfg.safety.drive.enabled else None,
+                                  (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))
 
     def records(self, f: RawFrame) -> list[Record]:
         """The messages of one frame, counted and timed."""
@@ -133,6 +160,19 @@ class CanTap:
                 logs.append((LogLevel.WARNING, "recorder", f"CAN id 0x{f.can_id:03X}: {missed} frame(s) missed"))
         if isinstance(decoded, Heartbeat):
             logs.extend(self._driver_change(decoded))
+            line = self.latches.on_heartbeat(decoded) if self.latches is not None else None
+            if line is not None:   # ERROR when it needs the user, WARNING when the edge clears it
+                level = LogLevel.ERROR if latch_level(decoded) >= logging.ERROR else LogLevel.WARNING
+                logs.append((level, f"driver{decoded.node_id}", line))
+        elif self.latches is not None and isinstance(decoded, (FeedbackAngle, Feedback)):
+            self.latches.feedback(decoded.node_id, decoded.theta_rad,
+                                  *((decoded.omega_rad_s, decoded.delta_m) if isinstance(decoded, Feedback) else ()))
+        elif self.latches is not None and isinstance(decoded, (FeedbackJoint1, FeedbackJoint2)):
+            m = self.latches.measured.setdefault(decoded.node_id, Measured())
+            j = 0 if isinstance(decoded, FeedbackJoint1) else 1
+            w, d = list(m.omega_rad_s or (0.0, 0.0)), list(m.delta_m or (0.0, 0.0))
+            w[j], d[j] = decoded.omega_rad_s, decoded.delta_m
+            m.omega_rad_s, m.delta_m = (w[0], w[1]), (d[0], d[1])
         recs.extend(Record("/log/faults", t_ns, t_ns, log_message(t_ns, lv, who, text), seq) for lv, who, text in logs)
         return recs
 

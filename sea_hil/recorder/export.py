@@ -42,7 +42,7 @@ def can_messages(data: SessionData, channel: str | int | None = None) -> Iterato
 def export_can(data: SessionData, path: str | os.PathLike[str], fmt: str, channel: str | int | None = None) -> int:
     """Write every recorded frame to `path` as `fmt` (`candump` or `asc`); -> frames written."""
     if fmt == "candump":
-        writer: can.io.generic.MessageWriter = can.CanutilsLogWriter(path, channel=channel or "vcan0")
+        writer: can.io.generic.MessageWriter = can.CanutilsLogWriter(path, channel=str(channel or "vcan0"))
     elif fmt == "asc":
         writer = can.ASCWriter(path, channel=channel if isinstance(channel, int) else 1)
     else:

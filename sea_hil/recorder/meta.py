@@ -16,7 +16,8 @@ from collections.abc import Mapping
 from importlib import metadata as importlib_metadata
 from typing import Any, Protocol
 
-from sea_hil.config import SeaHilConfig, config_to_toml
+from sea_hil.config.loader import config_to_toml
+from sea_hil.config.root import SeaHilConfig
 
 META_SESSION, META_CONFIG, META_FINAL = "sea-hil.session", "sea-hil.config", "sea-hil.final"
 CONFIG_ATTACHMENT = "config.toml"

@@ -6,14 +6,13 @@ their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/
 writes (bounded queue: a recorder that falls behind drops and counts); with a `RecorderProcess` the node only
 forwards raw frames and the child process decodes and writes.
 
-On SocketCAN the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
-large receive buffer (`enlarge_rx_buffer`) and the frames that were missed anyway are counted from seq gaps
+On SocketCAN (and udp_multicast) the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
+large receive buffer (`sea_hil.protocol.canbus.enlarge_rx_buffer`; on udp_multicast too) and the frames that were missed anyway are counted from seq gaps
 (`can_frames_missed`, `sea_hil.recorder.can_tap.SeqGapCounter`).
 """
 from __future__ import annotations
 
 import logging
-import socket
 import threading
 import time
 from typing import Any
@@ -22,42 +21,21 @@ import can
 import zenoh
 
 from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.canbus import RX_BUFFER_BYTES, enlarge_rx_buffer
 from sea_hil.protocol.keys import everything
 from sea_hil.protocol.payloads import PayloadCounters
+from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
-from sea_hil.recorder.can_tap import CanTap, RawFrame
-from sea_hil.recorder.zenoh_tap import ZenohTap, zenoh_record
+from sea_hil.recorder.zenoh_tap import ZenohTap
 from sea_hil.runtime.node import Node
 from sea_hil.stats.schema import StatsError
 
-__all__ = ["RecorderNode", "enlarge_rx_buffer", "zenoh_record"]
+__all__ = ["RecorderNode"]
 
 log = logging.getLogger("sea_hil.record")
-SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it
 SHORT_PAUSE_S = 0.01         # a tap pause up to this long is a plain sleep (`RecorderNode._pause`)
-RX_BUFFER_BYTES = 8 << 20   # the kernel doubles it: ~21k queued frames at ~770 B each, ~5 s of one 1 kHz limb
-
-
-def enlarge_rx_buffer(bus: can.BusABC, size_bytes: int = RX_BUFFER_BYTES) -> int | None:
-    """Raise the receive buffer of a SocketCAN bus's socket (SO_RCVBUFFORCE as root, else SO_RCVBUF, which the
-    kernel caps at net.core.rmem_max); -> the size the kernel granted, None for buses without a socket."""
-    sock = getattr(bus, "socket", None)
-    if not isinstance(sock, socket.socket):
-        return None
-    try:
-        sock.setsockopt(socket.SOL_SOCKET, SO_RCVBUFFORCE, size_bytes)
-    except OSError:   # no CAP_NET_ADMIN: the capped request
-        try:
-            sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, size_bytes)
-        except OSError as err:
-            log.warning("cannot enlarge the CAN receive buffer: %s", err)
-    granted = sock.getsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF)
-    if granted < size_bytes:
-        log.warning("CAN receive buffer is %d bytes (asked for %d; raise net.core.rmem_max): frames may be "
-                    "dropped by the kernel, counted as can_frames_missed", granted, size_bytes)
-    return granted
 
 
 def _enlarge_all(bus: Any, size_bytes: int) -> int | None:
@@ -157,10 +135,7 @@ class RecorderNode(Node):
             stopping = self.stop_event.is_set()
             while (s := sub.try_recv()) is not None:
                 self._on_zenoh(s)
-            frames = 0
-            while (msg := bus.recv(timeout=0)) is not None:
-                self.on_can(msg)
-                frames += 1
+            frames = self._drain_bus(bus)
             if stopping:
                 return
             if not frames and isinstance(self.rec, RecorderProcess):
@@ -178,13 +153,11 @@ class RecorderNode(Node):
                 if isinstance(self.rec, RecorderProcess):
                     self.rec.flush(wait=False)   # idle bus: deliver what is batched, never block
                 continue
-            while msg is not None:
-                self.on_can(msg)
-                msg = self._bus.recv(timeout=0)
+            self.on_can(msg)
+            self._drain_bus(self._bus)
             if self.tap_batch_s > 0:
                 self._pause(self.tap_batch_s)
-        while (msg := self._bus.recv(timeout=0)) is not None:   # stopping: record what is still queued
-            self.on_can(msg)
+        self._drain_bus(self._bus)   # stopping: record what is still queued
 
     def _pause(self, s: float) -> None:
         """A tap's pause between batches. Up to `SHORT_PAUSE_S` a plain sleep: `Event.wait` with a timeout costs its
@@ -195,6 +168,24 @@ class RecorderNode(Node):
             time.sleep(s)
         else:
             self.stop_event.wait(s)
+
+    def _drain_bus(self, bus: can.BusABC) -> int:
+        """Record every frame queued on `bus` (a `RecorderProcess` gets them as one batch); -> how many."""
+        if not isinstance(self.rec, RecorderProcess):
+            n = 0
+            while (msg := bus.recv(timeout=0)) is not None:
+                self.on_can(msg)
+                n += 1
+            return n
+        frames, now_ns = [], time.time_ns
+        while (msg := bus.recv(timeout=0)) is not None:
+            t = msg.timestamp
+            frames.append((round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
+                           bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
+                           bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
+        self.can_forwarded += len(frames)
+        self.rec.submit_can_batch(frames)
+        return len(frames)
 
     def on_can(self, msg: can.Message) -> None:
         """Record one frame, logged at its bus timestamp (receive time when the bus gives none)."""

@@ -1,29 +1,28 @@
-"""Reading a session MCAP file back: every message per topic, schemas, metadata, attachments; truncation-tolerant."""
+"""Reading a session MCAP file back: every message per topic, schemas, metadata, attachments; truncation-tolerant.
+JSON messages and the protobuf CAN channels (`sea_hil.recorder.binary`) come back as the same flat dicts."""
 from __future__ import annotations
 
 import json
 import os
 import struct
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
-from typing import Any, BinaryIO, Callable, Iterator, NamedTuple
+from typing import Any, BinaryIO, NamedTuple
 
+import zstandard
 from mcap.exceptions import McapError
 from mcap.records import Attachment, Channel, Chunk, Footer, Message, Metadata, Schema
 from mcap.stream_reader import StreamReader, breakup_chunk
 from mcap.writer import MCAP0_MAGIC
 
 from sea_hil.errors import RecordingError
+from sea_hil.recorder import binary
+from sea_hil.recorder.schemas import schema_for
 
 
 def _codec_errors() -> tuple[type[BaseException], ...]:
     """What the chunk decompressors raise on a cut or corrupt chunk (zstd: ZstdError; lz4: RuntimeError)."""
-    errors: list[type[BaseException]] = [RuntimeError]
-    try:
-        import zstandard
-        errors.append(zstandard.ZstdError)
-    except ImportError:
-        pass
-    return tuple(errors)
+    return (RuntimeError, zstandard.ZstdError)   # zstandard: a dependency of mcap
 
 
 # what the MCAP parser raises past the last good record of a torn or truncated file: end of data, a record length or
@@ -64,7 +63,7 @@ class SessionData:
     """Everything read back from a session file. `complete` (footer and closing magic read) is False for a
     truncated (recovered) file; `tail_error` then says why reading stopped, `chunks` counts complete chunks."""
     messages: dict[str, list[RecordedMessage]] = field(default_factory=dict)
-    schemas: dict[str, dict[str, Any]] = field(default_factory=dict)
+    schemas: dict[str, dict[str, Any]] = field(default_factory=dict)  # JSON schema (of the decoded payloads)
     encodings: dict[str, tuple[str, str]] = field(default_factory=dict)  # topic -> (schema enc, message enc)
     metadata: dict[str, dict[str, str]] = field(default_factory=dict)
     attachments: dict[str, bytes] = field(default_factory=dict)
@@ -97,7 +96,9 @@ def read_session(path: str | os.PathLike[str],
             sch = schemas.get(rec.schema_id)
             out.encodings[rec.topic] = (sch.encoding if sch else "", rec.message_encoding)
             out.messages.setdefault(rec.topic, [])
-            if sch is not None and sch.encoding == "jsonschema":
+            if rec.message_encoding == binary.MESSAGE_ENCODING and rec.topic in binary.BINARY_TOPICS:
+                out.schemas[rec.topic] = schema_for(rec.topic)   # what the decoded dicts follow
+            elif sch is not None and sch.encoding == "jsonschema":
                 try:
                     out.schemas[rec.topic] = json.loads(sch.data)
                 except (ValueError, UnicodeDecodeError):    # a corrupt schema record (not CRC-protected outside
@@ -105,8 +106,11 @@ def read_session(path: str | os.PathLike[str],
         elif isinstance(rec, Message):
             ch = channels.get(rec.channel_id)
             try:
-                payload = json.loads(rec.data)
-            except (ValueError, UnicodeDecodeError):
+                if ch is not None and ch.message_encoding == binary.MESSAGE_ENCODING:
+                    payload = binary.decode(ch.topic, rec.data) if ch.topic in binary.BINARY_TOPICS else None
+                else:
+                    payload = json.loads(rec.data)
+            except (ValueError, UnicodeDecodeError, RecordingError):
                 payload = None
             if ch is None or not isinstance(payload, dict):
                 out.undecodable += 1

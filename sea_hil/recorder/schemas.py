@@ -2,7 +2,9 @@
 
 Every sea-hil channel message is one flat JSON object of scalars so Foxglove can plot each numeric field. Listed
 properties document the expected fields; further flat scalar fields are allowed (`additionalProperties` is a
-scalar). The Foxglove well-known channels (`/log/*`, `/joint_states`) keep Foxglove's own nested schemas
+scalar). The high-rate CAN channels (`/can/raw`, `/can/feedback`, `/can/command`) are recorded in protobuf
+(`sea_hil.recorder.binary`: the same fields, decoded back into the same flat dicts); their JSON schema here documents
+the decoded payload. The Foxglove well-known channels (`/log/*`, `/joint_states`) keep Foxglove's own nested schemas
 (`sea_hil.recorder.well_known`). `validate_payload` is the cheap check the recorder applies (required keys present,
 every value a scalar; the well-known channels: their structure); `/stats` follows the one stats schema of every
 node (`sea_hil.stats.schema`: `node`, `final`, `t_ns`, then numbers only).
@@ -15,6 +17,8 @@ from collections.abc import Mapping
 from typing import Any
 
 from sea_hil.errors import RecordingError
+from sea_hil.recorder import binary
+from sea_hil.recorder.meta import encode_payload
 from sea_hil.recorder.well_known import WELL_KNOWN, validate_well_known
 from sea_hil.stats.schema import ENVELOPE, STATS_JSON_SCHEMA, STATS_PROPERTIES, StatsError, validate_stats
 
@@ -78,11 +82,37 @@ def schema_for(topic: str) -> dict[str, Any]:
 
 
 def schema_name(topic: str) -> str:
+    if topic in binary.BINARY_TOPICS:
+        return binary.schema_name(topic)
     return WELL_KNOWN[topic][0] if topic in WELL_KNOWN else _CHANNELS[topic][0]
 
 
 def schema_bytes(topic: str) -> bytes:
+    """The data of `topic`'s MCAP schema record: its JSON schema, or a binary channel's FileDescriptorSet."""
+    if topic in binary.BINARY_TOPICS:
+        return binary.schema_data()
     return json.dumps(schema_for(topic), sort_keys=True).encode()
+
+
+def encodings(topic: str) -> tuple[str, str]:
+    """(MCAP schema encoding, message encoding) of `topic`."""
+    if topic in binary.BINARY_TOPICS:
+        return binary.SCHEMA_ENCODING, binary.MESSAGE_ENCODING
+    return "jsonschema", "json"
+
+
+def message_bytes(topic: str, payload: Mapping[str, Any]) -> bytes:
+    """One message of `topic`, checked and encoded: `validate_payload` + compact JSON, or for a binary channel the
+    required fields + protobuf (whose encoder refuses unknown fields and wrong types); `RecordingError` if bad."""
+    if topic in binary.BINARY_TOPICS:
+        if type(payload) is not dict and not isinstance(payload, Mapping):   # (the ABC check costs ~0.3 us)
+            raise RecordingError(f"{topic}: payload must be a mapping, got {type(payload).__name__}")
+        missing = [k for k in _CHANNELS[topic][3] if k not in payload]
+        if missing:
+            raise RecordingError(f"{topic}: missing required field(s) {missing}")
+        return binary.encode(topic, payload)
+    validate_payload(topic, payload)
+    return encode_payload(payload)
 
 
 def validate_payload(topic: str, payload: Mapping[str, Any]) -> None:

@@ -1,7 +1,11 @@
-"""MCAP session recording: a thread-safe JSON/jsonschema writer with a bounded queue and a signal-safe finaliser.
+"""MCAP session recording: a thread-safe writer with a bounded queue and a signal-safe finaliser. Messages are JSON
+(schema encoding jsonschema), the high-rate CAN channels protobuf (`sea_hil.recorder.binary`); `record_batch` writes
+many messages under one lock through `sea_hil.recorder.mcap_bulk.BulkWriter` (what the recorder process uses).
 
-Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader` (both
-re-exported here). See docs/recording.md for channels, metadata names, drop policy and recovery.
+Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader`. `RecordSink` is
+what a session needs of a recorder: this `SessionRecorder`, or `sea_hil.recorder.process.RecorderProcess` (the
+same calls, written by a child process). See docs/recording.md for channels, metadata names, drop policy and
+recovery.
 """
 from __future__ import annotations
 
@@ -13,21 +17,22 @@ import queue
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterator, Mapping
-from typing import Any
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from typing import IO, Any, Protocol, cast
 
-from mcap.writer import CompressionType, Writer
+from mcap.writer import CompressionType
 
-from sea_hil.config import RecordConfig, SeaHilConfig
+from sea_hil.config.comms import RecordConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
-from sea_hil.recorder.meta import (CONFIG_ATTACHMENT, META_CONFIG, META_FINAL, META_SESSION, encode_payload,
-                                     session_metadata, write_session_header)
-from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
-from sea_hil.recorder.schemas import TOPICS, schema_bytes, schema_name, validate_payload
+from sea_hil.recorder.mcap_bulk import BulkWriter
+from sea_hil.recorder.meta import (
+    META_FINAL,
+    write_session_header,
+)
+from sea_hil.recorder.schemas import TOPICS, encodings, message_bytes, schema_bytes, schema_name
 
-__all__ = ["CONFIG_ATTACHMENT", "META_CONFIG", "META_FINAL", "META_SESSION", "RecordedMessage", "SessionData",
-           "SessionRecorder", "encode_payload", "install_finalizer", "read_session", "session_metadata",
-           "write_session_header"]
+__all__ = ["SessionRecorder", "install_finalizer"]
 _COMPRESSION = {"zstd": CompressionType.ZSTD, "lz4": CompressionType.LZ4, "none": CompressionType.NONE}
 _STOP = object()
 
@@ -58,6 +63,26 @@ class _Sink:
 
 
 
+class RecordSink(Protocol):
+    """Where a session's messages go (`SessionRecorder`, `RecorderProcess`): validated at the call, written in
+    order; `submit` may drop (counted) when the writer falls behind, `record` does not."""
+
+    def record(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> None: ...
+
+    def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
+               sequence: int = 0) -> bool: ...
+
+    def add_metadata(self, name: str, data: Mapping[str, Any]) -> None: ...
+
+    def write_session_header(self, config: SeaHilConfig | None = None, *, seed: int | None = None,
+                             argv: list[str] | None = None, extra: Mapping[str, Any] | None = None) -> None: ...
+
+    def counters(self) -> dict[str, int]: ...
+
+    def close(self, final_stats: Mapping[str, Any] | None = None) -> None: ...
+
+
 class SessionRecorder:
     """Writes one MCAP session. `record` writes synchronously; `submit` enqueues (bounded, drops when full) for
     the writer thread. Both are thread-safe. `writer_gate` (tests only) holds the writer thread before each item."""
@@ -72,15 +97,17 @@ class SessionRecorder:
         except OSError as err:
             raise RecordingError(f"cannot create recording {path}: {err}") from err
         self.path = os.fspath(path)
-        self._writer = Writer(self._sink, chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
+        self._writer = BulkWriter(cast(IO[bytes], self._sink),   # a file to the writer (write, tell, flush, close)
+                                  chunk_size=chunk_size_bytes, compression=_COMPRESSION[compression])
         self._writer.start(profile="", library="sea-hil")
         self._channels: dict[str, int] = {}
-        schema_ids: dict[tuple[str, bytes], int] = {}   # one schema record per distinct schema
+        schema_ids: dict[tuple[str, str, bytes], int] = {}   # one schema record per distinct schema
         for topic in TOPICS:
-            key = (schema_name(topic), schema_bytes(topic))
+            schema_encoding, message_encoding = encodings(topic)
+            key = (schema_name(topic), schema_encoding, schema_bytes(topic))
             if key not in schema_ids:
-                schema_ids[key] = self._writer.register_schema(key[0], "jsonschema", key[1])
-            self._channels[topic] = self._writer.register_channel(topic, "json", schema_ids[key])
+                schema_ids[key] = self._writer.register_schema(key[0], schema_encoding, key[2])
+            self._channels[topic] = self._writer.register_channel(topic, message_encoding, schema_ids[key])
         self._lock = threading.Lock()
         self._count_lock = threading.Lock()
         self._queue: queue.Queue[Any] = queue.Queue(maxsize=queue_limit)
@@ -126,17 +153,55 @@ class SessionRecorder:
                sequence: int = 0) -> None:
         """Validate and write one message now (`RecordingError` on bad input or after close). `sequence` is the
         sender's sequence number (MCAP `sequence`, u32; 0 when the message has none)."""
-        validate_payload(topic, payload)
-        self._write(topic, log_time_ns, publish_time_ns, encode_payload(payload), sequence)
+        self._write(topic, log_time_ns, publish_time_ns, message_bytes(topic, payload), sequence)
+
+    def record_batch(self, records: Iterable[tuple[str, int, int, Mapping[str, Any], int]]) -> int:
+        """Check, encode and write many (topic, log time, publish time, payload, sequence) messages now, under one
+        lock and one bulk append; a bad one is not written but counted (`write_errors`, `last_error`), as the
+        writer thread counts its failures. -> messages written."""
+        items, topics = [], []
+        for topic, log_time_ns, publish_time_ns, payload, sequence in records:
+            try:
+                if not 0 <= sequence < 1 << 32:
+                    raise RecordingError(f"{topic}: sequence {sequence} is not a u32")
+                items.append((self._channels[topic], log_time_ns, message_bytes(topic, payload), publish_time_ns,
+                              sequence))
+                topics.append(topic)
+            except RecordingError as err:
+                self.write_errors += 1
+                self.last_error = str(err)
+        if not items:
+            return 0
+        with self._locked():
+            self._writing_thread = threading.get_ident()
+            try:
+                before, chunks_before = self._sink.bytes_written, self._writer.chunk_count
+                self._writer.add_messages(items)
+                self.written += len(items)
+                for topic in topics:
+                    self.per_topic[topic] += 1
+                now = time.monotonic_ns()
+                if self._flush_period_ns is not None and now - self._last_flush_ns >= self._flush_period_ns:
+                    self._writer.flush()
+                if self._sink.bytes_written != before:
+                    chunks_after = self._writer.chunk_count
+                    self.chunks_written += 1 if chunks_before is None or chunks_after is None \
+                        else chunks_after - chunks_before
+                    self._last_flush_ns = now
+            finally:
+                self._writing_thread = None
+        if self.deferred_signal is not None and threading.current_thread() is threading.main_thread():
+            raise SystemExit(128 + self.deferred_signal)
+        return len(items)
 
     def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
                sequence: int = 0) -> bool:
         """Validate, encode and enqueue; returns False (and counts `dropped`) when the queue is full."""
-        validate_payload(topic, payload)
+        data = message_bytes(topic, payload)
         if self._closing:
             raise RecordingError("recorder is closed")
         try:
-            self._queue.put_nowait((topic, log_time_ns, publish_time_ns, encode_payload(payload), sequence))
+            self._queue.put_nowait((topic, log_time_ns, publish_time_ns, data, sequence))
             return True
         except queue.Full:
             with self._count_lock:

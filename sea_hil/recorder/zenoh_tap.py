@@ -11,8 +11,15 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from sea_hil.protocol.payloads import (AckPayload, EventStatePayload, PayloadCounters, SetpointPayload, StatePayload,
-                                      VoltagePayload)
+from sea_hil.protocol.keys import KEY_PAYLOADS
+from sea_hil.protocol.payloads import (
+    AckPayload,
+    EventStatePayload,
+    PayloadCounters,
+    SetpointPayload,
+    StatePayload,
+    VoltagePayload,
+)
 from sea_hil.recorder.can_tap import Record
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
@@ -36,7 +43,7 @@ def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str,
         flat = {k: v for k, v in obj.items() if isinstance(v, (int, float, str, bool)) or v is None}
         flat["key"] = key
         return "/tracking", flat
-    p = payloads.try_decode(data)
+    p = payloads.try_decode(data, KEY_PAYLOADS.get(channel))   # a type its key does not carry: counted, not recorded
     if p is None:
         return None
     base: dict[str, Any] = {"key": key, "seq": p.seq, "sent_t_ns": p.t_ns, "payload_bytes": len(data)}

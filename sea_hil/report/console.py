@@ -1,6 +1,6 @@
 """What `sea-hil run` and `sea-hil simulate` print: live progress while a session runs and one short table at the
-end (mode, messages and bytes up/down/total and the ratios to TT, tracking error per joint, latency, warnings,
-files written).
+end (the verdict and its reasons first, then mode, messages and bytes up/down/total and the ratios to TT, tracking
+error per joint, latency, warnings, files written).
 
 Rendering only: the numbers come from summary.json as written (read through `field`, which also finds the
 timing-derived fields under a `timing` key). Progress is a rich progress bar when its stream is a terminal and one
@@ -16,6 +16,8 @@ from typing import Any, NamedTuple, TextIO
 from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
+
+from sea_hil.report.completeness import completeness_lines
 
 JOINTS = ("hip", "knee")
 _MISSING = object()
@@ -43,6 +45,7 @@ class ProgressSample(NamedTuple):
     setpoints: int
     states: int
     latency_p50_us: float
+    waiting: bool = False       # `--controller external`: no controller has joined yet (nothing has started)
 
     @property
     def total_s(self) -> float:
@@ -50,12 +53,16 @@ class ProgressSample(NamedTuple):
 
     @property
     def phase(self) -> str:
+        if self.waiting:
+            return "waiting for controller"
         if self.sim_s < self.lead_in_s:
             return "lead-in"
         cycle = min(int((self.sim_s - self.lead_in_s) // self.period_s) + 1, self.cycles)
         return f"cycle {cycle}/{self.cycles}"
 
     def __str__(self) -> str:
+        if self.waiting:
+            return f"[{self.wall_s:6.1f} s] waiting for controller  states {self.states}"
         return (f"[{self.wall_s:6.1f} s] sim {self.sim_s:6.2f}/{self.total_s:.2f} s  {self.phase}  setpoints "
                 f"{self.setpoints}  states {self.states}  latency p50 {self.latency_p50_us:.0f} us")
 
@@ -119,13 +126,45 @@ def _warnings(summary: Mapping[str, Any]) -> list[str]:
     out = []
     if not summary.get("lockstep", True):   # lockstep has no deadlines: simulated time waits for every node
         out.append(f"deadline misses: {edge.get('loop_overruns', 0)} edge loop overruns")
-    drops = {k: edge.get(k, 0) for k in ("uplink_dropped", "downlink_dropped", "seq_lost", "stale_setpoints",
-                                         "rejected_frames", "rejected_samples", "bus_errors")}
+    drops = {k: edge.get(k, 0) for k in ("uplink_dropped", "downlink_dropped", "seq_lost", "bus_errors")}
     out += [f"{k.replace('_', ' ')}: {v}" for k, v in drops.items() if v]
+    out += rejection_warnings(summary)
     saturated = summary.get("saturated_steps", edge.get("saturated_steps", 0))
     if saturated:
         out.append(f"voltage saturated: {saturated} steps")
     return out
+
+
+def rejection_label(cls: str) -> str:
+    """The table's words for a rejection class of summary.json's `rejections` (its /stats counter name)."""
+    if cls == "payload_rejected_key":
+        return "payloads on the wrong key"
+    if cls.startswith("payload_rejected_"):
+        return f"malformed payloads ({cls.removeprefix('payload_rejected_')})"
+    named = {"epoch_foreign": "foreign-epoch payloads", "epoch_old": "old-epoch payloads"}
+    return named.get(cls, cls.replace("_", " "))
+
+
+def rejection_warnings(summary: Mapping[str, Any]) -> list[str]:
+    """One "what: count" per rejection class with a count (summary.json `rejections` and `timing.rejections`;
+    older summaries without them: the edge counters they had)."""
+    timing = summary.get("timing") or {}
+    classes = {**(summary.get("rejections") or {}), **(timing.get("rejections") or {})}
+    if not classes:
+        edge = {**(timing.get("edge") or {}), **(summary.get("edge") or {})}
+        classes = {k: edge.get(k, 0) for k in ("stale_setpoints", "rejected_frames", "rejected_samples")}
+    return [f"{rejection_label(k)}: {v}" for k, v in classes.items() if v]
+def verdict_rows(summary: Mapping[str, Any]) -> list[tuple[str, str]]:
+    """The verdict (summary.json `verdict`, docs/verdict.md) and one row per reason; [] for a summary without one."""
+    v = summary.get("verdict")
+    if not isinstance(v, Mapping):
+        return []
+    reasons = v.get("reasons") or []
+    status = str(v.get("status", "?"))
+    rows = [("verdict", status if not reasons else f"{status.upper()} ({len(reasons)} reason"
+                                                     f"{'s' if len(reasons) > 1 else ''})")]
+    rows += [(f"  {r.get('severity', '')}: {r.get('code', '')}", str(r.get("message", ""))) for r in reasons]
+    return rows
 
 
 def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, command: str = "run",
@@ -138,7 +177,8 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
         mode = f"{'lockstep' if summary.get('lockstep') else 'real time'}, {ctrl}, inner loop on " \
                f"{summary.get('inner', 'edge')}"
     lead = field(summary, "lead_in", "duration_s", default=0.0)
-    rows = [("mode", mode), ("duration", f"{summary.get('duration_s', 0.0):.2f} s" +
+    verdict_lines = verdict_rows(summary)
+    rows = verdict_lines + [("mode", mode), ("duration", f"{summary.get('duration_s', 0.0):.2f} s" +
                                         (f" (+ {lead:.2f} s lead-in)" if lead else ""))]
     rows += _messages(summary, tt_msgs)
     tracking = summary.get("tracking", {})
@@ -160,7 +200,12 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
     for what, value in (("wall time", wall), ("CPU time", cpu)):
         if isinstance(value, (int, float)):
             rows.append((what, f"{value:.1f} s"))
-    rows.append(("warnings", "; ".join(_warnings(summary)) or "none"))
+    comp = summary.get("completeness")
+    if isinstance(comp, Mapping):   # a recording against the nodes' own counters (sea_hil.report.completeness)
+        rows.append(("recording complete", "yes" if comp.get("complete") else
+                     "no: " + "; ".join(completeness_lines(comp))))
+    rows.append(("warnings", "; ".join(_warnings(summary)) or ("none" if len(verdict_lines) <= 1 else
+                                                                   "the verdict's reasons above")))
     if files:
         rows.append(("files", "\n".join(str(f) for f in files)))
     return rows

@@ -28,9 +28,9 @@ def recorded_limbs(data: SessionData) -> list[tuple[str, int, str]]:
         return out
     states = data.messages.get("/zenoh/state", [])
     feedback = data.messages.get("/can/feedback", [])
-    name = str(states[0].payload.get("key", "?/limb1/state")).split("/")[-2] if states else "limb1"
-    node_id = int(feedback[0].payload.get("node_id", 1)) if feedback else 1
-    return [(name, node_id, data.metadata.get("sea-hil.session", {}).get("can", ""))]
+    limb = str(states[0].payload.get("key", "?/limb1/state")).split("/")[-2] if states else "limb1"
+    node = int(feedback[0].payload.get("node_id", 1)) if feedback else 1
+    return [(limb, node, data.metadata.get("sea-hil.session", {}).get("can", ""))]
 
 
 def _belongs(payload: dict[str, Any], name: str, node_id: int) -> bool:
@@ -61,9 +61,20 @@ def limbs_total(entries: list[dict[str, Any]]) -> dict[str, Any]:
             "tracking": worst}
 
 
-def driver_block(data: SessionData) -> dict[str, int] | None:
-    """Driver ticks and tick misses (real time: deadlines skipped) from the final metadata, None when not recorded."""
+META_FLOOR = "sea-hil.host_floor"   # real time: the host's empty-loop floor measured at start-up (sea_hil/session/run.py)
+
+
+def driver_block(data: SessionData) -> dict[str, Any] | None:
+    """Driver ticks and tick misses (real time: deadlines skipped) from the final metadata, None when not recorded;
+    with the host's floor measured at start-up (`floor`: ticks, misses, miss_pct, lateness p99, duration) when the
+    recording has it."""
     final = data.metadata.get("sea-hil.final", {})
     if "plant_ticks" not in final:
         return None
-    return {"ticks": int(final["plant_ticks"]), "tick_misses": int(final.get("plant_overruns", 0))}
+    out: dict[str, Any] = {"ticks": int(final["plant_ticks"]), "tick_misses": int(final.get("plant_overruns", 0))}
+    floor = data.metadata.get(META_FLOOR)
+    if floor:
+        out["floor"] = {"ticks": int(floor["ticks"]), "misses": int(floor["misses"]),
+                        "miss_pct": float(floor["miss_pct"]), "lateness_us_p99": float(floor["lateness_us_p99"]),
+                        "duration_s": float(floor["duration_s"])}
+    return out

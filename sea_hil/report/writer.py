@@ -8,12 +8,13 @@ from typing import Any
 
 import numpy as np
 
-from sea_hil.recorder.writer import SessionData, read_session
-from sea_hil.stats.can_bits import nominal_bits
+from sea_hil.recorder.reader import SessionData, read_session
+from sea_hil.report.completeness import completeness_lines
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
-from sea_hil.report.session_summary import session_summary, tracking_arrays
+from sea_hil.report.session_summary import session_summary, tracking_arrays, with_completeness
 from sea_hil.report.summary import write_summary
+from sea_hil.stats.can_bits import nominal_bits
 
 
 def _bins(msgs: list, value: Any, t0_ns: int, width_s: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
@@ -57,7 +58,7 @@ def _limb_figures(data: SessionData, out: Path) -> list[Path]:
                              f"{title}: closed-loop latency")
         files += names
     if len(limbs) > 1:   # the 1-limb names: the first limb's figures
-        for stem, src in zip(FIGURES, files):
+        for stem, src in zip(FIGURES, files, strict=False):   # the first limb's figures
             shutil.copyfile(src, out / f"{stem}.png")
             files.append(out / f"{stem}.png")
     return files
@@ -89,7 +90,8 @@ def write_report_figures(data: SessionData, out: Path) -> list[Path]:
     tb = np.zeros(0)
     for bus in dict.fromkeys(bus_of.values()):   # every bus (frames of unknown node ids: the first bus)
         first = bus == next(iter(bus_of.values()))
-        msgs = [m for m in raw if bus_of.get(m.payload.get("node_id"), bus if first else None) == bus]
+        msgs = [m for m in raw
+                if (bus_of[n] if (n := m.payload.get("node_id")) in bus_of else bus if first else None) == bus]
         t_i, bits = _bins(msgs, lambda p: nominal_bits(int(p["dlc"]), fd=bool(p.get("is_fd")), bitrate_bps=bitrate,
                                                        data_bitrate_bps=data_rate), t0)
         tb = t_i if len(t_i) > len(tb) else tb
@@ -121,35 +123,85 @@ def _limb_rows(summary: dict[str, Any]) -> list[str]:
     return rows
 
 
+NOT_RECORDED = "not recorded"
+
+
+def _if_recorded(comp: dict[str, Any], channel: str, msgs: int, size: int) -> str:
+    """`msgs / size`, or "not recorded" when the channel has none in the file and its node's counter is unknown
+    (a recorder that was never routed those keys): a zero that is not a measurement (issue 32)."""
+    c = (comp.get("channels") or {}).get(channel, {})
+    if c.get("status") == "unverified" and not c.get("recorded"):
+        return NOT_RECORDED
+    if c.get("status") == "incomplete":
+        return f"{msgs} / {size} (incomplete: {c['missing']} of {c['expected']} messages not recorded)"
+    return f"{msgs} / {size}"
+
+
+def _or_not_recorded(present: bool, text: str) -> str:
+    return text if present else NOT_RECORDED
+
+
+def _latency(lat: dict[str, Any]) -> str:
+    """p50 / p99 / max, or "not recorded": the edge's final statistics (which carry the histogram) are not in the
+    file, or it measured no answer (-1 in summary.json, whose schema keeps numbers)."""
+    if any(lat.get(k, -1) < 0 for k in ("p50", "p99", "max")):
+        return NOT_RECORDED
+    return f"{lat['p50']:.0f} / {lat['p99']:.0f} / {lat['max']:.0f}"
+
+
+def _completeness_rows(comp: dict[str, Any]) -> list[str]:
+    """The recording against the nodes' own counters (`sea_hil.report.completeness`)."""
+    if not comp:
+        return []
+    lines = completeness_lines(comp)
+    return [f"| recording complete | {'yes' if comp.get('complete') else 'no: ' + '; '.join(lines)} |"]
+def _verdict_lines(summary: dict[str, Any]) -> list[str]:
+    """The verdict first (docs/verdict.md): its status and every reason."""
+    v = summary.get("verdict") or {}
+    out = [f"verdict: **{v.get('status', '?')}**", ""]
+    out += [f"- {r['severity']}: {r['code']}: {r['message']}" for r in v.get("reasons", [])]
+    return out + ([""] if v.get("reasons") else [])
+
+
 def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     tx = summary["transmissions"]
     lat = summary["timing"]["latency_us"]
-    lines = ["# sea-hil session report", "",
+    comp = summary.get("completeness") or {}
+    tracked = bool(data.messages.get("/tracking"))   # the controller's records of the tracking (none: no figure)
+    lines = ["# sea-hil session report", "", *_verdict_lines(summary),
              f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
              f"file complete: {data.complete}, messages: {data.message_count}", "",
              "| figure | value |", "|---|---|",
-             f"| downlink messages / bytes | {tx['downlink_msgs']} / {tx['downlink_bytes']} |",
-             f"| uplink messages / bytes | {tx['uplink_msgs']} / {tx['uplink_bytes']} |",
+             f"| downlink messages / bytes | {_if_recorded(comp, 'downlink', tx['downlink_msgs'], tx['downlink_bytes'])} |",
+             f"| uplink messages / bytes | {_if_recorded(comp, 'state', tx['uplink_msgs'], tx['uplink_bytes'])} |",
              f"| total link messages / bytes (up + down) | {tx['total_msgs']} / {tx['total_bytes']} |",
-             f"| max abs tracking error hip / knee [rad] | {summary['tracking']['max_abs_error_rad'][0]:.5f} / "
-             f"{summary['tracking']['max_abs_error_rad'][1]:.5f} |",
-             f"| rms tracking error hip / knee [rad] | {summary['tracking']['rms_error_rad'][0]:.5f} / "
-             f"{summary['tracking']['rms_error_rad'][1]:.5f} |",
-             f"| inter-event min / median / max [s] | {summary['inter_event_s']['min']:.3f} / "
-             f"{summary['inter_event_s']['median']:.3f} / {summary['inter_event_s']['max']:.3f} |",
-             f"| max abs voltage [V] | {summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f} |",
-             f"| closed-loop latency p50 / p99 / max [us] | {lat['p50']:.0f} / {lat['p99']:.0f} / {lat['max']:.0f} |",
+             "| max abs tracking error hip / knee [rad] | " + _or_not_recorded(
+                 tracked, f"{summary['tracking']['max_abs_error_rad'][0]:.5f} / "
+                          f"{summary['tracking']['max_abs_error_rad'][1]:.5f}") + " |",
+             "| rms tracking error hip / knee [rad] | " + _or_not_recorded(
+                 tracked, f"{summary['tracking']['rms_error_rad'][0]:.5f} / "
+                          f"{summary['tracking']['rms_error_rad'][1]:.5f}") + " |",
+             "| inter-event min / median / max [s] | " + _or_not_recorded(
+                 tracked, f"{summary['inter_event_s']['min']:.3f} / {summary['inter_event_s']['median']:.3f} / "
+                          f"{summary['inter_event_s']['max']:.3f}") + " |",
+             "| max abs voltage [V] | " + _or_not_recorded(
+                 bool(data.messages.get("/can/command")),
+                 f"{summary['max_abs_voltage_v'][0]:.2f} / {summary['max_abs_voltage_v'][1]:.2f}") + " |",
+             f"| closed-loop latency p50 / p99 / max [us] | {_latency(lat)} |",
              *_lead_in_rows(summary),
              *_limb_rows(summary),
+             *_completeness_rows(comp),
              "", "Figures: tracking.png (paper Fig. 2/3), inter_event.png (Fig. 4), latency.png, bandwidth.png, "
              "bus_load.png", ""]
     return "\n".join(lines)
 
 
-def run_report(path: Path, out: Path) -> dict[str, Any]:
+def run_report(path: Path, out: Path, node_counters: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
+    """Figures, summary.json and report.md of a recording; `node_counters` (node kind -> its counters, from the
+    nodes' `--json` summaries) complete the completeness check where the file lacks a node's final record."""
     data = read_session(path)
     session = data.metadata.get("sea-hil.session", {})
-    summary = session_summary(data, session.get("controller", "et"))
+    summary = with_completeness(session_summary(data, session.get("controller", "et")), data, node_counters)
     write_report_figures(data, out)
     write_summary(out / "summary.json", summary)
     (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")

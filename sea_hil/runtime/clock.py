@@ -7,39 +7,110 @@
 - `LockstepClock` (`sea_hil.runtime.lockstep`, the one module with all lockstep logic: ACKs, waits, re-sends):
   simulated time advances only when every node has handled the step; deterministic, as fast as possible.
 
-`clock_for(lockstep)` is the one place the choice is made from an option.
+`clock_for(lockstep)` (`sea_hil.runtime.lockstep`, beside the clock it may pick) is the one place the choice is made
+from an option.
 """
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Protocol
 
 import zenoh
 
 from sea_hil.config.timing import TimingConfig
+from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.payloads import AckPayload
+from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zlatest import LatestSubscriber
-from sea_hil.runtime.realtime import SlackCollector, ThreadPolicy
+from sea_hil.runtime.realtime import ThreadPolicy
 
 
-class Clock:
-    """Factory of the per-node parts of one pacing scheme."""
+class Pacer(Protocol):
+    """The driver's schedule (`Clock.plant`): real-time deadlines, or one lockstep step per tick."""
 
-    name = "clock"
+    done: bool
 
-    def plant(self, node: Any) -> Any:
-        raise NotImplementedError
+    def start(self, duration_s: float | None) -> None: ...
 
-    def edge(self, node: Any) -> Any:
-        raise NotImplementedError
+    def tick(self) -> None: ...
 
-    def controller(self, node: Any) -> Any:
-        raise NotImplementedError
+    def on_command(self, frame: object, drv: Any) -> None:
+        """A command the driver accepted (lockstep: the step's answer from that drive)."""
+
+
+class EdgeSync(Protocol):
+    """How the edge meets its peers (`Clock.edge`): when a setpoint applies, what a state is stamped with, whether
+    the edge waits for the controller."""
+
+    congestion_control: zenoh.CongestionControl
+
+    def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]: ...
+
+    def control_callback(self) -> Callable[[zenoh.Sample], None]: ...
+
+    def on_ack(self, data: bytes) -> bool: ...
+
+    def repeat_feedback(self, fb: Any) -> bool: ...
+
+    def state_sent(self, at_ns: int, seq: int, data: bytes) -> None: ...
+
+    def state_stamp(self, at_ns: int) -> int: ...
+
+    def sync(self, now_ns: int) -> None: ...
+
+    def drain(self) -> bool: ...
+
+    def gate(self, fresh: bool) -> tuple[bool, bool]: ...
+
+    def late(self, rx_ns: int) -> bool: ...
+
+    def restart_possible(self, timed_out: bool) -> bool: ...
+
+
+class StateSource(Protocol):
+    """The controller's incoming states: the newest only (real time) or every one in order (lockstep)."""
+
+    def recv(self, timeout_s: float) -> bytes | None: ...
+
+    def close(self) -> None: ...
+
+
+class ControllerSync(Protocol):
+    """How the remote controller meets the edge (`Clock.controller`): its state source, re-answers, ACKs."""
+
+    congestion_control: zenoh.CongestionControl
+
+    def state_source(self, session: zenoh.Session, key: str) -> StateSource: ...
+
+    def repeat_state(self, verdict: SeqVerdict, seq: int) -> bool: ...
+
+    def answer_extra(self, state_seq: int, setpoint_seq: int, sent: bool) -> list[tuple[Any, bytes]]: ...
+
+    def answered(self, seq: int, answer: list[tuple[Any, bytes]]) -> None: ...
+
+    def arrival_ns(self, p: Any) -> int: ...
+
+    def restart_possible(self, silent: bool) -> bool: ...
+
+    def close(self) -> None: ...
+
+
+class Clock(Protocol):
+    """Factory of the per-node parts of one pacing scheme (`RealTimeClock`, `sea_hil.runtime.lockstep.LockstepClock`).
+    """
+
+    name: str
+
+    def plant(self, node: Any) -> Pacer: ...
+
+    def edge(self, node: Any) -> EdgeSync: ...
+
+    def controller(self, node: Any) -> ControllerSync: ...
 
 
 class RealTimeClock(Clock):
-    name = "realtime"
+    name: str = "realtime"
 
     def plant(self, node: Any) -> RealTimePacer:
         return RealTimePacer(node)
@@ -49,11 +120,6 @@ class RealTimeClock(Clock):
 
     def controller(self, node: Any) -> RealTimeControllerSync:
         return RealTimeControllerSync(node)
-
-
-def clock_for(lockstep: bool) -> Clock:
-    from sea_hil.runtime.lockstep import LockstepClock
-    return LockstepClock() if lockstep else RealTimeClock()
 
 
 class RealTimePacer:
@@ -66,8 +132,6 @@ class RealTimePacer:
         self.done = False
         timing = getattr(getattr(node, "cfg", None), "timing", None) or TimingConfig()
         self.timing = timing
-        self.spin_ns = timing.spin_us * 1000
-        self.gc = SlackCollector.from_config(timing)
         self.policy = ThreadPolicy(timing, "driver")
         self.applied: dict[str, object] = {}
 
@@ -77,9 +141,6 @@ class RealTimePacer:
         self.applied = self.policy.apply()
         n.on_loop_exit(self.policy.undo)
         n.prepare_kernels()
-        if self.gc is not None:
-            self.gc.start()
-            n.on_loop_exit(self.gc.stop)
         self.start_ns = time.monotonic_ns()
         self.end_ns = None if duration_s is None else self.start_ns + int(duration_s * 1e9)
         for drv in n.drivers.values():
@@ -91,12 +152,7 @@ class RealTimePacer:
         n = self.node
         self.k += 1
         deadline = self.start_ns + self.k * n.period_ns
-        if self.spin_ns:   # sleep until the tail, then poll the bus (a GIL-releasing wait of ~1 us) to the deadline
-            n.drain_until(deadline - self.spin_ns)
-            while (now := time.monotonic_ns()) < deadline:
-                n.drain_until(now + 1000)
-        else:
-            n.drain_until(deadline)
+        n.drain_until(deadline)
         now = time.monotonic_ns()
         late = now - deadline
         n.lateness.record(max(late, 0) * 1e-9 + 1e-7)
@@ -114,8 +170,6 @@ class RealTimePacer:
             n.heartbeats()
             self.policy.refresh()   # [timing] realtime_scope = "process": threads started since
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
-        if self.gc is not None:   # a due collection, if the next deadline leaves it room
-            self.gc.tick(self.start_ns + (self.k + 1) * n.period_ns - time.monotonic_ns())
         if self.end_ns is not None and now >= self.end_ns:
             self.done = True
 
@@ -130,9 +184,10 @@ class RealTimeEdgeSync:
     def __init__(self, edge: Any) -> None:
         self.edge = edge
 
-    def downlink_callback(self) -> Callable[[zenoh.Sample], None]:
+    def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]:
+        """The subscriber callback of the edge's downlink key `channel` ("setpoint" | "voltage")."""
         on_arrival = self.edge.on_arrival
-        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns())
+        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns(), channel)
 
     def control_callback(self) -> Callable[[zenoh.Sample], None]:
         def on_control(s: zenoh.Sample) -> None:
@@ -176,15 +231,10 @@ class RealTimeEdgeSync:
 
 
 def control_payload(core: Any, data: bytes) -> AckPayload | None:
-    """Decode a control-key payload with the edge core's counters; a non-ACK is counted (`unexpected_payloads`) and
-    dropped."""
-    p = core.payloads.try_decode(data)
-    if p is None:
-        return None
-    if not isinstance(p, AckPayload):
-        core.counters.unexpected_payloads += 1
-        return None
-    return p
+    """Decode a control-key payload with the edge core's counters; a non-ACK is counted (`payload_rejected_key`)
+    and dropped."""
+    p = core.payloads.try_decode(data, KEY_PAYLOADS["control"])   # another type: rejected as KEY, counted
+    return p if isinstance(p, AckPayload) else None
 
 
 class RealTimeControllerSync:

@@ -25,14 +25,15 @@ import zenoh
 
 from sea_hil.protocol.can_frames import VoltageCmd
 from sea_hil.protocol.link import DelayQueue
-from sea_hil.protocol.payloads import AckPayload, SeqVerdict, encode
+from sea_hil.protocol.payloads import AckPayload, encode
+from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zsession import publisher
 from sea_hil.queues import timed_get
-from sea_hil.runtime.clock import Clock, control_payload
+from sea_hil.runtime.clock import Clock, RealTimeClock, control_payload
 
 
 class LockstepClock(Clock):
-    name = "lockstep"
+    name: str = "lockstep"
 
     def __init__(self, plant_resend_s: float = 0.05, edge_resend_s: float = 0.1) -> None:
         self.plant_resend_s, self.edge_resend_s = plant_resend_s, edge_resend_s
@@ -45,6 +46,11 @@ class LockstepClock(Clock):
 
     def controller(self, node: Any) -> LockstepControllerSync:
         return LockstepControllerSync(node)
+
+
+def clock_for(lockstep: bool) -> Clock:
+    """The clock of a session: lockstep (simulated time) or real time."""
+    return LockstepClock() if lockstep else RealTimeClock()
 
 
 class LockstepPacer:
@@ -103,22 +109,23 @@ class LockstepEdgeSync:
     def __init__(self, edge: Any, resend_s: float) -> None:
         self.edge = edge
         self.resend_ns = int(resend_s * 1e9)
-        self.inbox: queue.SimpleQueue[tuple[bool, bytes, int]] = queue.SimpleQueue()   # (is_ack, payload, rx_ns)
+        self.inbox: queue.SimpleQueue[tuple[str, bytes, int]] = queue.SimpleQueue()   # (key channel, payload, rx_ns)
         self.in_flight: DelayQueue[tuple[int, bytes]] = DelayQueue()   # states held by the uplink emulator
         self.newest_released = 0
         self.awaiting: dict[int, bytes] = {}
         self.acks: dict[int, AckPayload] = {}
 
     # ---- arrival: everything into the inbox -------------------------------------------------------------------
-    def _to_inbox(self, is_ack: bool) -> Callable[[zenoh.Sample], None]:
+    def _to_inbox(self, channel: str) -> Callable[[zenoh.Sample], None]:
         put = self.inbox.put
-        return lambda s: put((is_ack, s.payload.to_bytes(), time.monotonic_ns()))
+        return lambda s: put((channel, s.payload.to_bytes(), time.monotonic_ns()))
 
-    def downlink_callback(self) -> Callable[[zenoh.Sample], None]:
-        return self._to_inbox(False)
+    def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]:
+        """The subscriber callback of the edge's downlink key `channel` ("setpoint" | "voltage")."""
+        return self._to_inbox(channel)
 
     def control_callback(self) -> Callable[[zenoh.Sample], None]:
-        return self._to_inbox(True)
+        return self._to_inbox("control")
 
     def on_ack(self, data: bytes) -> bool:
         """Handle one payload from the control key (ACKs); anything else is counted and dropped."""
@@ -129,9 +136,9 @@ class LockstepEdgeSync:
         self.acks.pop(p.state_seq - 1000, None)
         return True
 
-    def _dispatch(self, item: tuple[bool, bytes, int]) -> bool:
-        is_ack, data, rx_ns = item
-        return self.on_ack(data) if is_ack else self.edge.on_downlink(data, rx_ns)
+    def _dispatch(self, item: tuple[str, bytes, int]) -> bool:
+        channel, data, rx_ns = item
+        return self.on_ack(data) if channel == "control" else self.edge.on_downlink(data, rx_ns, channel)
 
     def drain(self) -> bool:
         got = False

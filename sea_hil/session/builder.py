@@ -17,13 +17,22 @@ from typing import Any, TypeVar
 
 import can
 import zenoh
+from zenoh import Session as ZenohSession  # `zenoh` in the class body is the method
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.cia402_edge import Cia402EdgeNode
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.controller.remote import RemoteController
+from sea_hil.plant_emulator.cia402_node import Cia402PlantNode
+from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.bus_timing import warn_if_overloaded
-from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.canbus import CanHandle, open_bus
 from sea_hil.protocol.timed_bus import TimedBus, make_timeline
 from sea_hil.protocol.zsession import open_session
-from sea_hil.runtime.clock import clock_for
+from sea_hil.recorder.node import RecorderNode
+from sea_hil.recorder.process import RecorderProcess
+from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.runtime.lockstep import clock_for
 from sea_hil.runtime.node import Node
 
 N = TypeVar("N", bound=Node)
@@ -83,23 +92,28 @@ class SessionBuilder:
         return node
 
     # ---- nodes ----------------------------------------------------------------------------------------------------
-    def plant(self, bus: can.BusABC, node_ids: tuple[int, ...], cfg: SeaHilConfig | None = None) -> Any:
-        from sea_hil.plant_emulator.node import PlantNode
-        return self.add(PlantNode(cfg or self.cfg, bus, node_ids, clock=self.clock))
+    def plant(self, bus: CanHandle, node_ids: tuple[int, ...], cfg: SeaHilConfig | None = None) -> Any:
+        cfg = cfg or self.cfg
+        if cfg.can.profile == "cia402":   # the CANopen nodes of [can.cia402] node_ids (docs/cia402.md)
+            return self.add(Cia402PlantNode(cfg, bus, cfg.can.cia402.node_ids, lockstep=self.lockstep))
+        return self.add(PlantNode(cfg, bus, node_ids, clock=self.clock))
 
-    def edge(self, bus: can.BusABC, session: zenoh.Session, node_id: int, *, inner: str = "edge",
+    def edge(self, bus: CanHandle, session: ZenohSession, node_id: int, *, inner: str = "edge",
              cfg: SeaHilConfig | None = None, mode: str = "et") -> Any:
         """`mode` (et | tt) is the trigger the edge runs when `trigger.placement = "edge"`."""
-        from sea_hil.controller.edge import EdgeNode
-        return self.add(EdgeNode(cfg or self.cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
+        cfg = cfg or self.cfg
+        if cfg.can.profile == "cia402":   # the edge as the CANopen master of the limb's two nodes
+            ids = cfg.can.cia402.node_ids
+            return self.add(Cia402EdgeNode(cfg, bus, session, (ids[0], ids[1]), inner=inner, clock=self.clock,
+                                           mode=mode))
+        return self.add(EdgeNode(cfg, bus, session, node_id, inner=inner, clock=self.clock, mode=mode))
 
-    def controller(self, session: zenoh.Session, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
-        from sea_hil.controller.remote import RemoteController
+    def controller(self, session: ZenohSession, mode: str, *, inner: str = "edge", cycles: int = 1) -> Any:
         return self.add(RemoteController(self.cfg, session, mode, inner=inner, clock=self.clock, cycles=cycles))
 
-    def recorder(self, rec: Any, session: zenoh.Session | None, bus: can.BusABC | None = None,
+    def recorder(self, rec: SessionRecorder | RecorderProcess, session: ZenohSession | None,
+                 bus: can.BusABC | None = None,
                  **kw: Any) -> Any:
-        from sea_hil.recorder.node import RecorderNode
         if isinstance(bus, TimedBus):
             bus.listen_only = True   # the bus-timing model does not wait for a recorder (it never answers)
         return self.add(RecorderNode(rec, session, self.cfg.zenoh.prefix, bus, **kw))

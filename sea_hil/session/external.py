@@ -24,9 +24,9 @@ from pathlib import Path
 
 import zenoh
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import SeaHilError
-from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.keys import KEY_PAYLOADS, Keys
 from sea_hil.protocol.payloads import AckPayload, PayloadCounters, SetpointPayload, StatePayload, VoltagePayload
 
 log = logging.getLogger("sea_hil.session")
@@ -87,6 +87,7 @@ class OutsideController:
     def __init__(self, cfg: SeaHilConfig, cycles: int, session: zenoh.Session, *, endpoint: str, config_path: Path,
                  lockstep: bool, join_timeout_s: float, log: Callable[[str], None] = print) -> None:
         self.returncode: int | None = None
+        self.endpoint = endpoint          # where the outside controller connects (`sea_hil.Session.endpoint`)
         self.join_timeout_s = join_timeout_s
         self.watch = ExternalWatch(cfg.trajectory.lead_in_s, cfg.trajectory.period_s * cycles)
         self.payloads = PayloadCounters()
@@ -95,8 +96,8 @@ class OutsideController:
         self._wake = threading.Event()
         self._t0 = time.monotonic()
         keys = Keys.from_config(cfg.zenoh)
-        self._subs = [session.declare_subscriber(k, self._on_payload)
-                      for k in (keys.state, keys.setpoint, keys.voltage, keys.control)]
+        self._subs = [session.declare_subscriber(getattr(keys, ch), self._on_payload(ch))
+                      for ch in ("state", "setpoint", "voltage", "control")]
         self._subs.append(session.declare_subscriber(keys.event, self._on_record))
         mode = " --lockstep" if lockstep else ""
         log(f"external controller: connect to Zenoh endpoint {endpoint}; session config {config_path}; keys "
@@ -104,14 +105,19 @@ class OutsideController:
             f"  python examples/external_controller/controller.py --connect {endpoint} --config {config_path} "
             f"--cycles {cycles}{mode}")
 
-    def _on_payload(self, sample: zenoh.Sample) -> None:
-        p = self.payloads.try_decode(sample.payload.to_bytes())
-        with self._lock:
-            if isinstance(p, StatePayload):
-                self.watch.on_state(p.seq, p.sample_t_ns)
-            elif isinstance(p, (SetpointPayload, VoltagePayload, AckPayload)):
-                self.watch.on_answer(p.state_seq)
-        self._wake.set()
+    def _on_payload(self, channel: str) -> Callable[[zenoh.Sample], None]:
+        """The callback of key `channel`: a payload of another type than the key carries is not an answer."""
+        accepts = KEY_PAYLOADS[channel]
+
+        def on_payload(sample: zenoh.Sample) -> None:
+            p = self.payloads.try_decode(sample.payload.to_bytes(), accepts)
+            with self._lock:
+                if isinstance(p, StatePayload):
+                    self.watch.on_state(p.seq, p.sample_t_ns)
+                elif isinstance(p, (SetpointPayload, VoltagePayload, AckPayload)):
+                    self.watch.on_answer(p.state_seq)
+            self._wake.set()
+        return on_payload
 
     def _on_record(self, sample: zenoh.Sample) -> None:
         try:
@@ -147,7 +153,9 @@ class OutsideController:
                 raise subprocess.TimeoutExpired("external controller", timeout or 0.0)
             self._wake.wait(0.1 if deadline is None else max(0.0, min(0.1, deadline - now)))
             self._wake.clear()
-        return self.returncode
+        code = self.returncode
+        assert code is not None
+        return code
 
     def _end(self, code: int) -> None:
         if self.returncode is None:

@@ -10,7 +10,11 @@ import time
 from dataclasses import dataclass, field
 from typing import Any
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.edge_mux import EdgeMux
+from sea_hil.errors import ConfigError
+from sea_hil.protocol.merged_bus import MergedBus, can_merge
+from sea_hil.recorder.writer import RecordSink
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.limbs import Limb, buses_of, limb_config
 
@@ -46,15 +50,17 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
                      mode: str = "et") -> LimbNodes:
     """Open every bus's handles and build its plant and edge (owned by `b`); nothing is started. Real time with
     several buses (and `[timing] merge_buses`): one driver, one edge and one tap for all buses (`_merged`)."""
-    from sea_hil.controller.edge_mux import EdgeMux
     nodes = LimbNodes(limbs)
     groups = buses_of(limbs)
+    if b.cfg.can.profile == "cia402" and len(limbs) != 1:
+        raise ConfigError("the cia402 profile in sea-hil run serves one limb so far ([can.cia402] node_ids: one "
+                          "(hip, knee) pair)")
     handles = {spec: (b.bus(spec), b.bus(spec), b.bus(spec)) for spec in groups}   # plant, edge, recorder tap
     if _merged(b, nodes, handles, session, inner, mode):
         return nodes
     for spec, group in groups.items():
         plant_bus, edge_bus, tap = handles[spec]
-        nodes.taps.append(tap)
+        nodes.taps.append(None if b.cfg.can.profile == "cia402" else tap)   # CANopen frames: not the DBC's
         nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
         edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
                  for limb in group]
@@ -70,8 +76,6 @@ def _merged(b: SessionBuilder, nodes: LimbNodes, handles: dict[str, tuple[Any, A
     session no longer grow with the buses (docs/timing.md "Where the CPU goes"). Only in real time, with several
     buses, distinct node ids and buses that can be merged; False (nothing built) otherwise. Lockstep keeps one node
     per bus, so no lockstep result can change."""
-    from sea_hil.controller.edge_mux import EdgeMux
-    from sea_hil.protocol.merged_bus import MergedBus, can_merge
     limbs = nodes.limbs
     ids = [limb.node_id for limb in limbs]
     if (b.lockstep or len(handles) < 2 or not b.cfg.timing.merge_buses or len(set(ids)) != len(ids)
@@ -98,10 +102,10 @@ def stop_and_join(nodes: LimbNodes) -> None:
         node.join()
 
 
-def record_edge_finals(rec: Any, nodes: LimbNodes, lockstep: bool) -> None:
+def record_edge_finals(rec: RecordSink, nodes: LimbNodes, lockstep: bool) -> None:
     """Each limb's final edge stats on `/stats` (they carry its `node_id`; in lockstep at its sample time) and as metadata
     (`sea-hil.edge` for the first limb, the 1-limb name; `sea-hil.edge.<limb>` for the others)."""
-    for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges)):
+    for i, (limb, edge) in enumerate(zip(nodes.limbs, nodes.edges, strict=True)):
         now_ns = edge.core.sample_t_ns if lockstep else time.time_ns()
         rec.record("/stats", now_ns, now_ns, edge.stats_record(final=True))   # carries the limb's `node_id`
         rec.add_metadata("sea-hil.edge" if i == 0 else f"sea-hil.edge.{limb.name}",
@@ -118,7 +122,9 @@ class ControllerGroup:
         deadline = None if timeout is None else time.monotonic() + timeout
         for p in self.procs:
             p.wait(timeout=None if deadline is None else max(deadline - time.monotonic(), 0.0))
-        return self.returncode
+        code = self.returncode
+        assert code is not None   # every child has ended
+        return code
 
     @property
     def returncode(self) -> int | None:

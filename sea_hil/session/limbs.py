@@ -17,10 +17,11 @@ import math
 import re
 from dataclasses import dataclass
 
-from sea_hil.config import SeaHilConfig
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.config.wire_names import parse_can_spec
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.bus_timing import planned_load_pct
 from sea_hil.protocol.can_frames import NODE_ID_MAX
-from sea_hil.protocol.canbus import parse_can_spec
 
 MAX_BUS_LOAD = 0.8   # planned worst-case load of a bus at most (a session warns above 80 %, issue 17)
 
@@ -35,7 +36,6 @@ class Limb:
 def limb_load_pct(cfg: SeaHilConfig) -> float:
     """Planned worst-case load (%) of one limb on its bus, for the configured profile (classic or FD):
     `sea_hil.protocol.bus_timing.planned_load_pct` (its feedback and voltage frames per sample, its heartbeats)."""
-    from sea_hil.protocol.bus_timing import planned_load_pct
     return planned_load_pct(cfg.can, (1,))
 
 

@@ -14,26 +14,31 @@ import json
 import subprocess
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from sea_hil.config import SeaHilConfig, config_to_toml
+from sea_hil.config.loader import config_to_toml
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
 from sea_hil.live.link import await_live
 from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.recorder.clock import TimeBase
 from sea_hil.recorder.process import RecorderProcess
-from sea_hil.recorder.writer import read_session
+from sea_hil.recorder.reader import read_session
 from sea_hil.report.console import ProgressSample
-from sea_hil.report.session_summary import session_summary
+from sea_hil.report.limbs import META_FLOOR
+from sea_hil.report.session_summary import session_summary, with_completeness
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
+from sea_hil.runtime.processes import end_process, spawn_child, stop_on_signals
+from sea_hil.runtime.realtime import child_priority
+from sea_hil.runtime.timer_floor import measure_floor
+from sea_hil.session import limb_nodes
 from sea_hil.session.builder import SessionBuilder
 from sea_hil.session.external import OutsideController
-from sea_hil.session import limb_nodes
 from sea_hil.session.limbs import Limb, session_limbs
-from sea_hil.session.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_cpus, child_priority
 from sea_hil.session.secure import secure_profile
 
 
@@ -72,9 +77,10 @@ def listen_endpoints(cfg: SeaHilConfig, opts: RunOptions) -> tuple[str, ...]:
 
 def controller_config(cfg: SeaHilConfig, endpoint: str, priority: int | None = None) -> SeaHilConfig:
     """The controller child's config: the same, its `[zenoh]` (mode, TLS, ACL) connected to `endpoint` only; with
-    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md)."""
+    `priority`, its `[timing] controller_priority` (SCHED_FIFO once started: docs/timing.md). Its inputs are not
+    checked again (`[verdict] check_inputs = false`): whoever started the session has decided."""
     z = type(cfg.zenoh).model_validate({**cfg.zenoh.model_dump(), "listen": (), "connect": (endpoint,)})
-    update: dict[str, Any] = {"zenoh": z}
+    update: dict[str, Any] = {"zenoh": z, "verdict": cfg.verdict.model_copy(update={"check_inputs": False})}
     if priority is not None:
         update["timing"] = cfg.timing.model_copy(update={"controller_priority": priority})
     return cfg.model_copy(update=update)
@@ -99,6 +105,9 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     if opts.inner == "remote" and cfg.trigger.placement == "edge":   # the CLI picks the paper's scheme for it
         raise ConfigError("inner 'remote' computes the voltage from every state: it needs trigger.placement = "
                           "'controller' (--trigger controller --compensation none)")
+    # real time: the host's own floor (an empty 1 kHz loop) before anything of the session runs (docs/verdict.md)
+    floor = measure_floor(cfg.verdict.floor_measure_s, cfg.timing.realtime_priority) \
+        if not opts.lockstep and cfg.verdict.floor_measure_s > 0 else None
     t0 = time.monotonic()
     # SIGTERM/SIGHUP raise `Terminated` here: the builder's close path ends the controller and closes the recording
     with stop_on_signals(), SessionBuilder(cfg, lockstep=opts.lockstep) as b:
@@ -110,23 +119,22 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
             proc = OutsideController(cfg, opts.cycles, session, endpoint=listen[0], config_path=cfg_path,
                                      lockstep=opts.lockstep, join_timeout_s=opts.join_timeout_s, log=log)
         else:   # the controllers' start-up (interpreter, imports, Zenoh) overlaps the set-up of the nodes here
-            procs = []   # [timing] pinning in real time only (lockstep runs as fast as it can)
-            rt_child = {} if opts.lockstep else {"cpus": child_cpus(cfg.timing)}
+            procs = []
             base = controller_config(_without_live(child_cfg), listen[0], None if opts.lockstep else
                                      child_priority(cfg.timing))
             for stem, limb_cfg in limb_nodes.controller_configs(base, limbs):
                 child_path = opts.out / f"{stem}.toml"
                 child_path.write_text(config_to_toml(limb_cfg), encoding="utf-8")
-                # the child ends when this process dies (sea_hil/session/processes.py)
-                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL, **rt_child))
+                # the child ends when this process dies (sea_hil/runtime/processes.py)
+                procs.append(spawn_child(_controller_cmd(opts, child_path), stdin=subprocess.DEVNULL))
                 b.callback(end_process, procs[-1])
             proc = procs[0] if len(procs) == 1 else limb_nodes.ControllerGroup(procs)
         if isinstance(proc, OutsideController):
             b.callback(end_process, proc)
-        _host_nodes(b, opts, session, proc, limbs, t0, log)
+        _host_nodes(b, opts, session, proc, limbs, t0, log, floor)
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
-    summary = session_summary(data, opts.controller)   # every limb (`limbs`, `limbs_total`)
+    summary = with_completeness(session_summary(data, opts.controller), data)   # every limb; the file checked
     summary["timing"]["wall_s"] = wall_s
     if b.timelines:   # [can] emulate_bitrate: queueing delay and latency per CAN id (simulated time in lockstep)
         summary["timing"]["can_bus"] = b.bus_timing()
@@ -143,7 +151,7 @@ def _without_live(cfg: SeaHilConfig) -> SeaHilConfig:
 
 
 def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, limbs: tuple[Limb, ...], t0: float,
-                log: Callable[..., None]) -> None:
+                log: Callable[..., None], floor: dict[str, Any] | None = None) -> None:
     """Plant, edge and recorder in this process until the controller `proc` (a child process, or the outside
     controller's watch) has finished its cycles. Closing (the builder's stack, last in first out): the controller
     ends, plant and edge stop, the recorder's taps stop, the edge's final stats are recorded and the MCAP file is
@@ -153,7 +161,7 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     # every bus: plant, edge(s), recorder tap
     nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller)
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
-    time_base = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
+    time_base: TimeBase = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
                           live=(cfg.live, cfg.can.bitrate_bps) if cfg.live.enabled else None)
     b.callback(rec.close)   # idempotent: closes the file if building the nodes failed
@@ -161,9 +169,11 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
     rec.add_metadata("sea-hil.limbs", nodes.metadata())
+    if floor is not None:   # the verdict weighs the driver's tick misses against it (sea_hil/report/verdict.py)
+        rec.add_metadata(META_FLOOR, {k: str(v) for k, v in floor.items()})
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0
-    recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.002, time_base=time_base)
+    recorders = [b.recorder(rec, session if i == 0 else None, tap, tap_batch_s=0.01, time_base=time_base)
                  for i, tap in enumerate(nodes.taps)]
     edge = nodes.edges[0]
     b.callback(_finish, rec, nodes, recorders, opts.lockstep)
@@ -194,8 +204,14 @@ def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConf
         if opts.progress:
             c = edge.core.counters
             lat = c.latency.to_dict()
-            log(ProgressSample(now, edge.core.sample_t_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
-                               c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0))
+            sim_ns, waiting = edge.core.sample_t_ns, False
+            if isinstance(proc, OutsideController):   # the session starts when an outside controller answers
+                start_ns = proc.watch.first_answer_sample_ns
+                waiting = start_ns is None
+                sim_ns = 0 if start_ns is None else max(0, sim_ns - start_ns)
+            log(ProgressSample(now, sim_ns * 1e-9, cfg.trajectory.lead_in_s, period_s, opts.cycles,
+                               c.setpoints + c.voltages, c.states_sent, lat["p50"] * 1e6 if lat["count"] else 0,
+                               waiting))
     if proc.returncode != 0:
         raise SeaHilError(f"controller process exited with status {proc.returncode}")
 

@@ -13,9 +13,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from urllib.parse import urlsplit
 
-from sea_hil.protocol.zcerts import DEFAULT_NODES, make_certs
-from sea_hil.config import SeaHilConfig
+from cryptography import x509
+from cryptography.x509.oid import NameOID
+
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.zcerts import DEFAULT_NODES, make_certs
 
 HOST_NODE, CONTROLLER_NODE = "edge", "controller"
 
@@ -28,8 +31,6 @@ class SecureProfile:
 
 
 def _common_name(pem: Path) -> str:
-    from cryptography import x509
-    from cryptography.x509.oid import NameOID
     try:
         cert = x509.load_pem_x509_certificate(pem.read_bytes())
     except (OSError, ValueError) as err:

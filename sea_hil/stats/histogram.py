@@ -96,7 +96,7 @@ class LogHistogram:
                 return min(max(self._value_of(i), self.min), self.max)
         return self.max
 
-    def to_dict(self) -> dict[str, float | int]:
+    def to_dict(self) -> dict[str, float | int | None]:
         """Summary: count, min, mean, p50, p90, p99, p999, max (NaN-free: empty fields are None)."""
         def num(x: float) -> float | None:
             return x if math.isfinite(x) else None

@@ -6,6 +6,9 @@ import contextlib
 import logging
 from collections.abc import Iterator
 
+import dask
+from distributed import Client, LocalCluster
+
 from sea_hil.errors import ConfigError
 
 # no dashboard, and the scheduler's remaining HTTP server (health, metrics) on an ephemeral port: with
@@ -20,12 +23,10 @@ QUIET_MONITORS = {"distributed.admin.system-monitor.interval": "5s", "distribute
 
 
 @contextlib.contextmanager
-def open_client(scheduler: str | None, jobs: int, engine: str = "offline") -> Iterator[object]:
+def open_client(scheduler: str | None, jobs: int, engine: str = "offline") -> Iterator[Client]:
     """A `distributed.Client`. Without `scheduler`, a local cluster (no dashboard, closed on exit): engine `offline`
     computes in the worker (CPU and GIL bound), so `jobs` worker processes of one thread; engine `lockstep` points
     are child processes a thread waits on, so one in-process worker with `jobs` threads (no GIL cost)."""
-    import dask
-    from distributed import Client, LocalCluster
     if scheduler is None:
         with dask.config.set(QUIET_MONITORS):
             if engine == "offline":

@@ -47,7 +47,7 @@ def _value(text: str) -> Any:
 
 
 TEXT_COLUMNS = ("point", "controller", "trigger", "compensation", "edge_model", "link", "status", "error",
-                "config_sha256")
+                "config_sha256", "verdict", "verdict_reasons")
 
 
 def parse_row(row: dict[str, str]) -> dict[str, Any]:

@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from itertools import pairwise
 
 from sea_hil.errors import SeaHilError
 
@@ -32,7 +33,7 @@ def tt_error_at(total_msgs: float, tt_points: Sequence[tuple[float, float]]) -> 
         raise OutsideBaseline(f"{total_msgs:g} messages is outside TT's measured range [{xs[0]:g}, {xs[-1]:g}]")
     if float(total_msgs) in by_msgs:   # at a measured period: its own error, exactly
         return ys[xs.index(float(total_msgs))]
-    for (x0, y0), (x1, y1) in zip(zip(xs, ys), zip(xs[1:], ys[1:])):
+    for (x0, y0), (x1, y1) in pairwise(zip(xs, ys, strict=True)):
         if x0 < total_msgs < x1:
             return y0 + (y1 - y0) * (total_msgs - x0) / (x1 - x0)
     raise AssertionError("unreachable: total_msgs is inside [xs[0], xs[-1]]")

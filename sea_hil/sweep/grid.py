@@ -4,11 +4,13 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.link import parse_link_spec
 from sea_hil.sweep.methods import Scheme
 
 # axis name -> (lower bound, lower bound allowed?, upper bound or None)
@@ -21,7 +23,18 @@ SCHEME_COLUMNS = ("trigger", "compensation", "edge_model", "period_ms")    # eff
 CSV_COLUMNS = ("point", "controller", *SCHEME_COLUMNS, "eta", "r", "link", "delay_ms", "jitter_ms", "loss", "cycles",
                "seed", "downlink_msgs", "downlink_bytes", "uplink_msgs", "total_msgs", "total_bytes",
                "max_err_hip_rad", "max_err_knee_rad", "max_err_rad", "rms_err_hip_rad", "rms_err_knee_rad",
-               "rms_err_rad", "latency_p50_us", "latency_p99_us", "wall_s", "status", "error", "config_sha256")
+               "rms_err_rad", "latency_p50_us", "latency_p99_us", "wall_s", "status", "error", "config_sha256",
+               "verdict", "verdict_reasons")   # the point's summary.json verdict: status, reason codes
+
+
+LINK_KEYS = ("delay_ms", "jitter_ms", "loss", "link")   # the columns of a sweep row naming its link condition
+
+
+def link_label(key: tuple[Any, ...]) -> str:
+    """A LINK_KEYS group's label: its link spec (`--links`), else the delay/jitter/loss axes' values."""
+    if len(key) > 3 and key[3]:
+        return str(key[3])
+    return f"delay {key[0]:g} ms, jitter {key[1]:g} ms, loss {key[2]:g}"
 
 
 def parse_axis(name: str, text: str) -> tuple[float, ...]:
@@ -59,7 +72,6 @@ class LinkCondition:
 
     @classmethod
     def from_spec(cls, spec: str) -> LinkCondition:
-        from sea_hil.protocol.link import parse_link_spec
         ov = parse_link_spec(spec)
         return cls(float(ov.get("delay_s", 0.0)) * 1000.0, float(ov.get("jitter_s", 0.0)) * 1000.0,
                    float(ov.get("loss", 0.0)), spec)
@@ -72,7 +84,6 @@ class LinkCondition:
     def overrides(self) -> dict[str, Any]:
         """One direction's `[link.<dir>]` overrides."""
         if self.spec:
-            from sea_hil.protocol.link import parse_link_spec
             return parse_link_spec(self.spec)
         return {"delay_s": self.delay_ms / 1000.0, "jitter_s": self.jitter_ms / 1000.0, "loss": self.loss}
 
@@ -112,7 +123,7 @@ def expand_grid(eta: Sequence[float], r: Sequence[float], delay_ms: Sequence[flo
     """Per link condition (delay x jitter x loss, or `links`) and seed: a TT reference per TT scheme (by default
     one), then every ET point (ET scheme x eta x r)."""
     points: list[GridPoint] = []
-    conditions = links if links is not None else [LinkCondition(d, j, l) for d, j, l in
+    conditions = links if links is not None else [LinkCondition(d, j, lo) for d, j, lo in
                                                   itertools.product(delay_ms, jitter_ms, loss)]
     for link in conditions:
         for seed in seeds:
@@ -184,6 +195,8 @@ def csv_row(point: GridPoint, summary: dict[str, Any] | None, *, cycles: int, se
     if summary is None:
         return row
     row.update(_tx(summary))
+    v = summary.get("verdict") or {}
+    row.update(verdict=v.get("status", ""), verdict_reasons=" ".join(sorted({r["code"] for r in v.get("reasons", [])})))
     tracking = summary.get("tracking", {})
     mx, rms = tracking.get("max_abs_error_rad"), tracking.get("rms_error_rad")
     if mx:

@@ -4,10 +4,12 @@ outer sample period a point runs (`Scheme`), the named methods of `--methods`, t
 from __future__ import annotations
 
 import itertools
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Sequence
+from typing import Any
 
 from sea_hil.errors import ConfigError
+from sea_hil.protocol.link import parse_link_spec
 
 TRIGGERS = ("controller", "edge")
 COMPENSATIONS = ("none", "predict")
@@ -95,7 +97,6 @@ def schemes_from_methods(names: Sequence[str], periods_ms: Sequence[float] | Non
 def parse_links(text: str) -> tuple[str, ...]:
     """`--links`: ';'-separated link specs (the `--uplink` syntax), `ideal`, or a preset name (issue16) -> the
     specs ('' = ideal), each checked by the link parser."""
-    from sea_hil.protocol.link import parse_link_spec
     items = [p.strip() for p in text.split(";")]
     if not text.strip() or any(not p for p in items):
         raise ConfigError(f"--links {text!r}: expected ';'-separated link specs, 'ideal' or "

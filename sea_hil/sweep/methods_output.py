@@ -5,8 +5,9 @@ seeds folded into their mean with the 95 % band — and the sweep.md section jud
 periodic TT at the same total messages (`sea_hil.sweep.frontier`)."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import matplotlib
 
@@ -14,7 +15,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from sea_hil.sweep.frontier import OutsideBaseline, dominates  # noqa: E402
-from sea_hil.sweep.output import LINK_KEYS, link_label  # noqa: E402
+from sea_hil.sweep.grid import LINK_KEYS, link_label  # noqa: E402
 from sea_hil.sweep.seeds import fold_seeds  # noqa: E402
 
 
@@ -58,10 +59,10 @@ def methods_figure(path: Path, rows: Sequence[dict[str, Any]]) -> None:
     fig, axes = plt.subplots((n + cols - 1) // cols, cols, figsize=(7.5 * cols, 5.5 * ((n + cols - 1) // cols)),
                              squeeze=False)
     labels = sorted({m for methods in curves.values() for m in methods})
-    colours = dict(zip(labels, plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4))
-    for ax, (key, methods) in zip(axes.flat, curves.items()):
+    colours = dict(zip(labels, plt.rcParams["axes.prop_cycle"].by_key()["color"] * 4, strict=False))
+    for ax, (key, methods) in zip(axes.flat, curves.items(), strict=False):
         for label, pts in sorted(methods.items()):
-            xs, ys = zip(*(_xy(p) for p in pts))
+            xs, ys = zip(*(_xy(p) for p in pts), strict=True)
             marker = "s" if label.startswith("TT") else "o"
             ax.plot(xs, ys, "-" + marker, color=colours[label], label=label, ms=5)
             if any(p.get("n_seeds", 1) > 1 for p in pts):    # mean over seeds: 95 % band of both coordinates
@@ -69,7 +70,7 @@ def methods_figure(path: Path, rows: Sequence[dict[str, Any]]) -> None:
                             yerr=[p.get("max_err_rad_ci95", 0.0) for p in pts], fmt="none", ecolor=colours[label],
                             alpha=0.5, capsize=2)
             if label.startswith("TT"):
-                for p, x, y in zip(pts, xs, ys):
+                for p, x, y in zip(pts, xs, ys, strict=True):
                     ax.annotate(f"{p['period_ms']:g} ms", (x, y), textcoords="offset points", xytext=(3, 3),
                                 fontsize=6, color=colours[label])
         ax.set_yscale("log")
@@ -97,7 +98,7 @@ def domination_markdown(rows: Sequence[dict[str, Any]]) -> list[str]:
         for label, pts in methods.items():
             if label.startswith("TT"):
                 lines.append(f"  - {label}: " + ", ".join(f"{p['period_ms']:g} ms {x:g} msgs {y:.4f} rad"
-                                                          for p, (x, y) in zip(pts, map(_xy, pts))))
+                                                          for p, (x, y) in zip(pts, map(_xy, pts), strict=True)))
                 continue
             for p in pts:
                 x, y = _xy(p)

@@ -3,8 +3,9 @@ link condition, TT references and the paper's points marked), DIR/methods.png (s
 DIR/sweep.md."""
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import matplotlib
 
@@ -12,11 +13,9 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
 from sea_hil.report.summary import PAPER  # noqa: E402
-from sea_hil.sweep.grid import pareto_front  # noqa: E402
+from sea_hil.sweep.grid import LINK_KEYS, link_label, pareto_front  # noqa: E402
+from sea_hil.sweep.methods_output import compares_methods, domination_markdown, methods_figure  # noqa: E402
 from sea_hil.sweep.seeds import fold_seeds  # noqa: E402
-
-LINK_KEYS = ("delay_ms", "jitter_ms", "loss", "link")
-
 
 METRICS = {"max_err_rad": "max |tracking error| over both joints [rad]",
            "rms_err_rad": "RMS tracking error (worse joint) [rad]"}
@@ -38,14 +37,7 @@ def fronts_by_link(rows: Sequence[dict[str, Any]],
     groups: dict[tuple, list[dict[str, Any]]] = {}
     for r in _plottable(fold_seeds(rows), metric):
         groups.setdefault(tuple(r.get(k, "") for k in LINK_KEYS), []).append(r)
-    return {k: list(zip(g, pareto_front([_xy(r, metric) for r in g]))) for k, g in groups.items()}
-
-
-def link_label(key: tuple) -> str:
-    """A LINK_KEYS group's label: its link spec (`--links`), else the delay/jitter/loss axes' values."""
-    if len(key) > 3 and key[3]:
-        return str(key[3])
-    return f"delay {key[0]:g} ms, jitter {key[1]:g} ms, loss {key[2]:g}"
+    return {k: list(zip(g, pareto_front([_xy(r, metric) for r in g]), strict=True)) for k, g in groups.items()}
 
 
 def _front_labels(flagged: list[tuple[dict[str, Any], bool]], metric: str) -> dict[tuple[float, float], str]:
@@ -149,7 +141,6 @@ def write_outputs(out: Path, rows: Sequence[dict[str, Any]], command: str, wall_
                   interrupted: bool) -> None:
     """pareto.png, methods.png (when the rows compare methods: `compares_methods`) and sweep.md (sweep.csv is written
     by the runner as points finish, `sea_hil.sweep.csvlog`)."""
-    from sea_hil.sweep.methods_output import compares_methods, domination_markdown, methods_figure
     out.mkdir(parents=True, exist_ok=True)
     pareto_figure(out / "pareto.png", rows)
     if compares_methods(rows):

@@ -12,12 +12,18 @@ import hashlib
 import sys
 import time
 import uuid
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
-from sea_hil.config import SeaHilConfig, config_to_toml
+from distributed import Event, as_completed, wait
+from tqdm import tqdm
+
+from sea_hil.config.loader import config_to_toml
+from sea_hil.config.root import SeaHilConfig
 from sea_hil.config.shorthand import scenario_config
+from sea_hil.sweep.cluster import open_client
 from sea_hil.sweep.csvlog import CsvLog, finished, read_rows, write_csv
 from sea_hil.sweep.grid import GridPoint, csv_row, point_overrides, scheme_columns
 from sea_hil.sweep.task import PointSpec, run_point
@@ -86,7 +92,6 @@ class _Progress:
         use_bar = sys.stderr.isatty() if bar is None else bar
         self._bar = None
         if use_bar:
-            from tqdm import tqdm
             self._bar = tqdm(total=total, initial=already, unit="point", file=sys.stderr, dynamic_ncols=True)
 
     def update(self, row: dict[str, Any], point: GridPoint) -> None:
@@ -111,8 +116,7 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
               configs: dict[int, SeaHilConfig] | None = None) -> tuple[list[dict[str, Any]], bool]:
     """Run every point (`opts.jobs` at a time locally, or on the cluster at `opts.scheduler`); rows in point order,
     and whether the sweep was interrupted."""
-    from distributed import Event, as_completed, wait
-    from sea_hil.sweep.cluster import open_client
+
     configs = configs if configs is not None else build_configs(points, opts)
     csv_path = opts.out / "sweep.csv"
     done_before = finished(read_rows(csv_path)) if opts.resume else {}
@@ -135,7 +139,7 @@ def run_sweep(points: list[GridPoint], opts: SweepOptions, log: Callable[[str], 
         try:
             direct = True if opts.scheduler is None else None   # a remote cluster's workers may be unreachable
             for batch in as_completed(futures).batches():   # one gather per batch of finished points
-                for fut, row in zip(batch, client.gather(batch, direct=direct)):
+                for fut, row in zip(batch, client.gather(batch, direct=direct), strict=True):
                     point = futures[fut]
                     rows[point.index] = row
                     csv_log.append(row)

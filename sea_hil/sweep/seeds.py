@@ -6,6 +6,7 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
+from scipy import stats
 
 MEAN_COLUMNS = ("downlink_msgs", "total_msgs", "max_err_rad", "rms_err_rad", "max_err_hip_rad", "max_err_knee_rad")
 
@@ -22,7 +23,6 @@ def ci95_half_width(values: Sequence[float]) -> float:
         return 0.0
     mean = sum(values) / n
     sd = math.sqrt(sum((v - mean) ** 2 for v in values) / (n - 1))
-    from scipy import stats     # here: scipy.stats takes about a second to import, and only a seeds axis needs it
     return float(stats.t.ppf(0.975, n - 1) * sd / math.sqrt(n))
 
 

@@ -24,6 +24,12 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from distributed import Event
+
+from sea_hil.config.loader import config_from_dict
+from sea_hil.errors import SeaHilError
+from sea_hil.offline.gc_pause import gc_paused
+from sea_hil.offline.session_engine import engine_summary
 from sea_hil.sweep.grid import GridPoint, csv_row, point_command
 
 GRACE_S = 10.0
@@ -79,7 +85,6 @@ def end_group(proc: subprocess.Popen) -> None:
 def _stop_requested(name: str) -> Callable[[], bool]:
     if not name:
         return lambda: False
-    from distributed import Event
     event = Event(name)
     return event.is_set
 
@@ -90,10 +95,6 @@ def run_point(spec: PointSpec) -> dict[str, Any]:
 
 
 def _run_offline(spec: PointSpec) -> dict[str, Any]:
-    from sea_hil.config import config_from_dict
-    from sea_hil.errors import SeaHilError
-    from sea_hil.offline.gc_pause import gc_paused
-    from sea_hil.offline.session_engine import engine_summary
     t0 = time.monotonic()
     row = functools.partial(csv_row, spec.point, cycles=spec.cycles, seed=spec.seed, config_sha256=spec.config_sha256,
                             scheme=dict(spec.scheme))

@@ -1,16 +1,22 @@
 // Independent check of a sea-hil MCAP file with the reference TypeScript reader (npm @mcap/core), zstd chunks
-// through fzstd (the recorder's default compression), JSON Schema validation with ajv (draft 2020-12).
+// through fzstd (the recorder's default compression), JSON Schema validation with ajv (draft 2020-12), and the
+// protobuf channels decoded with protobufjs from the FileDescriptorSet in their schema record (as Foxglove does:
+// Root.fromDescriptor, lookupType(schema name)).
 //
 // usage: node check_mcap.mjs FILE.mcap  -> prints one JSON object on stdout:
 //   {ok, channels: {topic: {schema, schemaEncoding, messageEncoding, messages, invalid, undecodable,
-//    nonMonotonic, firstErrors: [..], seqZero, logTimeMin, logTimeMax, publishEqualsLog}},
+//    nonMonotonic, firstErrors: [..], seqZero, logTimeMin, logTimeMax, publishEqualsLog, decoded}},
 //    wellKnownSchemasMatch: {topic: bool}, chunks, summaryChunks, metadata: {name: {...}}, errors: [..]}
+//   `decoded` (protobuf channels only): every message as decoded, in file order (present fields only, int64 as
+//   numbers), for the caller to compare with its own reader.
 // Exit status 0 when the file could be read (the verdict is in the JSON), 2 on a read failure.
 import { readFile } from "node:fs/promises";
 import { McapIndexedReader, McapStreamReader } from "@mcap/core";
 import { decompress as zstdDecompress } from "fzstd";
 import Ajv2020 from "ajv/dist/2020.js";
 import * as foxglove from "@foxglove/schemas/jsonschema.js";
+import protobuf from "protobufjs";
+import descriptor from "protobufjs/ext/descriptor/index.js";
 
 const decompressHandlers = {
   zstd: (buffer, decompressedSize) => zstdDecompress(buffer, new Uint8Array(Number(decompressedSize))),
@@ -44,12 +50,19 @@ async function main(path) {
     if (rec.type === "Chunk") {
       out.chunks += 1;
     } else if (rec.type === "Schema") {
-      const entry = { name: rec.name, encoding: rec.encoding, validate: null };
+      const entry = { name: rec.name, encoding: rec.encoding, validate: null, type: null };
       if (rec.encoding === "jsonschema") {
         const parsed = JSON.parse(decoder.decode(rec.data));
         entry.validate = ajv.compile(parsed);
         if (FOXGLOVE[rec.name]) {
           out.wellKnownSchemasMatch[rec.name] = sameJson(withoutDollarSchema(parsed), FOXGLOVE[rec.name]);
+        }
+      }
+      if (rec.encoding === "protobuf") {
+        try {
+          entry.type = protobuf.Root.fromDescriptor(descriptor.FileDescriptorSet.decode(rec.data)).lookupType(rec.name);
+        } catch (err) {
+          out.errors.push(`protobuf schema ${rec.name}: ${err.message}`);
         }
       }
       schemas.set(rec.id, entry);
@@ -72,7 +85,15 @@ async function main(path) {
       if (rec.sequence === 0) c.seqZero += 1;
       if (rec.publishTime === rec.logTime) c.publishEqualsLog += 1;
       let value;
+      const s = schemas.get(ch.schemaId);
       try {
+        if (ch.messageEncoding === "protobuf") {
+          if (!s?.type) throw new Error(`no protobuf type for schema ${s?.name}`);
+          const type = s.type;
+          value = type.toObject(type.decode(rec.data), { longs: Number });
+          (c.decoded ??= []).push(value);
+          continue;   // decoding with the file's own descriptor is the schema check
+        }
         if (ch.messageEncoding !== "json") throw new Error(`message encoding ${ch.messageEncoding}`);
         value = JSON.parse(decoder.decode(rec.data));
       } catch (err) {
@@ -80,7 +101,6 @@ async function main(path) {
         if (c.firstErrors.length < 3) c.firstErrors.push(`decode: ${err.message}`);
         continue;
       }
-      const s = schemas.get(ch.schemaId);
       if (!s?.validate) { c.invalid += 1; continue; }
       if (!s.validate(value)) {
         c.invalid += 1;

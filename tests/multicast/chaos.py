@@ -28,6 +28,7 @@ import subprocess
 import sys
 import threading
 import time
+from itertools import pairwise
 from pathlib import Path
 
 import psutil
@@ -37,16 +38,17 @@ sys.path.insert(0, str(REPO))
 sys.path.insert(0, str(REPO / "tests"))
 
 from faults_helpers import wait_for  # noqa: E402
-from sea_hil.config import load_config  # noqa: E402
+
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.errors import MalformedFrame  # noqa: E402
-from sea_hil.protocol.can_codec import DriverState, Heartbeat, SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import LIMIT_FLAGS, FeedbackAngle  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, DriverState, FeedbackAngle, Heartbeat  # noqa: E402  # noqa: E402
 from sea_hil.protocol.canbus import open_bus  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.payloads import PayloadCounters  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session  # noqa: E402
 from sea_hil.recorder.reader import read_session  # noqa: E402
-from sea_hil.session.processes import end_process  # noqa: E402
+from sea_hil.runtime.processes import end_process  # noqa: E402
 
 NODE = 1
 FAULTS, WINDOW_S = 10, 60.0
@@ -57,7 +59,7 @@ WALL_MARGIN_S = 5.0   # the same in wall time on a loaded 2-core host (only catc
 # the router carries every state and setpoint between the edge and the controller: on the session's real-time tier
 # (`[timing]`: SCHED_FIFO as a standalone controller takes it, `node_priority`), as a zenohd on this host would be run
 ROUTER = """import sys, threading
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.protocol.zsession import make_config, open_session
 from sea_hil.runtime.realtime import ThreadPolicy, node_priority
 from sea_hil.config.timing import TimingConfig
@@ -124,7 +126,7 @@ class Watch:
 
 def _last_run(seqs: list[int]) -> list[int]:
     """The states of the newest edge stream (a restarted edge numbers its states from 1 again)."""
-    starts = [i + 1 for i, (a, b) in enumerate(zip(seqs, seqs[1:])) if b <= a]
+    starts = [i + 1 for i, (a, b) in enumerate(pairwise(seqs)) if b <= a]
     return seqs[starts[-1]:] if starts else seqs
 
 
@@ -138,7 +140,7 @@ def _event_gaps(path: Path) -> int:
     events: its header seq, the sample number, has gaps by design), in `seq` for the paper's every-sample stream."""
     states = [m.payload for m in read_session(path).messages.get("/zenoh/state", [])]
     seqs = _last_run([int(p.get("event_seq", p["seq"])) for p in states])
-    return sum(b - a - 1 for a, b in zip(seqs, seqs[1:]) if b > a)
+    return sum(b - a - 1 for a, b in pairwise(seqs) if b > a)
 
 
 def _recorded_states(path: Path) -> list[int]:
@@ -186,7 +188,7 @@ class Chaos:
         kinds = ["edge", "controller", "recorder"] * 3 + [self.rng.choice(["edge", "controller", "recorder"])]
         self.rng.shuffle(kinds)
         times = sorted(self.rng.uniform(0.0, WINDOW_S) for _ in kinds)
-        return list(zip(times, kinds))
+        return list(zip(times, kinds, strict=True))
 
     def running(self, w: Watch, timeout_s: float) -> bool:
         return wait_for(lambda: w.state is DriverState.RUNNING, timeout_s, poll_s=0.01) is not None

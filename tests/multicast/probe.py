@@ -15,9 +15,10 @@ from pathlib import Path
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from sea_hil.protocol.can_codec import DriverState, FeedbackAngle, Heartbeat, SeaCodec, VoltageCmd  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
 from sea_hil.errors import MalformedFrame  # noqa: E402
+from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
+from sea_hil.protocol.can_frames import DriverState, FeedbackAngle, Heartbeat, VoltageCmd  # noqa: E402
+from sea_hil.protocol.canbus import open_bus  # noqa: E402
 
 NODE = 1
 TIMEOUT_S = 30.0

@@ -24,13 +24,14 @@ import yaml
 REPO = Path(__file__).resolve().parents[2]
 sys.path.insert(0, str(REPO))
 
-from sea_hil.config import load_config  # noqa: E402
+from sea_hil.config.loader import load_config  # noqa: E402
 from sea_hil.protocol.keys import Keys  # noqa: E402
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session  # noqa: E402
 from sea_hil.recorder.reader import read_session  # noqa: E402
+from sea_hil.report.completeness import completeness_block  # noqa: E402
 from sea_hil.report.session_summary import session_summary  # noqa: E402
 from sea_hil.report.summary import write_summary  # noqa: E402
-from sea_hil.session.processes import end_process  # noqa: E402
+from sea_hil.runtime.processes import end_process  # noqa: E402
 
 SESSION_TIMEOUT_S = 240.0
 STEP_TIMEOUT_S = 60.0
@@ -94,8 +95,9 @@ def run(config: Path, out: Path, group: str) -> dict[str, object]:
         stats.undeclare()
         probe.undeclare()
         router.close()
-    summary = session_summary(read_session(out / "session.mcap"), "et")
-    summary.update(lockstep=True, inner="edge")
+    data = read_session(out / "session.mcap")
+    summary = session_summary(data, "et")
+    summary.update(lockstep=True, inner="edge", completeness=completeness_block(data))
     write_summary(out / "summary.json", summary)
     return {"codes": codes, "summary": str(out / "summary.json")}
 

@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import IO, Any
 
-from sea_hil.session.processes import end_process
+from sea_hil.runtime.processes import end_process
 
 REPO = Path(__file__).resolve().parents[2]
 SAMPLE_STEP_S = 0.005        # CSV resolution of the gait slice (spline-interpolated by the controller)
@@ -34,8 +34,8 @@ def write_gait_slice_config(directory: Path, duration_s: float, paper: bool = Tr
     """Write ``gait-slice.csv`` (the default gait's first ``duration_s``) and ``session.toml`` using it; -> TOML.
     `paper`: the paper's scheme (trigger at the controller, no compensation; the counts these tests assert are its),
     else the default one (no [trigger] / [controller] tables: the caller may append them)."""
+    from sea_hil.config.loader import load_config
     from sea_hil.controller.trajectory import GaitTrajectory
-    from sea_hil.config import load_config
     gait = GaitTrajectory(load_config().trajectory.period_s)
     rows = ["t,theta1,theta2"]
     for i in range(int(round(duration_s / SAMPLE_STEP_S)) + 1):
@@ -186,10 +186,12 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
         for name in ("edge", "plant", "record"):
             assert nodes.stop(name) == 0, f"{name} did not exit cleanly:\n{nodes.outputs()}"
         plant_lines = nodes.output("plant").strip().splitlines()
-    from sea_hil.recorder.writer import read_session
+    from sea_hil.recorder.reader import read_session
+    from sea_hil.report.completeness import completeness_block
     from sea_hil.report.session_summary import session_summary
     from sea_hil.report.summary import write_summary
     data = read_session(mcap)
     summary = session_summary(data, s.controller)
+    summary["completeness"] = completeness_block(data)   # the file against the nodes' own counters (issue 32)
     write_summary(out / "summary.json", summary)
     return NodeSessionResult(summary, data, plant_lines[-1] if plant_lines else "")

@@ -9,12 +9,13 @@ import time
 from collections.abc import Callable
 
 import can
-
-from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.can_codec import ErrorFlags, FeedbackAngle, Heartbeat, SeaCodec
-from sea_hil.config import load_config
-from sea_hil.errors import MalformedFrame
 from socketcan_helpers import PROCESS_TIMEOUT_S
+
+from sea_hil.config.loader import load_config
+from sea_hil.errors import MalformedFrame
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import ErrorFlags, FeedbackAngle, Heartbeat
 
 NODE = 1
 WAIT_S = 30.0

@@ -18,9 +18,10 @@ from pathlib import Path
 
 import pytest
 
-from sea_hil.config import load_config
+from sea_hil.config.loader import load_config
 from sea_hil.plant_emulator.node import PlantNode
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
 from sea_hil.protocol.canbus import open_bus
 
 ROOT = Path(__file__).resolve().parents[2]

@@ -15,9 +15,9 @@ from pathlib import Path
 
 import can
 
-from sea_hil.protocol.can_codec import DriverState, FeedbackAngle, Heartbeat, SeaCodec, VoltageCmd, load_database
-from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK
 from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, DriverState, FeedbackAngle, Heartbeat, VoltageCmd
 
 NODE = 1
 REPO = Path(__file__).resolve().parents[2]

@@ -13,7 +13,8 @@ import pytest
 from socketcan_helpers import PROCESS_TIMEOUT_S
 
 from sea_hil.cli import main
-from sea_hil.protocol.can_codec import Feedback, SeaCodec, VoltageCmd
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.writer import SessionRecorder
 

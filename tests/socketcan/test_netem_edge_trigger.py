@@ -30,7 +30,7 @@ def delayed_namespaces(veth_namespaces: tuple[str, str]) -> tuple[str, str]:
 
 
 def test_edge_trigger_with_prediction_across_netem(tmp_path: Path, delayed_namespaces: tuple[str, str]) -> None:
-    from sea_hil.config import load_config
+    from sea_hil.config.loader import load_config
     from sea_hil.offline.session_engine import run_engine
     from sea_hil.protocol.link import parse_link_spec
     from sea_hil.protocol.zsession import free_tcp_port

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
 from netns_helpers import CLIENT_ADDR, SERVER_ADDR, run
+from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
 
 DELAY_MS = 25
 DURATION_S = 1.0
@@ -50,6 +50,8 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     tx = summary["transmissions"]
     assert 0 < tx["downlink_msgs"] < summary["edge"]["uplink_msgs"], (tx, summary["edge"])
     assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
+    # the recorder (a client of the edge) holds every message the far-side controller sent (issue 32)
+    assert summary["completeness"]["complete"], summary["completeness"]
 
     # closed loop (edge): every setpoint crossed the veth twice
     latency_us = summary["timing"]["latency_us"]

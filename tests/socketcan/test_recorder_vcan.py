@@ -15,10 +15,11 @@ from pathlib import Path
 import can
 import pytest
 
-from sea_hil.protocol.can_codec import SeaCodec, VoltageCmd
-from sea_hil.protocol.canbus import send_with_retry
-from sea_hil.config import load_config
-from sea_hil.recorder.node import RX_BUFFER_BYTES, RecorderNode
+from sea_hil.config.loader import load_config
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import VoltageCmd
+from sea_hil.protocol.canbus import RX_BUFFER_BYTES, send_with_retry
+from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.writer import SessionRecorder
 
 NODES = tuple(range(1, 17))

@@ -2,8 +2,7 @@
 with SIGTERM, a bounded wait, then SIGKILL, always reaped.
 
 - `end_process(proc)`: SIGTERM, wait, SIGKILL, reap.
-- `spawn_child(cmd, cpus=)`: `subprocess.Popen` (pinned to `cpus` if given: `[timing] driver_cpu`) that
-  tells the child who its parent is (`SEA_HIL_PARENT_PID`); the child's
+- `spawn_child(cmd)`: `subprocess.Popen` that tells the child who its parent is (`SEA_HIL_PARENT_PID`); the child's
   `exit_with_parent()` (called by `sea_hil.cli.main`) asks Linux for SIGTERM when that parent dies, so a parent
   that is SIGKILLed (no close path runs) leaves no controller behind. The recorder child needs no such signal: it
   finalises its file and exits when its stdin (the parent's pipe) reaches end of file.
@@ -23,7 +22,6 @@ from contextlib import contextmanager
 from typing import Any
 
 from sea_hil.errors import Terminated
-from sea_hil.runtime.realtime import pin_process
 
 PARENT_ENV = "SEA_HIL_PARENT_PID"
 _PR_SET_PDEATHSIG = 1    # <linux/prctl.h>
@@ -40,15 +38,11 @@ def end_process(proc: subprocess.Popen, timeout_s: float = 5.0) -> int:
         return proc.wait()
 
 
-def spawn_child(cmd: Sequence[str], *, cpus: set[int] | None = None, **kw: Any) -> subprocess.Popen:
-    """`subprocess.Popen(cmd, **kw)` with `SEA_HIL_PARENT_PID` set to this process (see `exit_with_parent`); with
-    `cpus`, the child is pinned to them (`[timing] driver_cpu`: the driver's CPU is kept for the driver; a refusal
-    is logged, the child runs unpinned)."""
+def spawn_child(cmd: Sequence[str], **kw: Any) -> subprocess.Popen:
+    """`subprocess.Popen(cmd, **kw)` with `SEA_HIL_PARENT_PID` set to this process (see `exit_with_parent`)."""
     env = dict(kw.pop("env", None) or os.environ)
     env[PARENT_ENV] = str(os.getpid())
-    proc = subprocess.Popen(list(cmd), env=env, **kw)
-    pin_process(proc.pid, cpus)
-    return proc
+    return subprocess.Popen(list(cmd), env=env, **kw)
 
 
 def exit_with_parent() -> bool:

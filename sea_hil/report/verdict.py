@@ -1,0 +1,204 @@
+"""summary.json's `verdict`: did the run test what it meant to? `ok`, `degraded` or `invalid`, with every reason, its
+figure and its threshold (docs/verdict.md).
+
+- `invalid`: a drive latched its safe state (a soft-limit fault, a watchdog trip, an e-stop: `drive_faults`); the
+  limb stopped following the controller, whatever the tracking figures say.
+- `degraded`: a counter above its `[verdict]` threshold (`COUNTER_RULES`): driver tick misses beyond the host's own
+  floor, late samples, late or lost setpoints and states, envelope rejections, saturated inner steps, rejections,
+  recording losses, a recording incomplete against the nodes' own counters (`completeness`, issue 32).
+
+Pure: summary (and thresholds) in, verdict out, so `sea-hil report` on the recording reproduces `run`'s. A counter
+that is absent from the summary (a kind of run that does not have it) gives no reason. A new counter is judged by
+adding one `CounterRule` line (a rejection counter: to `REJECTION_COUNTERS`).
+"""
+from __future__ import annotations
+
+import tomllib
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from sea_hil.config.verdict import VerdictConfig
+from sea_hil.protocol.payload_fields import RejectReason
+from sea_hil.report.console import field
+
+OK, DEGRADED, INVALID = "ok", "degraded", "invalid"
+STRICT_EXIT = 3   # `--strict`: the exit status of a run whose verdict is not ok
+
+
+def _edge_feedback(s: Mapping[str, Any]) -> float | None:
+    return field(s, "edge", "feedback_samples")
+
+
+def _inner_steps(s: Mapping[str, Any]) -> float | None:
+    return field(s, "edge", "commands_sent", default=field(s, "inner_steps"))
+
+
+@dataclass(frozen=True)
+class CounterRule:
+    """One counter of summary.json (`path`, looked up also under `timing`), degraded above `[verdict].threshold`;
+    with `per`, the threshold is a percentage of what `per` returns; `realtime_only`: not judged in lockstep."""
+    code: str
+    path: tuple[str, ...]
+    threshold: str
+    what: str
+    per: Callable[[Mapping[str, Any]], float | None] | None = None
+    realtime_only: bool = False
+
+
+# rejection counters: each degrades the run above `[verdict] rejections_max` (one line per new counter)
+REJECTION_COUNTERS: tuple[tuple[tuple[str, ...], str], ...] = (
+    (("edge", "rejected_frames"), "CAN frames the edge rejected (malformed)"),
+    (("edge", "rejected_samples"), "feedback samples the edge rejected (sample time not advancing)"),
+    *((("rejections", f"payload_rejected_{r.value}"), f"Zenoh payloads the edge rejected ({r.value})")
+      for r in RejectReason),
+    (("edge", "unexpected_payloads"), "payloads of an unexpected type at the edge"),
+    (("edge", "epoch_foreign"), "payloads of a foreign session epoch at the edge"),
+    (("edge", "bus_errors"), "CAN bus errors at the edge"),
+)
+
+COUNTER_RULES: tuple[CounterRule, ...] = (
+    CounterRule("late_samples", ("edge", "late_samples"), "late_samples_max_pct",
+                "feedback samples left unanswered (older than safety.setpoint.max_sample_age_s)", _edge_feedback,
+                realtime_only=True),
+    CounterRule("late_setpoints", ("edge", "late_setpoints"), "late_setpoints_max",
+                "setpoints dropped: their state was older than safety.setpoint.max_answer_age_s"),
+    CounterRule("lost_setpoints", ("edge", "seq_lost"), "lost_setpoints_max",
+                "setpoints lost on the way to the edge (beyond the downlink model's own drops)"),
+    CounterRule("lost_states", ("link_losses", "uplink_beyond_model"), "lost_states_max",
+                "states lost on the way to the controller (beyond the uplink model's own drops)"),
+    CounterRule("stale_setpoints", ("edge", "stale_setpoints"), "stale_setpoints_max",
+                "setpoints dropped as stale or duplicated", realtime_only=True),
+    CounterRule("envelope_rejections", ("edge", "setpoints_out_of_envelope"), "envelope_rejections_max",
+                "setpoints rejected outside the setpoint envelope [safety.setpoint]"),
+    CounterRule("saturated_steps", ("edge", "saturated_steps"), "saturated_steps_max_pct",
+                "inner-loop steps with the voltage clipped at plant.voltage_limit_v", _inner_steps),
+    CounterRule("saturated_steps", ("saturated_steps",), "saturated_steps_max_pct",
+                "inner-loop steps with the voltage clipped at plant.voltage_limit_v", _inner_steps),
+    CounterRule("recording_losses", ("recording", "lost"), "recording_losses_max",
+                "messages the recorder dropped or could not write"),
+    *(CounterRule("rejections", path, "rejections_max", what) for path, what in REJECTION_COUNTERS),
+)
+
+
+def _reason(code: str, severity: str, message: str, value: Any, threshold: Any, **extra: Any) -> dict[str, Any]:
+    return {"code": code, "severity": severity, "message": message, "value": value, "threshold": threshold, **extra}
+
+
+def _fault_reasons(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
+    out = []
+    for f in summary.get("drive_faults") or []:
+        if f.get("after_session"):
+            continue   # the designed safe state after the last measured sample (sea_hil/report/drive_faults.py)
+        flags = "|".join(f["flags"]) or "no flags"
+        limit = any(n.endswith("_LIMIT") for n in f["flags"])
+        code = "estop" if f["state"] == "ESTOP" else \
+            "watchdog_trip" if "WATCHDOG" in f["flags"] and not limit else "drive_fault"
+        t = "at an unrecorded time" if f.get("t_s") is None else f"at {f['t_s']:.3f} s"
+        held = "" if f.get("in_fault_s") is None else \
+            f", {f['in_fault_s']:.2f} s in {f['state']}" + ("" if f.get("cleared") else " (still latched at the end)")
+        out.append(_reason(code, INVALID, f"drive {f['node_id']} latched {f['state']} {flags} {t}{held}; "
+                                          f"{f['clear_policy']}", f.get("t_s"), None, **{k: f.get(k) for k in (
+                               "node_id", "state", "flags", "t_s", "in_fault_s", "cleared")}))
+    return out
+
+
+def _tick_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    drv = field(summary, "driver")
+    if summary.get("lockstep", False) or not isinstance(drv, Mapping) or not drv.get("ticks"):
+        return []    # lockstep has no deadlines: simulated time waits for every node
+    pct = 100.0 * drv.get("tick_misses", 0) / drv["ticks"]
+    floor = drv.get("floor") or {}
+    floor_pct = float(floor.get("miss_pct", 0.0))
+    limit = cfg.tick_miss_max_pct + cfg.tick_miss_floor_factor * floor_pct
+    if pct <= limit:
+        return []
+    where = (f"host's empty-loop floor {floor_pct:.3f} % over {floor.get('duration_s', 0):g} s at start-up"
+             if floor else "host floor not measured")
+    return [_reason("tick_misses", DEGRADED, f"driver missed {drv.get('tick_misses', 0)} of {drv['ticks']} ticks "
+                                            f"({pct:.3f} %), above {limit:.3f} % = {cfg.tick_miss_max_pct:g} % + "
+                                            f"{cfg.tick_miss_floor_factor:g} x the {where}",
+                    round(pct, 4), round(limit, 4), floor_pct=floor_pct)]
+
+
+def _counter_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    out, seen = [], set()
+    lockstep = bool(summary.get("lockstep", False))
+    for rule in COUNTER_RULES:
+        value = field(summary, *rule.path)
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or (rule.realtime_only and lockstep):
+            continue
+        if (rule.code, rule.path[-1]) in seen:
+            continue
+        seen.add((rule.code, rule.path[-1]))
+        threshold = getattr(cfg, rule.threshold)
+        name = ".".join(rule.path)
+        if rule.per is not None:
+            base = rule.per(summary)
+            if not base:
+                continue
+            pct = 100.0 * value / base
+            if pct > threshold:
+                out.append(_reason(rule.code, DEGRADED, f"{rule.what}: {value:g} of {base:g} ({pct:.3f} %, "
+                                                        f"{name}), above verdict.{rule.threshold} = {threshold:g} %",
+                                   round(pct, 4), threshold, counter=name, count=value))
+        elif value > threshold:
+            out.append(_reason(rule.code, DEGRADED, f"{rule.what}: {value:g} ({name}), above verdict."
+                                                    f"{rule.threshold} = {threshold:g}", value, threshold,
+                               counter=name))
+    return out
+
+
+# channels of summary.json `completeness` judged here; the CAN sequence gaps (`can_frames`) are reported, not judged:
+# a gap is also a frame its sender never sent (a skipped tick), not only one the recorder lost
+COMPLETENESS_JUDGED = ("state", "downlink", "can_command")
+
+
+def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    """A recording that lacks messages the nodes' own counters say were sent (issue 32: `incomplete`, more than
+    `recording_losses_max` missing), or that cannot be checked because a node's final record is not in the file
+    (`unverified`: a recorder started late or cut off; `sea-hil report --node-summary` supplies it)."""
+    comp = summary.get("completeness")
+    if not isinstance(comp, Mapping):
+        return []
+    out = []
+    for name, c in (comp.get("channels") or {}).items():
+        if name not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):
+            continue
+        if c.get("status") == "incomplete" and (c.get("missing") or 0) > cfg.recording_losses_max:
+            out.append(_reason("recording_incomplete", DEGRADED, f"recording of {name}: {c['missing']} of "
+                                                               f"{c['expected']} messages missing ({c.get('source')})"
+                                                               f", above verdict.recording_losses_max = "
+                                                               f"{cfg.recording_losses_max}", c["missing"],
+                               cfg.recording_losses_max, channel=name))
+        elif c.get("status") == "unverified":
+            out.append(_reason("recording_unverified", DEGRADED, f"recording of {name}: {c.get('recorded', 0)} "
+                                                               f"messages, not checked against the sender's count "
+                                                               f"(its final statistics are not in the file)",
+                               c.get("recorded", 0), None, channel=name))
+    return out
+
+
+def verdict(summary: Mapping[str, Any], cfg: VerdictConfig | None = None) -> dict[str, Any]:
+    """The verdict of a summary (see the module docstring)."""
+    cfg = cfg or VerdictConfig()
+    reasons = _fault_reasons(summary) + _tick_reason(summary, cfg) + _counter_reasons(summary, cfg) \
+        + _completeness_reasons(summary, cfg)
+    status = INVALID if any(r["severity"] == INVALID for r in reasons) else DEGRADED if reasons else OK
+    return {"status": status, "reasons": reasons}
+
+
+def verdict_config_of(toml_text: str | bytes | None) -> VerdictConfig:
+    """`[verdict]` of a recording's attached config.toml (the defaults when there is none)."""
+    if not toml_text:
+        return VerdictConfig()
+    text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
+    try:
+        return VerdictConfig.model_validate(tomllib.loads(text).get("verdict", {}))
+    except (tomllib.TOMLDecodeError, ValueError):
+        return VerdictConfig()
+
+
+def strict_status(summary: Mapping[str, Any]) -> int:
+    """`--strict`'s exit status for a summary: 0 when its verdict is ok, else `STRICT_EXIT`."""
+    return 0 if (summary.get("verdict") or {}).get("status") == OK else STRICT_EXIT
