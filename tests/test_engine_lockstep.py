@@ -14,7 +14,7 @@ import pytest
 from paper_scheme import paper
 
 from sea_hil.config.loader import load_config
-from sea_hil.offline.session_engine import run_engine
+from sea_hil.offline.session_engine import engine_verdict, run_engine
 from sea_hil.protocol.link import parse_link_spec
 from sea_hil.report.session_summary import session_summary
 from sea_hil.session.run import RunOptions, run_session
@@ -79,6 +79,11 @@ def test_offline_engine_equals_lockstep(name: str, tmp_path: Path) -> None:
     offline = run_engine(cfg, mode)
     got = session_summary(offline.data, mode)
     assert {k: got[k] for k in COMPARED} == {k: live[k] for k in COMPARED}
+    # the rejections per class the edge core counted, as lockstep's edge /stats reports them (issue 29's blocks)
+    judged = engine_verdict(got, offline.drive_faulted, offline.saturated_steps, offline.samples, cfg,
+                            offline.edge_stats)
+    assert judged["rejections"] == live["rejections"]
+    assert bool(judged["drive_faults"]) == offline.drive_faulted and "verdict" in judged
     if name.startswith("fault-mid-session"):     # the limit fault latched inside the session, not at its start
         assert offline.drive_faulted and max(live["tracking"]["max_abs_error_rad"]) > 0.1
         assert max(live["lead_in"]["tracking"]["max_abs_error_rad"]) < 0.05

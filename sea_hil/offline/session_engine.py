@@ -14,12 +14,13 @@ limits). The messages a recorder would see (states as delivered, setpoints as pu
 as the recorder's `zenoh_record` builds them (`SessionRecords`) and summarised by `session_summary`, so the summary
 is the session's (tests/test_engine_lockstep.py: bit for bit, over a matrix of links, schemes and faults).
 
-Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats`, and `max_abs_voltage_v` is taken up to
+Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats` (its rejections per class are:
+`engine_verdict` puts the edge core's counts in the summary's `rejections` blocks), and `max_abs_voltage_v` is taken up to
 the controller's last sample (a session also records the commands of its shut-down tail).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 from sea_hil.config.root import SeaHilConfig
@@ -41,7 +42,8 @@ from sea_hil.protocol.can_frames import Feedback
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, decode
 from sea_hil.recorder.reader import RecordedMessage, SessionData
-from sea_hil.report.session_summary import session_summary
+from sea_hil.report.session_summary import rejections_blocks, session_summary
+from sea_hil.report.summary import TIMING_KEY
 from sea_hil.report.verdict import verdict
 
 STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
@@ -85,6 +87,7 @@ class EngineResult:
     drive_faulted: bool = False          # a drive soft limit faulted the drive (0 V from then on)
     setpoints_out_of_envelope: int = 0   # setpoints the edge's envelope rejected
     edge: EdgeEvents | None = None       # trigger at the edge: the edge core's events (stats, stale holds)
+    edge_stats: dict[str, Any] = field(default_factory=dict)   # the edge core's final counters (`EdgeCore.stats`)
 
 
 class SessionRecords:
@@ -128,17 +131,23 @@ def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, A
     with gc_paused():
         res = run_session(cfg, mode, cycles)
         return engine_verdict(session_summary(res.data, mode), res.drive_faulted, res.saturated_steps, res.samples,
-                              cfg)
+                              cfg, res.edge_stats)
 
 
-def engine_verdict(summary: dict[str, Any], faulted: bool, saturated_steps: int, samples: int, cfg: SeaHilConfig
-                   ) -> dict[str, Any]:
+def engine_verdict(summary: dict[str, Any], faulted: bool, saturated_steps: int, samples: int, cfg: SeaHilConfig,
+                   edge_stats: dict[str, Any] | None = None) -> dict[str, Any]:
     """`summary` with the engine's `drive_faults` (the engine knows only whether a soft limit faulted the drive, not
-    when: `t_s` None; it records no heartbeats) and its `verdict` under `cfg`'s `[verdict]`, judging the saturated
-    inner steps too (of `samples` driver periods; the engine's summary has no edge `/stats`)."""
+    when: `t_s` None; it records no heartbeats), the rejections per class the edge core counted (`edge_stats`, its
+    final `EdgeCore.stats`: the session's `rejections` and `timing.rejections` blocks, which `session_summary` of
+    messages without an edge `/stats` leaves at 0) and its `verdict` under `cfg`'s `[verdict]`, judging the
+    saturated inner steps too (of `samples` driver periods)."""
     faults = [{"node_id": 1, "t_s": None, "state": "FAULT", "flags": ["soft limit"], "in_fault_s": None,
                "cleared": False, "clear_policy": POLICY_USER}] if faulted else []
     out = {**summary, "drive_faults": faults}
+    if edge_stats is not None:
+        rejected, rejected_timing = rejections_blocks(edge_stats)
+        out["rejections"] = rejected
+        out[TIMING_KEY] = {**out.get(TIMING_KEY, {}), "rejections": rejected_timing}
     edge = {**out.get("edge", {}), "saturated_steps": saturated_steps, "commands_sent": samples}
     out["verdict"] = verdict({**out, "lockstep": True, "edge": edge}, cfg.verdict)
     return out
@@ -235,7 +244,7 @@ class _Session:
             k = nxt
         self.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
         return EngineResult(SessionData(messages=self.rec.messages, complete=True), k, saturated, faulted,
-                            edge.envelope.rejected, edge.events)
+                            edge.envelope.rejected, edge.events, edge.stats())
 
     def _controller(self, now: int) -> bool:
         """The controller's core answers the states released by `now` (a state released after a newer one is
