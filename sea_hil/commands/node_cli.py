@@ -34,10 +34,14 @@ def add_node_args(p: argparse.ArgumentParser, *, link: bool = False) -> None:
 def add_json_arg(p: argparse.ArgumentParser) -> None:
     p.add_argument("--json", action="store_true",
                    help="at the end print the node's summary as JSON (one line) instead of its table")
+    p.add_argument("--no-result", action="store_true",
+                   help="print no result at the end (`sea-hil run`'s own children: run prints the session's)")
 
 
 def print_result(args: argparse.Namespace, kind: str, counters: dict[str, Any], finished: bool) -> None:
-    """The node's own result at its end (`sea_hil.report.node_summary`)."""
+    """The node's own result at its end (`sea_hil.report.node_summary`); nothing with `--no-result`."""
+    if args.no_result:
+        return
     print_node_summary(node_summary(kind, counters, finished=finished), as_json=args.json, command=args.command)
 
 

@@ -64,7 +64,7 @@ class RunOptions:
 
 def _controller_cmd(opts: RunOptions, cfg_path: Path) -> list[str]:
     cmd = [sys.executable, "-m", "sea_hil.cli", "controller", "--config", str(cfg_path),
-           "--controller", opts.controller, "--cycles", str(opts.cycles), "--inner", opts.inner]
+           "--controller", opts.controller, "--cycles", str(opts.cycles), "--inner", opts.inner, "--no-result"]
     return cmd + (["--lockstep"] if opts.lockstep else [])
 
 
