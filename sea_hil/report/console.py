@@ -126,6 +126,15 @@ def _warnings(summary: Mapping[str, Any]) -> list[str]:
     out = []
     if not summary.get("lockstep", True):   # lockstep has no deadlines: simulated time waits for every node
         out.append(f"deadline misses: {edge.get('loop_overruns', 0)} edge loop overruns")
+        driver = timing.get("driver") or {}
+        if driver.get("tick_misses"):   # shown below the verdict's threshold too: nothing silent
+            out.append(f"driver tick misses: {driver['tick_misses']} of {driver.get('ticks', 0)}")
+    beyond = (summary.get("link_losses") or {}).get("uplink_beyond_model", 0)
+    if beyond:
+        out.append(f"states lost beyond the uplink model: {beyond}")
+    lost = (summary.get("recording") or {}).get("lost", 0)
+    if lost:
+        out.append(f"recording lost: {lost} messages")
     drops = {k: edge.get(k, 0) for k in ("uplink_dropped", "downlink_dropped", "seq_lost", "bus_errors")}
     out += [f"{k.replace('_', ' ')}: {v}" for k, v in drops.items() if v]
     out += rejection_warnings(summary)

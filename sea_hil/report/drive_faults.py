@@ -11,7 +11,7 @@ are every error flag the drive reported during the latch; `clear_policy` says wh
 the edge when setpoints are fresh again (real time; a lockstep session never clears), a soft-limit latch or an
 e-stop needs the user. `after_session`: the latch began after the last measured sample (the `/tracking` record of the largest cycle
 time `t_s`): in real time the edge stops commanding once setpoints stop and the drive's watchdog takes the limb
-to its safe state, as designed; the verdict lists such a latch but does not count it.
+to its safe state, as designed; summary.json lists such a latch, the verdict does not count it.
 """
 from __future__ import annotations
 
