@@ -126,5 +126,5 @@ class Cia402EdgeNode(EdgeNode):
         c = self.master.counters
         out.update({"cia402_syncs": c.syncs, "cia402_emcys": c.emcys, "cia402_faults": c.faults,
                     "cia402_sdo_aborts": c.sdo_aborts, "cia402_incomplete_syncs": c.incomplete_syncs,
-                    "cia402_sync_misses": self.sync_misses})
+                    "cia402_sync_misses": self.sync_misses, "cia402_rejected_frames": c.rejected_frames})
         return out

@@ -39,6 +39,10 @@ def setup_writes(node: int) -> list[Frame]:
             *(_sdo_write(node, 0x6040, 0, "H", cw) for cw in WALK)]
 
 
+# the shortest payload each function code's frame this master reads may have (SDO reply, TPDO 1, TPDO 2 / 3)
+MIN_BYTES = {0x580: 8, 0x180: 2, 0x280: 8, 0x380: 8}
+
+
 @dataclass
 class MasterCounters:
     sdo_aborts: int = 0
@@ -46,6 +50,7 @@ class MasterCounters:
     faults: int = 0
     syncs: int = 0
     incomplete_syncs: int = 0    # a SYNC sent before the previous one's four TPDOs were all in
+    rejected_frames: int = 0     # a frame of a node's SDO reply / TPDO ids shorter than that object's layout
 
 
 @dataclass
@@ -69,6 +74,9 @@ class Cia402Master:
         node = f.can_id & 0x7F
         kind = f.can_id & ~0x7F
         if node not in self.node_ids:
+            return []
+        if len(f.data) < MIN_BYTES.get(kind, 0):   # malformed: rejected and counted, never raised out of the node
+            self.counters.rejected_frames += 1
             return []
         if kind == 0x700 and f.data == b"\0" and self.phase == "boot":
             self._booted.add(node)

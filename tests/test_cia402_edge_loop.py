@@ -71,3 +71,14 @@ def test_master_start_up_and_inner_loop_on_sync() -> None:
     deviation = max(abs(a[j] - b[j]) for a, b in zip(theta, ref_theta, strict=True) for j in range(2))
     print(f"cia402 inner loop: moved {moved:.4f} rad, max deviation from the unquantised loop {deviation:.2e} rad")
     assert moved > 0.005 and deviation < 1e-4
+
+
+def test_the_master_rejects_and_counts_short_frames_of_its_nodes() -> None:
+    """A truncated SDO reply, statusword or TPDO of the limb's nodes is counted, never raised (the sea profile's
+    edge does the same with malformed frames)."""
+    master = Cia402Master((1, 2))
+    bad = [MasterFrame(0x581, b""), MasterFrame(0x181, b"\x01"), MasterFrame(0x282, b"\x00" * 3),
+           MasterFrame(0x381, b"\x00" * 7)]
+    assert all(master.receive(f) == [] for f in bad)
+    assert master.counters.rejected_frames == len(bad)
+    assert master.measurement() is None
