@@ -35,7 +35,7 @@ QUICK = {**GRID, "--delay-ms": "0,10", "--jitter-ms": "1", "--loss": "0.02"}
 
 
 SCHEMES = {"default": [], "paper": ["--trigger", "controller", "--compensation", "none"]}
-WARM_UP = ("import logging; logging.disable(logging.CRITICAL); from sea_hil.config import load_config; "
+WARM_UP = ("import logging; logging.disable(logging.CRITICAL); from sea_hil.config.loader import load_config; "
            "from sea_hil.offline.session_engine import run_engine; "
            "[run_engine(load_config(None, {'trajectory': {'period_s': 0.05, 'lead_in_s': 0.01}, **ov}), 'et') for ov in "
            "({}, {'trigger': {'placement': 'controller'}, 'controller': {'compensation': 'none'}})]")
