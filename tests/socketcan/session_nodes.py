@@ -130,6 +130,25 @@ def wait_for_sockets(port: int, state: str, count: int, netns: str | None, proc:
             pass
 
 
+RECORDER_READY = "sea-hil record: recording "   # printed once its subscribers are declared (commands/record.py)
+
+
+def wait_for_output(nodes: NodeGroup, name: str, line: str, timeout_s: float = CONNECT_TIMEOUT_S) -> None:
+    """Block until node ``name`` has printed ``line`` (polling its log), or raise after ``timeout_s`` or as soon as
+    it exits."""
+    proc = nodes.procs[name]
+    deadline = time.monotonic() + timeout_s
+    while line not in nodes.output(name):
+        if proc.poll() is not None:
+            raise AssertionError(f"{name} exited ({proc.returncode}) before printing {line!r}")
+        if time.monotonic() > deadline:
+            raise AssertionError(f"{name} did not print {line!r} within {timeout_s} s")
+        try:
+            proc.wait(timeout=0.2)   # bounded wait on the node doubles as the poll interval
+        except subprocess.TimeoutExpired:
+            pass
+
+
 @dataclass(frozen=True)
 class NodeSession:
     """Where the nodes of one lockstep session run. Plant, edge and recorder share the CAN interface (and
@@ -173,6 +192,9 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
             nodes.start("record", sea_hil_cmd("record", "--can", s.can, "--out", str(mcap), "--connect", s.endpoint,
                                               "--config", str(s.client_config), netns=s.bus_netns))
             wait_for_sockets(s.port, "established", 1, s.bus_netns, edge)  # the recorder is in before the controller
+            # connected is not subscribed: a recorder that only connects is a Zenoh client, whose subscriptions follow
+            # its connection (a first tracking record was missed once in the guest without this wait)
+            wait_for_output(nodes, "record", RECORDER_READY)
         except AssertionError as err:
             raise AssertionError(f"{err}\n{nodes.outputs()}") from None
         ctl = nodes.start("controller", sea_hil_cmd("controller", "--controller", s.controller, "--cycles", "1",
