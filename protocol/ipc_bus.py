@@ -111,6 +111,9 @@ class IpcBus(can.BusABC):
         self._ready: collections.deque[int] = collections.deque()
         self._listener, self._name = self._join()
         self._path = self._dir / self._name
+        # the directory holds this member's file, so it stays (rmdir fails) while this bus is open: fstat of a
+        # descriptor is ~1 us cheaper a send than stat of the path
+        self._dir_fd = os.open(self._dir, os.O_RDONLY | os.O_DIRECTORY)
         self._epoll = select.epoll()
         self._epoll.register(self._listener.fileno(), select.EPOLLIN)
         super().__init__(channel=channel, can_filters=can_filters, **kwargs)
@@ -152,10 +155,7 @@ class IpcBus(can.BusABC):
     def _refresh_peers(self) -> None:
         """Connect to members that joined, forget members whose file is gone (the directory listed again only when
         its mtime changed, or when the last listing was too close to that mtime to be sure: `SCAN_SETTLE_NS`)."""
-        try:
-            mtime_ns = os.stat(self._dir).st_mtime_ns
-        except FileNotFoundError:
-            mtime_ns = -1
+        mtime_ns = os.fstat(self._dir_fd).st_mtime_ns
         if mtime_ns == self._seen_mtime_ns and self._scan_settled:
             return
         t_scan_ns = time.time_ns()
@@ -354,6 +354,7 @@ class IpcBus(can.BusABC):
             conn.close()
         self._in.clear()
         self._epoll.close()
+        os.close(self._dir_fd)
         try:
             self._dir.rmdir()
         except OSError:   # other members (or a joining one) still there
