@@ -341,6 +341,10 @@ class IpcBus(can.BusABC):
         if self._is_shutdown:
             return
         super().shutdown()
+        if self.frames_dropped:
+            log.warning("%s: %d frame(s) sent were dropped for stuck members (%s)", self.channel_info,
+                        self.frames_dropped, ", ".join(f"{p.name}: {p.dropped}" for p in self._peers.values()
+                                                       if p.dropped) or "members since gone")
         try:
             self._path.unlink()
         except FileNotFoundError:

@@ -171,7 +171,8 @@ def test_shutdown_removes_the_member_and_the_last_one_the_directory(make_bus: Ma
         b.send(frame(2))
 
 
-def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counted(make_bus: MakeBus, bus_dir: str) -> None:
+def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counted(
+        make_bus: MakeBus, bus_dir: str, caplog: pytest.LogCaptureFixture) -> None:
     a, b = make_bus(send_timeout_s=0.05, sndbuf_bytes=16384), make_bus()
     stuck = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)   # listens, never accepts nor reads
     stuck.bind(str(channel_dir(CH, bus_dir) / "stuck.sock"))
@@ -182,6 +183,9 @@ def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counte
         got.append(int.from_bytes(b.recv(1.0).data, "little"))    # b reads as it goes: never full
     assert a.member_count == 2 and a.send_waits == 1 and 0 < a.frames_dropped < 500
     assert got == list(range(500)) and b.recv(0) is None
+    a.shutdown()
+    assert f"{a.frames_dropped} frame(s) sent were dropped for stuck members (stuck.sock: {a.frames_dropped})" \
+        in caplog.text
     stuck.close()
 
 
