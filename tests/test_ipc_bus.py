@@ -17,12 +17,14 @@ from typing import Any
 import can
 import pytest
 
+from sea_hil.config.loader import load_config
 from sea_hil.config.wire_names import parse_can_spec
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.protocol.ipc_bus import IpcBus, channel_dir
 from sea_hil.protocol.ipc_wire import HEADER, MAGIC, decode_frame, encode_frame
 from sea_hil.runtime.processes import end_process
+from sea_hil.session.limbs import bus_specs
 
 MEMBER = Path(__file__).resolve().parent / "ipc" / "member.py"
 CH = "bus"
@@ -240,6 +242,8 @@ def test_fifty_thousand_frames_from_two_processes_to_a_slow_receiver_lose_nothin
 
 def test_spec_and_python_can_entry_point(bus_dir: str) -> None:
     assert parse_can_spec("ipc:sea-hil") == ("ipc", "sea-hil")
+    assert load_config(overrides={"can": {"interface": "ipc:sea-hil"}}).can.interface == "ipc:sea-hil"
+    assert bus_specs("ipc:limb", 2) == ["ipc:limb0", "ipc:limb1"]
     for bad in ("ipc:", "ipc:.hidden", "ipc:a/b", "ipc:" + "x" * 41):
         with pytest.raises(ConfigError, match="ipc channel"):
             parse_can_spec(bad)
