@@ -185,10 +185,26 @@ def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counte
         got.append(int.from_bytes(b.recv(1.0).data, "little"))    # b reads as it goes: never full
     assert a.member_count == 2 and a.send_waits == 1 and 0 < a.frames_dropped < 500
     assert got == list(range(500)) and b.recv(0) is None
+    conn, _ = stuck.accept()           # it catches up: reads everything queued for it
+    conn.setblocking(False)
+    queued = [decode_frame(p, CH) for p in iter(lambda: _recv_or_none(conn), None)]
+    assert [int.from_bytes(m.data, "little") for m in queued] == list(range(len(queued)))   # a prefix, in order
+    assert len(queued) + a.frames_dropped == 500
+    a.send(frame(500))                 # then gets frames again
+    assert int.from_bytes(decode_frame(conn.recv(100), CH).data, "little") == 500
+    assert "reads again" in caplog.text
+    conn.close()
     a.shutdown()
     assert f"{a.frames_dropped} frame(s) sent were dropped for stuck members (stuck.sock: {a.frames_dropped})" \
         in caplog.text
     stuck.close()
+
+
+def _recv_or_none(conn: socket.socket) -> bytes | None:
+    try:
+        return conn.recv(100)
+    except BlockingIOError:
+        return None
 
 
 def test_dead_members_are_detected_not_waited_for(make_bus: MakeBus, bus_dir: str) -> None:
