@@ -42,11 +42,11 @@ def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[i
 
 def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     """Every safe-state latch of every drive of the recording, in time order (see the module docstring)."""
-    codec = SeaCodec(fd=None)
-    hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
     raw = data.messages.get("/can/raw", [])
     if not raw:
         return []
+    codec = SeaCodec(fd=None)
+    hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
     t0_ns = raw[0].log_time_ns
     tracking = data.messages.get("/tracking", [])
     last = max(tracking, key=lambda m: m.payload.get("t_s", float("-inf")), default=None)
