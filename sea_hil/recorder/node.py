@@ -8,7 +8,8 @@ forwards raw frames and the child process decodes and writes.
 
 On SocketCAN (and udp_multicast) the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
 large receive buffer (`sea_hil.protocol.canbus.enlarge_rx_buffer`; on udp_multicast too) and the frames that were missed anyway are counted from seq gaps
-(`can_frames_missed`, `sea_hil.recorder.can_tap.SeqGapCounter`).
+(`can_frames_missed`, `sea_hil.recorder.can_tap.SeqGapCounter`). The `ipc` bus drops nothing for a tap that keeps reading (its
+senders wait instead); its gaps are counted the same way.
 """
 from __future__ import annotations
 

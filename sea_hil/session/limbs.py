@@ -8,7 +8,8 @@ default limb (`[zenoh] limb`, `node_id`, `[can] interface`) -- once, or `n` time
 profile, `sea_hil.protocol.bus_timing.planned_load_pct`); classic CAN at 1 Mbit/s: 51.1 % a limb, one limb per
 bus (1.96 would fit at 100 %); CAN FD at 1 / 5 Mbit/s: 16.4 % a limb, four limbs per bus.
 Bus channels count up from the configured one (`bus_specs`): `virtual:NAME` -> `virtual:NAME0, NAME1, ...`,
-`socketcan:vcan0` -> `vcan0, vcan1, ...`, `udp_multicast:239.74.163.2` -> `.2, .3, ...`; one bus keeps its spec.
+`socketcan:vcan0` -> `vcan0, vcan1, ...`, `ipc:NAME` -> `ipc:NAME0, NAME1, ...`, `udp_multicast:239.74.163.2` -> `.2, .3, ...`;
+one bus keeps its spec.
 """
 from __future__ import annotations
 
