@@ -30,10 +30,11 @@ from sea_hil.report.verdict import verdict, verdict_config_of
 
 # edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
 # re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
-# extra commands on real-time setpoint arrival (`latency_*` go to timing.latency_us)
+# extra commands on real-time setpoint arrival, the cia402 SYNC producer's missed periods (`latency_*` go to
+# timing.latency_us)
 EDGE_TIMING_PREFIXES = ("latency_", "apply_latency_us_", "loop_us_", "can_")   # can_: the bus-timing model
 EDGE_TIMING_KEYS = frozenset({"loop_overruns", "lockstep_resends", "lockstep_startup_resends", "arrival_commands",
-                              "seq_duplicates", "stale_setpoints"})
+                              "seq_duplicates", "stale_setpoints", "cia402_sync_misses"})
 
 
 def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
