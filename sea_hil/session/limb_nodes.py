@@ -60,7 +60,7 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
         return nodes
     for spec, group in groups.items():
         plant_bus, edge_bus, tap = handles[spec]
-        nodes.taps.append(None if b.cfg.can.profile == "cia402" else tap)   # CANopen frames: not the DBC's
+        nodes.taps.append(tap)   # cia402: the tap decodes CANopen (sea_hil.recorder.can_tap, the session's config)
         nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
         edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
                  for limb in group]
