@@ -13,8 +13,9 @@ heartbeat, EMCY, SDO, PDOs) goes to `/can/raw` with its CANopen node id (`node_i
 and SYNC), nothing is decoded with the DBC; the target voltages of each limb's two RPDOs (object 0x2000, decoded by
 `protocol.cia402_decode` with the mapping the nodes have at the time) make one `/can/command` (`node_id`: the hip
 node's, `seq`: the number of SYNCs seen, mod 256), so the summary's voltages and the recording's completeness check
-read it as in the sea profile. Sample time base: one `can.feedback_rate_hz` period per SYNC, the drive's lockstep
-clock (frames before the first SYNC: 0).
+read it as in the sea profile. Sample time base: one `can.feedback_rate_hz` period per SYNC (COB-ID 0x080, the
+dictionary's default) seen on the frame's bus, the drive's lockstep clock (frames before the first SYNC: 0), given
+by the bus's recorder node (`stamp`): a frame is recorded at the time it comes with.
 
 Missed frames: feedback and voltage frames carry an 8-bit `seq` that steps by one per sample, and CAN keeps the
 order of one id's frames, so a forward step of n > 1 on one id means n - 1 frames of that id never reached the
@@ -47,6 +48,7 @@ from sea_hil.protocol.can_frames import (
     VoltageCmd,
 )
 from sea_hil.protocol.cia402_decode import Cia402Decoder, decoder_for
+from sea_hil.protocol.cia402_od import SYNC_DEFAULT
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, log_message
 
@@ -140,7 +142,8 @@ class CanTap:
         self.canopen: Cia402Decoder | None = None  # `configure`: a cia402 session (module docstring)
         self._pairs: tuple[tuple[int, int], ...] = ()
         self._volts: dict[int, int] = {}           # cia402: node -> its newest target voltage (mV) not yet paired
-        self._syncs = 0
+        self._syncs = 0                            # cia402: SYNCs decoded (the /can/command seq)
+        self._bus_syncs = 0                        # cia402, sample time base: SYNCs stamped (`stamp`)
         self._period_ns = 0
 
     def configure(self, config_toml: str) -> None:
@@ -198,6 +201,16 @@ class CanTap:
         recs.extend(Record("/log/faults", t_ns, t_ns, log_message(t_ns, lv, who, text), seq) for lv, who, text in logs)
         return recs
 
+    def stamp(self, t_ns: int, can_id: int, is_extended: bool = False) -> int:
+        """The log time of a frame received at `t_ns` on this tap's bus: `t_ns`, except in a cia402 session on the
+        sample time base: the bus's SYNCs so far (this one included) times the SYNC period. Called by the recorder
+        node of each bus, so that every bus keeps its own clock when several buses share one recorder process."""
+        if self.canopen is None or self.time_base == "wall":
+            return t_ns
+        if can_id == SYNC_DEFAULT and not is_extended:
+            self._bus_syncs += 1
+        return self._bus_syncs * self._period_ns
+
     def _canopen_records(self, decoder: Cia402Decoder, f: RawFrame) -> list[Record]:
         """A cia402 session's frame: `/can/raw`, and `/can/command` when it completes a limb's pair of target
         voltages (module docstring)."""
@@ -205,7 +218,7 @@ class CanTap:
         d = decoder.decode(f.can_id, f.data, remote=f.is_remote, extended=f.is_extended or f.is_error)
         if d.kind == "SYNC":
             self._syncs += 1
-        t_ns = f.t_ns if self.time_base == "wall" else self._syncs * self._period_ns
+        t_ns = f.t_ns   # stamped by the bus's recorder node (`stamp`)
         raw = {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
                "is_extended": f.is_extended, "node_id": d.node_id}
         out = [Record("/can/raw", t_ns, t_ns, raw)]

@@ -36,11 +36,15 @@ def field(summary: Mapping[str, Any], *path: str, default: Any = None) -> Any:
 
 
 def sync_periods(summary: Mapping[str, Any]) -> tuple[int, int] | None:
-    """The cia402 profile's SYNC deadlines of a real-time run: (periods missed by the edge's SYNC producer, periods
-    due = SYNCs sent + missed), from the edge counters `cia402_sync_misses` and `cia402_syncs` (timing.edge and
-    edge); None for a run without them (the sea profile, the offline engine)."""
-    edge = {**(summary.get("edge") or {}), **((summary.get("timing") or {}).get("edge") or {})}
-    misses, syncs = edge.get("cia402_sync_misses"), edge.get("cia402_syncs")
+    """The cia402 profile's SYNC deadlines of a run: (periods missed by the edges' SYNC producers, periods due =
+    SYNCs sent + missed), from `timing.sync` (every limb), else the first limb's edge counters `cia402_sync_misses`
+    and `cia402_syncs` (timing.edge and edge); None for a run without them (the sea profile, the offline engine)."""
+    sync = (summary.get("timing") or {}).get("sync")
+    if isinstance(sync, Mapping):
+        misses, syncs = sync.get("misses"), sync.get("syncs")
+    else:
+        edge = {**(summary.get("edge") or {}), **((summary.get("timing") or {}).get("edge") or {})}
+        misses, syncs = edge.get("cia402_sync_misses"), edge.get("cia402_syncs")
     if not isinstance(misses, (int, float)) or not isinstance(syncs, (int, float)) or syncs + misses <= 0:
         return None
     return int(misses), int(syncs + misses)

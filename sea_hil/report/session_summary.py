@@ -24,7 +24,7 @@ from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.completeness import completeness_block
 from sea_hil.report.drive_faults import drive_faults
-from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
+from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs, sync_block
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 from sea_hil.report.verdict import verdict, verdict_config_of
 
@@ -172,6 +172,9 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     driver = driver_block(data)
     if driver is not None:
         summary[TIMING_KEY]["driver"] = driver
+    sync = sync_block(per)
+    if sync is not None:
+        summary[TIMING_KEY]["sync"] = sync
     summary["drive_faults"] = drive_faults(data)
     rec = recording_block(data)
     if rec is not None:
