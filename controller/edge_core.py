@@ -556,6 +556,15 @@ class EdgeCore:
                          self.driver_state.name)
         self._stopped = not command and (self._stopped or self.counters.commands_sent > 0)
 
+    def ran_elsewhere(self, accepted: int, commanded: int, saturated: int) -> None:
+        """The offline session engine ran samples of this edge in its compiled kernel (sea_hil/offline/drive_kernel.py:
+        this core's own inner step, between the samples it hands the core): `accepted` samples not passed to `accept`,
+        `commanded` inner steps (VOLTAGE_CMDs), `saturated` of them clipped. Counted as the shell would count them,
+        so `stats` is the session's; no loop time is recorded (none was measured)."""
+        self.counters.feedback += accepted
+        self.counters.commands_sent += commanded
+        self.inner.saturated_steps += saturated
+
     # ---- counters out -------------------------------------------------------------------------------------------
     def stats(self) -> dict[str, float]:
         """The edge's flat counters (the fields of its stats record; keys read by the session summary)."""

@@ -20,10 +20,12 @@ from typing import Any
 
 import numpy as np
 
+from sea_hil.config.verdict import VerdictConfig
 from sea_hil.protocol.payload_fields import RejectReason
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT, ENGINE_SOURCE, META_SESSION
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.completeness import completeness_block
-from sea_hil.report.drive_faults import drive_faults
+from sea_hil.report.drive_faults import drive_faults as drive_faults_of
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 from sea_hil.report.verdict import verdict, verdict_config_of
@@ -158,8 +160,18 @@ def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
     return det, timing
 
 
-def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
-    """summary.json of a session recording, every limb (see the module docstring)."""
+def recorded(data: SessionData) -> bool:
+    """Is `data` a recorder's file (not the offline engine's in-memory session, `ENGINE_SESSION_META`)?"""
+    return data.metadata.get(META_SESSION, {}).get("source") != ENGINE_SOURCE
+
+
+def session_summary(data: SessionData, controller: str, node_counters: Mapping[str, Mapping[str, Any]] | None = None,
+                    *, verdict_cfg: VerdictConfig | None = None,
+                    drive_faults: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+    """summary.json of a session recording, every limb (see the module docstring), judged once, here: a recorder's
+    file with its `completeness` block (the file against the nodes' own counters; `node_counters` stand in for final
+    records it lacks, issue 32), then the `verdict` under `verdict_cfg` (None: the `[verdict]` of the recording's
+    attached config). `drive_faults`: the latches known otherwise than from the recording (the offline engine's)."""
     limbs = recorded_limbs(data)
     if len(limbs) == 1:
         per = [one_limb_summary(data, controller)]
@@ -171,25 +183,16 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     driver = driver_block(data)
     if driver is not None:
         summary[TIMING_KEY]["driver"] = driver
-    summary["drive_faults"] = drive_faults(data)
+    summary["drive_faults"] = drive_faults_of(data) if drive_faults is None else drive_faults
     rec = recording_block(data)
     if rec is not None:
         summary["recording"] = rec
     losses = link_losses(data, summary["edge"])
     if losses is not None:
         summary["link_losses"] = losses
-    cfg = verdict_config_of(data.attachments.get("config.toml"))
-    summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
-    return summary
-
-
-def with_completeness(summary: dict[str, Any], data: SessionData,
-                      node_counters: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
-    """`summary` of a recorder's file (`run`, `report`) with its `completeness` block (the file against the nodes'
-    own counters; `node_counters` stand in for final records the file lacks, issue 32) and the verdict judged again
-    with it. Not for the offline engine's in-memory sessions: they are not recordings."""
-    summary["completeness"] = completeness_block(data, node_counters)
-    cfg = verdict_config_of(data.attachments.get("config.toml"))
+    if recorded(data):
+        summary["completeness"] = completeness_block(data, node_counters)
+    cfg = verdict_cfg if verdict_cfg is not None else verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT))
     summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
     return summary
 
