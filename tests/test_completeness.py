@@ -76,3 +76,36 @@ def test_a_cut_off_recording_checked_against_the_nodes_own_summaries() -> None:
     assert block["incomplete"] == ["state", "downlink"] and block["unverified"] == []
     assert (block["channels"]["state"]["missing"], block["channels"]["downlink"]["missing"]) == (175 - 59, 1)
     assert block["counters_from_node_summaries"] == ["controller", "edge"] and not block["complete"]
+
+
+# ---- several limbs: each limb's channels against its own nodes' counters ------------------------------------------
+LIMBS_META = {"limb1": "1 virtual:sea-hil0", "limb2": "2 virtual:sea-hil1"}
+
+
+def _as_limb(data: SessionData, limb: str) -> dict[str, list[RecordedMessage]]:
+    """`data`'s messages (limb1's keys) as those of `limb`."""
+    def moved(m: RecordedMessage) -> RecordedMessage:
+        key = m.payload.get("key")
+        return m if not isinstance(key, str) else RecordedMessage(m.log_time_ns, m.publish_time_ns, {
+            **m.payload, "key": key.replace("/limb1/", f"/{limb}/")}, m.sequence)
+    return {topic: [moved(m) for m in msgs] for topic, msgs in data.messages.items()}
+
+
+def two_limbs(published2: range = PUBLISHED, edge2: dict[str, int] | None = None,
+              edge1: dict[str, int] | None = None) -> SessionData:
+    """A recording of two limbs (node ids 1 and 2), each with its edge's and controller's final record; limb2
+    recorded `published2` of its states."""
+    one, two = _session(20, 170, PUBLISHED, EVENTS), _as_limb(_session(20, 170, published2, EVENTS), "limb2")
+    data = SessionData(messages={t: one.messages.get(t, []) + two.get(t, []) for t in {*one.messages, *two}},
+                       metadata={"sea-hil.limbs": dict(LIMBS_META)})
+    data.messages["/stats"] = [_final("edge", node_id=1, uplink_msgs=len(PUBLISHED), **(edge1 or {})),
+                               _final("edge", node_id=2, uplink_msgs=len(PUBLISHED), **(edge2 or {})),
+                               _final("controller", setpoints_sent=len(EVENTS)),
+                               _final("controller", setpoints_sent=len(EVENTS))]
+    return data
+
+
+def test_two_complete_limbs_are_complete() -> None:
+    block = completeness_block(two_limbs())
+    jsonschema.validate(block, COMPLETENESS_SCHEMA)
+    assert block["complete"] and block["incomplete"] == [], block

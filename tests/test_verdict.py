@@ -12,11 +12,13 @@ from typing import Any
 
 import jsonschema
 import pytest
+from test_completeness import two_limbs
 
 from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.recorder.reader import read_session
+from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.report.verdict import COUNTER_RULES, verdict
 from sea_hil.session.run import RunOptions, run_session
@@ -229,6 +231,20 @@ def test_every_counter_rule_names_a_threshold_and_degrades_above_it() -> None:
         assert v["status"] == "degraded" and [r["code"] for r in v["reasons"]] == [code], v
         assert verdict(s, VerdictConfig(**{next(r.threshold for r in COUNTER_RULES if r.code == code): 3}))[
             "status"] == "ok"
+
+
+def test_every_limbs_edge_counters_are_judged() -> None:
+    """Two limbs (a synthetic recording, tests/test_completeness.py): limb2's edge lost 3 setpoints and rejected 2
+    out of the envelope, limb1's nothing; the top-level `edge` block is limb1's, yet the verdict names limb2."""
+    s = session_summary(two_limbs(edge2={"seq_lost": 3, "setpoints_out_of_envelope": 2}), "et")
+    jsonschema.validate(s, SUMMARY_SCHEMA)
+    assert "seq_lost" not in s["edge"] and [e["edge"].get("seq_lost") for e in s["limbs"]] == [None, 3]
+    reasons = {(r["code"], r.get("limb")): r for r in s["verdict"]["reasons"]}
+    assert set(reasons) == {("lost_setpoints", "limb2"), ("envelope_rejections", "limb2")}, s["verdict"]
+    assert reasons[("lost_setpoints", "limb2")]["value"] == 3
+    assert reasons[("lost_setpoints", "limb2")]["message"].startswith("limb2: ")
+    one = session_summary(two_limbs(edge1={"seq_lost": 1}), "et")   # limb1's own counter: named too
+    assert [(r["code"], r.get("limb")) for r in one["verdict"]["reasons"]] == [("lost_setpoints", "limb1")]
 
 
 def test_lockstep_has_no_tick_deadlines() -> None:

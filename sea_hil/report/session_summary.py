@@ -12,7 +12,8 @@ latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIM
 the edge's other final `/stats` counters are under `edge`.
 
 Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb's (the 1-limb layout), `limbs` has
-every limb's transmissions, tracking and latency, `limbs_total` the sums and the worst tracking."""
+every limb's transmissions, tracking and latency (and, with several limbs, its own `edge` counters and `rejections`,
+which the verdict judges limb by limb), `limbs_total` the sums and the worst tracking."""
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
@@ -178,7 +179,7 @@ def session_summary(data: SessionData, controller: str, node_counters: Mapping[s
     else:
         per = [one_limb_summary(limb_view(data, name, node_id), controller) for name, node_id, _ in limbs]
     summary = per[0]
-    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per, strict=True)]
+    entries = [limb_entry(*limb, s, counters=len(limbs) > 1) for limb, s in zip(limbs, per, strict=True)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
     driver = driver_block(data)
     if driver is not None:

@@ -59,7 +59,11 @@ TIMING = _object({
 LATENCY = _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")})
 LIMB = _object({"limb": {"type": "string"}, "node_id": _COUNT, "bus": {"type": "string"},
                 "transmissions": TRANSMISSIONS, "tracking": TRACKING,
-                "timing": _object({"latency_us": LATENCY})})               # the limb's wall-time-derived part
+                "timing": _object({"latency_us": LATENCY}),                # the limb's wall-time-derived part
+                # several limbs: the limb's own deterministic edge counters and rejections (the verdict's per limb)
+                "edge": {"type": "object", "additionalProperties": _NUMBER},
+                "rejections": {"type": "object", "additionalProperties": _COUNT}},
+               required=("limb", "node_id", "bus", "transmissions", "tracking", "timing"))
 LIMBS_TOTAL = _object({"limbs": _COUNT, "buses": _COUNT, "transmissions": TRANSMISSIONS, "tracking": TRACKING})
 
 SUMMARY_SCHEMA: dict[str, Any] = {
