@@ -92,20 +92,49 @@ def _as_limb(data: SessionData, limb: str) -> dict[str, list[RecordedMessage]]:
 
 
 def two_limbs(published2: range = PUBLISHED, edge2: dict[str, int] | None = None,
-              edge1: dict[str, int] | None = None) -> SessionData:
-    """A recording of two limbs (node ids 1 and 2), each with its edge's and controller's final record; limb2
-    recorded `published2` of its states."""
+              edge1: dict[str, int] | None = None, controller_node_ids: bool = True) -> SessionData:
+    """A recording of two limbs (node ids 1 and 2), each with its edge's and controller's final record (the
+    controller's with its limb's `node_id`, as `sea-hil controller` writes it, or without: an outside controller);
+    limb2's recorder kept `published2` of its states."""
     one, two = _session(20, 170, PUBLISHED, EVENTS), _as_limb(_session(20, 170, published2, EVENTS), "limb2")
     data = SessionData(messages={t: one.messages.get(t, []) + two.get(t, []) for t in {*one.messages, *two}},
                        metadata={"sea-hil.limbs": dict(LIMBS_META)})
-    data.messages["/stats"] = [_final("edge", node_id=1, uplink_msgs=len(PUBLISHED), **(edge1 or {})),
-                               _final("edge", node_id=2, uplink_msgs=len(PUBLISHED), **(edge2 or {})),
-                               _final("controller", setpoints_sent=len(EVENTS)),
-                               _final("controller", setpoints_sent=len(EVENTS))]
+    data.messages["/stats"] = [
+        *(_final("edge", **{"node_id": n, "uplink_msgs": len(PUBLISHED), **(extra or {})})
+          for n, extra in ((1, edge1), (2, edge2))),
+        *(_final("controller", setpoints_sent=len(EVENTS), **({"node_id": n} if controller_node_ids else {}))
+          for n in (1, 2))]
     return data
 
 
 def test_two_complete_limbs_are_complete() -> None:
-    block = completeness_block(two_limbs())
-    jsonschema.validate(block, COMPLETENESS_SCHEMA)
-    assert block["complete"] and block["incomplete"] == [], block
+    for by_node in (True, False):
+        block = completeness_block(two_limbs(controller_node_ids=by_node))
+        jsonschema.validate(block, COMPLETENESS_SCHEMA)
+        assert block["complete"] and block["incomplete"] == [], block
+        assert ("downlink.limb2" in block["channels"]) is by_node and ("downlink" in block["channels"]) is not by_node
+
+
+def test_one_limbs_surplus_does_not_hide_anothers_shortfall() -> None:
+    """limb2's recorder missed its first 40 states; limb1's file holds 40 states more than its edge counted (an
+    edge restarted mid-session: the records of its first run). Summed over the limbs the state channel balances;
+    per limb it does not."""
+    data = two_limbs(published2=range(41, 176), edge1={"uplink_msgs": len(PUBLISHED) - 40})
+    block = completeness_block(data)
+    assert not block["complete"] and block["incomplete"] == ["state.limb2"], block
+    c = block["channels"]["state.limb2"]
+    assert (c["expected"], c["recorded"], c["missing"]) == (175, 135, 40)
+    assert block["channels"]["state.limb1"]["extra"] == 40
+    reasons = session_summary(data, "et")["verdict"]["reasons"]
+    assert [(r["code"], r.get("channel")) for r in reasons] == [("recording_incomplete", "state.limb2")], reasons
+
+
+def test_a_limb_without_its_nodes_final_records_is_unverified() -> None:
+    data = two_limbs()
+    data.messages["/stats"] = [m for m in data.messages["/stats"] if m.payload.get("node_id") != 2]
+    block = completeness_block(data)
+    assert sorted(block["unverified"]) == ["downlink.limb2", "state.limb2"], block
+    assert block["never_seen"] == ["edge final stats (limb2)", "controller final stats (limb2)"]
+    supplied = completeness_block(data, [("edge", {"node_id": 2, "uplink_msgs": len(PUBLISHED)})])
+    assert supplied["unverified"] == ["downlink.limb2"] and supplied["counters_from_node_summaries"] == [
+        "edge (limb2)"]

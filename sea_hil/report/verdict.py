@@ -190,7 +190,7 @@ def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> lis
         return []
     out = []
     for name, c in (comp.get("channels") or {}).items():
-        if name not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):
+        if name.split(".")[0] not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):   # state.<limb>: per limb
             continue
         if c.get("status") == "incomplete" and (c.get("missing") or 0) > cfg.recording_losses_max:
             out.append(_reason("recording_incomplete", DEGRADED, f"recording of {name}: {c['missing']} of "
