@@ -88,6 +88,26 @@ def test_the_latch_is_explained_once_in_the_recording(forced: tuple[Path, int, s
     assert "above safety.drive.position_max_rad[0] = 0.66 rad" in lines[0] and "needs the user" in lines[0]
 
 
+def test_without_a_can_tap_the_edges_latch_count_judges(forced: tuple[Path, int, str]) -> None:
+    """A recording without a CAN tap (`sea-hil record` without `--can`: no /can/raw) of the faulted drive: the latch
+    the edge counted from the heartbeats it received makes the verdict invalid, with the same flags and time; with
+    the tap, the heartbeats in the file judge and the edge's count is not added (one reason, not two)."""
+    data = read_session(forced[0] / "session.mcap")
+    tapped = session_summary(data, "et")
+    data.messages.pop("/can/raw")
+    untapped = session_summary(data, "et")
+    assert [(f["source"], f["flags"]) for f in tapped["drive_faults"]] == [("can", ["POSITION_LIMIT"])]
+    assert [(f["source"], f["flags"]) for f in untapped["drive_faults"]] == [("edge", ["POSITION_LIMIT"])]
+    assert tapped["edge"]["drive_latches"] == 1 == untapped["edge"]["drive_latches"]
+    assert untapped["verdict"]["status"] == "invalid"
+    faults = [r for r in untapped["verdict"]["reasons"] if r["severity"] == "invalid"]
+    assert [r["code"] for r in faults] == ["drive_fault"] and faults[0]["flags"] == ["POSITION_LIMIT"]
+    assert [r["code"] for r in tapped["verdict"]["reasons"] if r["severity"] == "invalid"] == ["drive_fault"]
+    edge_t, can_t = untapped["drive_faults"][0]["t_s"], tapped["drive_faults"][0]["t_s"]
+    assert abs(edge_t - can_t) <= 0.002, (edge_t, can_t)   # the same heartbeat: the sample clock vs the tap's
+    assert untapped["drive_faults"][0]["in_fault_s"] > 10.0 and not untapped["drive_faults"][0]["cleared"]
+
+
 def test_report_reproduces_the_verdict(forced: tuple[Path, int, str], tmp_path: Path,
                                        capsys: pytest.CaptureFixture[str]) -> None:
     out = forced[0]

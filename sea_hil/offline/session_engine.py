@@ -31,7 +31,6 @@ from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
 from sea_hil.dynamics import initial_state
 from sea_hil.errors import SeaHilError
-from sea_hil.fault_explain import POLICY_USER
 from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
@@ -39,7 +38,7 @@ from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.wire_quantiser import dbc_resolutions
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
 from sea_hil.plant_emulator.soft_limits import DriveLimits
-from sea_hil.protocol.can_frames import Feedback
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, decode
 from sea_hil.recorder.meta import ENGINE_SESSION_META, META_SESSION
@@ -135,13 +134,10 @@ def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, A
 
 
 def result_summary(res: EngineResult, mode: str, cfg: SeaHilConfig) -> dict[str, Any]:
-    """summary.json of an engine session: `session_summary` of its messages (the edge block, rejections and verdict
-    from the edge core's final `/stats` record, as lockstep's), judged under `cfg`'s `[verdict]`, with the engine's
-    `drive_faults` (it knows only whether a soft limit faulted the drive, not when: `t_s` None; it records no
-    heartbeats)."""
-    faults = [{"node_id": 1, "t_s": None, "state": "FAULT", "flags": ["soft limit"], "in_fault_s": None,
-               "cleared": False, "clear_policy": POLICY_USER}] if res.drive_faulted else []
-    return session_summary(res.data, mode, verdict_cfg=cfg.verdict, drive_faults=faults)
+    """summary.json of an engine session: `session_summary` of its messages (the edge block, rejections, drive
+    latches and verdict from the edge core's final `/stats` record, as lockstep's), judged under `cfg`'s
+    `[verdict]`."""
+    return session_summary(res.data, mode, verdict_cfg=cfg.verdict)
 
 
 def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOptions | None = None) -> EngineResult:
@@ -205,7 +201,7 @@ class _Session:
     def run(self) -> EngineResult:
         cfg, edge, inner = self.cfg, self.edge, self.edge.inner
         m = feedback_measurement(self.x, self.p, self.lsb)  # the feedback of the current sample, as the edge decodes it
-        saturated, u_max, k, faulted, finished = 0, [0.0, 0.0], 0, False, False
+        saturated, u_max, k, faulted, finished, told = 0, [0.0, 0.0], 0, 0, False, False
         tab: Any = None
         steps: Any = None
         substeps, period, x = cfg.sim.substeps, self.period_ns, self.x
@@ -214,6 +210,9 @@ class _Session:
             fb = Feedback(self.NODE_ID, k & 0xFF, (now // 1000) & 0xFFFF, (m[0], m[1]), (m[2], m[3]), (m[4], m[5]),
                           (m[6], m[7]))
             edge.accept(fb, 0)
+            if faulted and not told:   # the drive latched in the last stretch: its heartbeat, at the next sample
+                told = True
+                edge.on_heartbeat(self._fault_heartbeat(faulted))
             edge.publish(fb)
             edge.poll(now)
             if not self._controller(now):
@@ -237,6 +236,8 @@ class _Session:
             k = nxt
         if finished:     # lockstep's edge answers the sample at which the controller finished (its inner step is
             edge.ran_elsewhere(0, 1, 0)    # not simulated here: the session ends)
+        if faulted:      # still latched at the end: the drive's last heartbeat
+            edge.on_heartbeat(self._fault_heartbeat(faulted))
         self.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
         stats = edge.stats()
         # the edge's final /stats record, as lockstep's edge writes it at its last sample time (`record_edge_finals`)
@@ -244,7 +245,12 @@ class _Session:
         self.rec.messages["/stats"] = [RecordedMessage(end_ns, end_ns, stats_record("edge", stats, final=True,
                                                                                     t_ns=end_ns))]
         data = SessionData(messages=self.rec.messages, metadata={META_SESSION: ENGINE_SESSION_META}, complete=True)
-        return EngineResult(data, k, saturated, faulted, edge.envelope.rejected, edge.events, stats)
+        return EngineResult(data, k, saturated, bool(faulted), edge.envelope.rejected, edge.events, stats)
+
+    def _fault_heartbeat(self, bits: int) -> Heartbeat:
+        """The HEARTBEAT of a drive in FAULT with the soft-limit `bits` the kernel latched (the engine emulates no
+        heartbeat period: the edge core sees one at the sample after the fault and one at the end)."""
+        return Heartbeat(self.NODE_ID, DriverState.FAULT, ErrorFlags(bits), 0, 0, 0)
 
     def _controller(self, now: int) -> bool:
         """The controller's core answers the states released by `now` (a state released after a newer one is

@@ -26,7 +26,7 @@ from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, ENGINE_SOURCE, META_SESSION
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.completeness import completeness_block
-from sea_hil.report.drive_faults import drive_faults as drive_faults_of
+from sea_hil.report.drive_faults import drive_faults
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 from sea_hil.report.verdict import verdict, verdict_config_of
@@ -167,12 +167,11 @@ def recorded(data: SessionData) -> bool:
 
 
 def session_summary(data: SessionData, controller: str, node_counters: Mapping[str, Mapping[str, Any]] | None = None,
-                    *, verdict_cfg: VerdictConfig | None = None,
-                    drive_faults: list[dict[str, Any]] | None = None) -> dict[str, Any]:
+                    *, verdict_cfg: VerdictConfig | None = None) -> dict[str, Any]:
     """summary.json of a session recording, every limb (see the module docstring), judged once, here: a recorder's
     file with its `completeness` block (the file against the nodes' own counters; `node_counters` stand in for final
     records it lacks, issue 32), then the `verdict` under `verdict_cfg` (None: the `[verdict]` of the recording's
-    attached config). `drive_faults`: the latches known otherwise than from the recording (the offline engine's)."""
+    attached config)."""
     limbs = recorded_limbs(data)
     if len(limbs) == 1:
         per = [one_limb_summary(data, controller)]
@@ -184,7 +183,7 @@ def session_summary(data: SessionData, controller: str, node_counters: Mapping[s
     driver = driver_block(data)
     if driver is not None:
         summary[TIMING_KEY]["driver"] = driver
-    summary["drive_faults"] = drive_faults_of(data) if drive_faults is None else drive_faults
+    summary["drive_faults"] = drive_faults(data)
     rec = recording_block(data)
     if rec is not None:
         summary["recording"] = rec

@@ -35,7 +35,7 @@ _NULLABLE_NUMBER = {"type": ["number", "null"]}
 DRIVE_FAULT = _object({"node_id": _COUNT, "t_s": _NULLABLE_NUMBER, "state": {"enum": ["FAULT", "ESTOP"]},
                        "flags": {"type": "array", "items": {"type": "string"}}, "in_fault_s": _NULLABLE_NUMBER,
                        "cleared": {"type": "boolean"}, "clear_policy": {"type": "string"},
-                       "after_session": {"type": "boolean"}}, required=("node_id", "t_s", "state", "flags",
+                       "after_session": {"type": "boolean"}, "source": {"enum": ["can", "edge"]}}, required=("node_id", "t_s", "state", "flags",
                                                                        "in_fault_s", "cleared", "clear_policy"))
 # sea_hil/report/verdict.py: a reason has its code, severity, message, figure and threshold, and may say more
 REASON = {"type": "object", "required": ["code", "severity", "message", "value", "threshold"],
