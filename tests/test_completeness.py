@@ -3,9 +3,16 @@
 four-process topologies are tests/test_compose_topology.py."""
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import jsonschema
+import pytest
 from test_session_summary import _session
 
+from sea_hil.cli import main
+from sea_hil.commands.report import node_counters_of
+from sea_hil.errors import ConfigError
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_block
 from sea_hil.report.session_summary import session_summary
@@ -138,3 +145,35 @@ def test_a_limb_without_its_nodes_final_records_is_unverified() -> None:
     supplied = completeness_block(data, [("edge", {"node_id": 2, "uplink_msgs": len(PUBLISHED)})])
     assert supplied["unverified"] == ["downlink.limb2"] and supplied["counters_from_node_summaries"] == [
         "edge (limb2)"]
+
+
+def _node_file(tmp: Path, name: str, kind: str, **counters: int) -> Path:
+    path = tmp / name
+    path.write_text("a table line first\n" + json.dumps({"node": kind, "finished": True, "counters": counters}) + "\n",
+                    encoding="utf-8")
+    return path
+
+
+def test_two_node_summaries_of_one_node_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`report --node-summary A --node-summary B` with two summaries of the same node: exit 2, one line naming both
+    (the second silently replaced the first); two limbs' edges (different node_id) are both used."""
+    rec = tmp_path / "run.mcap"
+    rec.write_bytes(b"")       # never read: the summaries are checked first
+    a = _node_file(tmp_path, "a.json", "edge", node_id=1, uplink_msgs=10)
+    b = _node_file(tmp_path, "b.json", "edge", node_id=1, uplink_msgs=12)
+    assert main(["report", str(rec), "--out", str(tmp_path / "o"), "--node-summary", str(a), "--node-summary",
+                 str(b)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a second edge summary of node 1" in err[0] and "a.json" in err[0], err
+    c1 = _node_file(tmp_path, "c1.json", "controller", setpoints_sent=3)     # an outside controller: no node_id
+    c2 = _node_file(tmp_path, "c2.json", "controller", node_id=2, setpoints_sent=3)
+    with pytest.raises(ConfigError, match="a second controller summary"):
+        node_counters_of([c1, c2])
+    two = _node_file(tmp_path, "two.json", "edge", node_id=2, uplink_msgs=len(PUBLISHED))
+    assert node_counters_of([a, two]) == [("edge", {"node_id": 1, "uplink_msgs": 10}),
+                                          ("edge", {"node_id": 2, "uplink_msgs": len(PUBLISHED)})]
+    data = two_limbs()
+    data.messages["/stats"] = [m for m in data.messages["/stats"] if m.payload.get("node") != "edge"]
+    block = completeness_block(data, node_counters_of([_node_file(tmp_path, "e1.json", "edge", node_id=1,
+                                                                  uplink_msgs=len(PUBLISHED)), two]))
+    assert block["counters_from_node_summaries"] == ["edge (limb1)", "edge (limb2)"] and block["unverified"] == []

@@ -133,7 +133,8 @@ def completeness_block(data: SessionData, node_counters: NodeCounters | None = N
     if len(limbs) == 1:
         for kind in NODES:
             own = finals.get(kind, [])
-            extra = [dict(c) for k, c in pairs if k == kind][-1:] if not own else []
+            extra = [dict(c) for k, c in pairs if k == kind and c.get("node_id") in (None, limbs[0][1])][-1:] \
+                if not own else []
             supplied += [kind] if extra else []
             never += [f"{kind} final stats"] if not own else []
             finals[kind] = own + extra

@@ -16,7 +16,7 @@ every limb's transmissions, tracking and latency (and, with several limbs, its o
 which the verdict judges limb by limb), `limbs_total` the sums and the worst tracking."""
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
@@ -25,7 +25,7 @@ from sea_hil.config.verdict import VerdictConfig
 from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, ENGINE_SOURCE, META_SESSION
 from sea_hil.recorder.reader import SessionData
-from sea_hil.report.completeness import completeness_block
+from sea_hil.report.completeness import NodeCounters, completeness_block
 from sea_hil.report.drive_faults import drive_faults
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
@@ -166,7 +166,7 @@ def recorded(data: SessionData) -> bool:
     return data.metadata.get(META_SESSION, {}).get("source") != ENGINE_SOURCE
 
 
-def session_summary(data: SessionData, controller: str, node_counters: Mapping[str, Mapping[str, Any]] | None = None,
+def session_summary(data: SessionData, controller: str, node_counters: NodeCounters | None = None,
                     *, verdict_cfg: VerdictConfig | None = None) -> dict[str, Any]:
     """summary.json of a session recording, every limb (see the module docstring), judged once, here: a recorder's
     file with its `completeness` block (the file against the nodes' own counters; `node_counters` stand in for final
