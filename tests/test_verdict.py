@@ -18,6 +18,7 @@ from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.report.verdict import COUNTER_RULES, verdict
@@ -265,6 +266,25 @@ def test_every_limbs_edge_counters_are_judged() -> None:
     assert reasons[("lost_setpoints", "limb2")]["message"].startswith("limb2: ")
     one = session_summary(two_limbs(edge1={"seq_lost": 1}), "et")   # limb1's own counter: named too
     assert [(r["code"], r.get("limb")) for r in one["verdict"]["reasons"]] == [("lost_setpoints", "limb1")]
+
+
+@pytest.mark.parametrize("table,key", [("late_setpoints_max = -1", "verdict.late_setpoints_max"),
+                                       ("lost_setpoint_max = 3", "verdict.lost_setpoint_max"),   # a typo
+                                       ("envelope_rejections_max = 'a few'", "verdict.envelope_rejections_max")])
+def test_a_bad_verdict_table_in_the_recording_is_an_error(table: str, key: str, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """`report` of a recording whose attached config.toml has a bad [verdict] table: exit 2, one line naming the key
+    (it judged under the defaults without a word: a verdict the session's thresholds did not give)."""
+    path = tmp_path / "bad.mcap"
+    with SessionRecorder(path) as rec:
+        rec.add_attachment("config.toml", f"[verdict]\n{table}\n".encode())
+    assert main(["report", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad [verdict] table" in err[0] and key in err[0], err
+    with SessionRecorder(tmp_path / "garbled.mcap") as rec:
+        rec.add_attachment("config.toml", b"[verdict\n")
+    assert main(["report", str(tmp_path / "garbled.mcap"), "--out", str(tmp_path / "out2")]) == 2
+    assert "config.toml cannot be read" in capsys.readouterr().err
 
 
 def test_lockstep_has_no_tick_deadlines() -> None:

@@ -18,7 +18,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from pydantic import ValidationError
+
+from sea_hil.config.loader import validation_line
 from sea_hil.config.verdict import VerdictConfig
+from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.report.console import field
 
@@ -216,14 +220,22 @@ def verdict(summary: Mapping[str, Any], cfg: VerdictConfig | None = None) -> dic
 
 
 def verdict_config_of(toml_text: str | bytes | None) -> VerdictConfig:
-    """`[verdict]` of a recording's attached config.toml (the defaults when there is none)."""
+    """`[verdict]` of a recording's attached config.toml (the defaults when there is none). A table that does not
+    validate (a hand-edited or foreign file) is a `ConfigError` naming the key: judging under the defaults instead
+    would give a verdict the session's own thresholds did not (docs/verdict.md)."""
     if not toml_text:
         return VerdictConfig()
-    text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
     try:
-        return VerdictConfig.model_validate(tomllib.loads(text).get("verdict", {}))
-    except (tomllib.TOMLDecodeError, ValueError):
-        return VerdictConfig()
+        text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
+        table = tomllib.loads(text).get("verdict", {})
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+        raise ConfigError(f"the recording's config.toml cannot be read, so neither can its [verdict] thresholds: "
+                          f"{err}") from err
+    try:
+        return VerdictConfig.model_validate(table)
+    except ValidationError as err:
+        raise ConfigError(f"the recording's config.toml has a bad [verdict] table: "
+                          f"{validation_line(err, 'verdict.')}") from err
 
 
 def strict_status(summary: Mapping[str, Any]) -> int:
