@@ -18,7 +18,11 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from pydantic import ValidationError
+
+from sea_hil.config.loader import validation_line
 from sea_hil.config.verdict import VerdictConfig
+from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.report.console import field, sync_periods
 
@@ -141,32 +145,59 @@ def _sync_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[st
                             ("sync_miss_max_pct", "sync_miss_floor_factor"))
 
 
+LIMB_SCOPED = ("edge", "rejections")   # blocks each limb has of its own (its edge's counters)
+
+
+def _limb_views(summary: Mapping[str, Any]) -> list[tuple[Mapping[str, Any], str | None]]:
+    """(summary as one limb sees it, the limb's name) per limb: with several limbs, each `limbs` entry's own `edge`
+    and `rejections` in place of the top-level ones (the first limb's); one limb: the summary itself, unnamed."""
+    limbs = summary.get("limbs") or []
+    if len(limbs) > 1 and all(isinstance(e.get("edge"), Mapping) for e in limbs):
+        return [({**summary, "edge": e["edge"], "rejections": e.get("rejections", {})}, str(e["limb"]))
+                for e in limbs]
+    return [(summary, None)]
+
+
 def _counter_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    """Every `COUNTER_RULES` counter above its threshold; the edge's counters of every limb (reasons name it)."""
     out, seen = [], set()
     lockstep = bool(summary.get("lockstep", False))
+    views = _limb_views(summary)
     for rule in COUNTER_RULES:
-        value = field(summary, *rule.path)
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or (rule.realtime_only and lockstep):
+        if rule.realtime_only and lockstep:
             continue
-        if (rule.code, rule.path[-1]) in seen:
-            continue
-        seen.add((rule.code, rule.path[-1]))
-        threshold = getattr(cfg, rule.threshold)
-        name = ".".join(rule.path)
-        if rule.per is not None:
-            base = rule.per(summary)
-            if not base:
+        for view, limb in views if rule.path[0] in LIMB_SCOPED else [(summary, None)]:
+            value = field(view, *rule.path)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or (rule.code, rule.path[-1], limb) \
+                    in seen:
                 continue
-            pct = 100.0 * value / base
-            if pct > threshold:
-                out.append(_reason(rule.code, DEGRADED, f"{rule.what}: {value:g} of {base:g} ({pct:.3f} %, "
-                                                        f"{name}), above verdict.{rule.threshold} = {threshold:g} %",
-                                   round(pct, 4), threshold, counter=name, count=value))
-        elif value > threshold:
-            out.append(_reason(rule.code, DEGRADED, f"{rule.what}: {value:g} ({name}), above verdict."
-                                                    f"{rule.threshold} = {threshold:g}", value, threshold,
-                               counter=name))
+            seen.add((rule.code, rule.path[-1], limb))
+            reason = _counter_reason(rule, view, value, getattr(cfg, rule.threshold))
+            if reason is not None:
+                if limb is not None:
+                    reason = {**reason, "message": f"{limb}: {reason['message']}", "limb": limb}
+                out.append(reason)
     return out
+
+
+def _counter_reason(rule: CounterRule, summary: Mapping[str, Any], value: float, threshold: float
+                    ) -> dict[str, Any] | None:
+    """The reason `rule` gives for `value` (None: within its threshold)."""
+    name = ".".join(rule.path)
+    if rule.per is not None:
+        base = rule.per(summary)
+        if not base:
+            return None
+        pct = 100.0 * value / base
+        if pct <= threshold:
+            return None
+        return _reason(rule.code, DEGRADED, f"{rule.what}: {value:g} of {base:g} ({pct:.3f} %, {name}), above "
+                                            f"verdict.{rule.threshold} = {threshold:g} %", round(pct, 4), threshold,
+                       counter=name, count=value)
+    if value <= threshold:
+        return None
+    return _reason(rule.code, DEGRADED, f"{rule.what}: {value:g} ({name}), above verdict.{rule.threshold} = "
+                                        f"{threshold:g}", value, threshold, counter=name)
 
 
 # channels of summary.json `completeness` judged here; the CAN sequence gaps (`can_frames`) are reported, not judged:
@@ -183,7 +214,7 @@ def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> lis
         return []
     out = []
     for name, c in (comp.get("channels") or {}).items():
-        if name not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):
+        if name.split(".")[0] not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):   # state.<limb>: per limb
             continue
         if c.get("status") == "incomplete" and (c.get("missing") or 0) > cfg.recording_losses_max:
             out.append(_reason("recording_incomplete", DEGRADED, f"recording of {name}: {c['missing']} of "
@@ -210,14 +241,22 @@ def verdict(summary: Mapping[str, Any], cfg: VerdictConfig | None = None) -> dic
 
 
 def verdict_config_of(toml_text: str | bytes | None) -> VerdictConfig:
-    """`[verdict]` of a recording's attached config.toml (the defaults when there is none)."""
+    """`[verdict]` of a recording's attached config.toml (the defaults when there is none). A table that does not
+    validate (a hand-edited or foreign file) is a `ConfigError` naming the key: judging under the defaults instead
+    would give a verdict the session's own thresholds did not (docs/verdict.md)."""
     if not toml_text:
         return VerdictConfig()
-    text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
     try:
-        return VerdictConfig.model_validate(tomllib.loads(text).get("verdict", {}))
-    except (tomllib.TOMLDecodeError, ValueError):
-        return VerdictConfig()
+        text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
+        table = tomllib.loads(text).get("verdict", {})
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+        raise ConfigError(f"the recording's config.toml cannot be read, so neither can its [verdict] thresholds: "
+                          f"{err}") from err
+    try:
+        return VerdictConfig.model_validate(table)
+    except ValidationError as err:
+        raise ConfigError(f"the recording's config.toml has a bad [verdict] table: "
+                          f"{validation_line(err, 'verdict.')}") from err
 
 
 def strict_status(summary: Mapping[str, Any]) -> int:
