@@ -2,7 +2,7 @@
 against one `advance` per limb. CPU time (thread_time, best of 7 repeats), so it is less load-sensitive than wall time;
 still, measure on a quiet machine for final figures.
 
-Run: python bench/bench_batched.py [--limbs 1,2,4,8]
+Run: python -m bench.bench_batched [--limbs 1,2,4,8]
 Prints, per hot message: cantools strict `encode` / `decode` vs the plan's generated pack / unpack (us per frame);
 the codec's cost per limb-sample (feedback encode + decode, voltage encode + decode; classic and CAN FD); and the
 driver's integration of one period for N limbs: N `DriverCore.step` calls vs one `step_all` (us per limb-sample).
@@ -13,18 +13,15 @@ import argparse
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.mechanics import limb_params  # noqa: E402
-from sea_hil.plant_emulator.batch import prepare_batch, step_all  # noqa: E402
-from sea_hil.plant_emulator.driver import DriverCore  # noqa: E402
-from sea_hil.plant_emulator.integrator import prepare_advance  # noqa: E402
-from sea_hil.protocol.can_codec import SeaCodec, load_database  # noqa: E402
-from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
-from sea_hil.protocol.frame_plan import FramePlan  # noqa: E402
+from sea_hil.config.loader import load_config
+from sea_hil.mechanics import limb_params
+from sea_hil.plant_emulator.batch import prepare_batch, step_all
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.plant_emulator.integrator import prepare_advance
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
+from sea_hil.protocol.frame_plan import FramePlan
 
 HOT = ("VOLTAGE_CMD", "FEEDBACK_ANGLE", "FEEDBACK_JOINT1", "FEEDBACK_JOINT2", "VOLTAGE_CMD_FD", "FEEDBACK_FD",
        "HEARTBEAT")

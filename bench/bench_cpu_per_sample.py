@@ -1,6 +1,6 @@
 """Steady-state CPU per limb-sample of a real-time `sea-hil run --limbs N`, per process and per thread (issue 17).
 
-Run: python bench/bench_cpu_per_sample.py [--limbs 1,2,4] [--runs 3] [--warm 2] [--window 6] [--profile]
+Run: python -m bench.bench_cpu_per_sample [--limbs 1,2,4] [--runs 3] [--warm 2] [--window 6] [--profile]
      [--compare OTHER_SEA_HIL] [--json OUT] [--end-after-window] [-- EXTRA sea-hil run ARGS]
 `--compare PATH`: an A/B against another checkout's `sea-hil` executable (e.g. a worktree of the base commit with its
 own venv): its runs (A) and this checkout's (B) alternate, A B A B ..., so both see the same load.
@@ -26,9 +26,8 @@ import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchlib import emit, record  # noqa: E402
-from cpu_window import WindowResult, measure  # noqa: E402
+from bench.benchlib import emit, record
+from bench.cpu_window import WindowResult, measure
 
 FIGURES = "cdefgh"   # BENCHMARKS.md figures 6c, 6d, ... in the order of --limbs
 

@@ -1,6 +1,6 @@
 """Figure 6: how many limbs (2 SEAs each, own node ids, one CAN bus) one machine runs in real time at 1 kHz.
 
-Run: python bench/bench_scale.py [--limbs 1,2,4,6,8] [--layout threads,mux] [--duration 10] [--runs 1] [--json OUT]
+Run: python -m bench.bench_scale [--limbs 1,2,4,6,8] [--layout threads,mux] [--duration 10] [--runs 1] [--json OUT]
 Each limb count and layout runs the limb rig of bench/limbrig.py for `--duration` s of wall time: one PlantNode (the
 batched driver) serving node ids 1..N on one virtual bus + one edge core per limb (backstepping inner loop), either
 each in its own thread (`threads`) or all served by one EdgeMux thread (`mux`, one edge per bus), fed by a setpoint
@@ -21,13 +21,10 @@ import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, emit, record  # noqa: E402
-from limbrig import RigResult, run_rig  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.session.limbs import limb_load_pct  # noqa: E402
+from bench.benchlib import bench_args, emit, record
+from bench.limbrig import RigResult, run_rig
+from sea_hil.config.loader import load_config
+from sea_hil.session.limbs import limb_load_pct
 
 MAX_MISS = 0.001
 MAX_CLOSED_LOOP_P99_US = 3000.0
@@ -67,7 +64,7 @@ def session_sweep(limbs: list[int], fd: bool) -> list[dict[str, Any]]:
     """Each count as a whole real-time session (bench/session_profile.py); one line per count plus its CPU table."""
     import tempfile
 
-    from session_profile import profile, report
+    from bench.session_profile import profile, report
     out = []
     with tempfile.TemporaryDirectory(prefix="sea-hil-scale-") as tmp:
         extra = []
