@@ -16,7 +16,7 @@ machine still inflates it somewhat (cache, migrations); the load average is prin
 its end: on a loaded machine its SCHED_IDLE recorder catches up for minutes; the tick counts are then not known.
 `--profile`: one more run per count, not in the table (py-spy's sampling inflates the target's CPU), with a
 `py-spy record --nonblocking --gil` of the session process over its window, printing the top functions by own
-samples per thread group (bench/cpu_profile.py).
+samples per thread group (bench/studies/cpu_profile.py).
 """
 from __future__ import annotations
 

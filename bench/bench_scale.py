@@ -10,7 +10,7 @@ CPU per limb-sample. A count passes when the driver's miss rate and the edges' m
 period or missing) are below 0.1 % and the closed-loop p99 is <= 3 ms. Every count is run (no early stop).
 Real-time figures: measure on a quiet machine; the load average at the start is in the record.
 `--session`: instead of the rig, a whole `sea-hil run --limbs N --cycles 1` per count (controllers and recorder
-included; bench/session_profile.py), printing the same columns from its summary.json plus the CPU per limb-sample of
+included; bench/studies/session_profile.py), printing the same columns from its summary.json plus the CPU per limb-sample of
 every process and thread group (add `--fd` for the CAN FD profile: four limbs per bus, one driver for all four).
 """
 from __future__ import annotations
@@ -18,11 +18,13 @@ from __future__ import annotations
 import json
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
 from bench.benchlib import bench_args, emit, record
 from bench.limbrig import RigResult, run_rig
+from bench.studies.session_profile import profile, report
 from sea_hil.config.loader import load_config
 from sea_hil.session.limbs import limb_load_pct
 
@@ -61,10 +63,7 @@ def sweep(limbs: list[int], layout: str, duration_s: float, warmup_s: float) -> 
 
 
 def session_sweep(limbs: list[int], fd: bool) -> list[dict[str, Any]]:
-    """Each count as a whole real-time session (bench/session_profile.py); one line per count plus its CPU table."""
-    import tempfile
-
-    from bench.session_profile import profile, report
+    """Each count as a whole real-time session (bench/studies/session_profile.py); one line per count plus its CPU table."""
     out = []
     with tempfile.TemporaryDirectory(prefix="sea-hil-scale-") as tmp:
         extra = []

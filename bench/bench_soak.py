@@ -208,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sample-s", type=float, default=1.0, help="sampling period of the processes (about)")
     ap.add_argument("--workdir", type=Path, help="keep the run directory here (default: temporary, kept on failure)")
     ap.add_argument("--tracemalloc", action="store_true",
-                    help="leak finder: run `run` under tracemalloc (bench/soak_tracemalloc.py) and write the "
+                    help="leak finder: run `run` under tracemalloc (bench/studies/soak_tracemalloc.py) and write the "
                          "allocations grown between minute 1 and the end of the session to tracemalloc.txt")
     args = ap.parse_args(argv)
     period_s = load_config(None).trajectory.period_s
@@ -219,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     run_args = ["run", "--controller", "et", "--cycles", str(cycles), "--out", str(out)]
     cmd = [sys.executable, "-m", "sea_hil.cli", *run_args]
     if args.tracemalloc:
-        cmd = [sys.executable, "-m", "bench.soak_tracemalloc", str(out / "tracemalloc.txt"),
+        cmd = [sys.executable, "-m", "bench.studies.soak_tracemalloc", str(out / "tracemalloc.txt"),
                str(FIRST_MINUTE_S), str(minutes * 60.0), "--", *run_args]
     sampler = Sampler()
     # the post-run phase prints nothing: the recorder child drains its backlog, then `run` reads the file back

@@ -16,6 +16,7 @@ from pathlib import Path
 
 import psutil
 
+from bench.studies.cpu_profile import finish_record, start_record
 from sea_hil.runtime.processes import end_process
 
 PROGRESS = re.compile(r"sim\s+([\d.]+)/[\d.]+ s .*setpoints (\d+)\s+states (\d+)")
@@ -257,7 +258,6 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             roles_a = _roles(root)
             spy = None
             if profile:
-                from bench.cpu_profile import start_record
                 spy = start_record(proc.pid, window_s, Path(tmp))
             sim_b = prog.next_line(t_a + window_s, proc)
             b = snapshot(root)
@@ -266,7 +266,6 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             roles = {**roles_a, **_roles(root)}
             hot = ""
             if spy is not None:
-                from bench.cpu_profile import finish_record
                 hot = finish_record(spy)
             if end_after:
                 _kill_tree(root)

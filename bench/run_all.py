@@ -1,4 +1,4 @@
-"""Run every benchmark (figures 1-8) and regenerate BENCHMARKS.md from their JSON results.
+"""Run every benchmark (the figures of BENCHMARKS.md) and regenerate BENCHMARKS.md from their JSON results.
 
 Run: python -m bench.run_all [--quick] [--only NAME,...] [--render-only] [--results DIR] [--out BENCHMARKS.md]
 Each script runs as a child process with `--json DIR/<name>.json`; its output is streamed with a progress prefix.
@@ -39,6 +39,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_recorder_child", "7c", ["--runs", "3"], ["--quick"], 30),
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
+    ("bench_ros2_export", "ros2", ["--runs", "3"], ["--quick"], 60),   # a lockstep session, then 3 exports
 ]
 # opt-in (`--long`): the endurance figures take many minutes of one real-time session each
 LONG_STEPS: list[tuple[str, str, list[str], list[str], int]] = [

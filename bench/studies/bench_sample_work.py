@@ -1,7 +1,7 @@
 """CPU of one limb-sample's work on the driver's and the edge's CAN side, without threads or real time (issue 17).
 
-Run: python -m bench.bench_sample_work [--limbs 1] [--repeat 7] [--number 3000]
-     (A/B: run it with each checkout's interpreter, alternating: /other/.venv/bin/python -m bench.bench_sample_work)
+Run: python -m bench.studies.bench_sample_work [--limbs 1] [--repeat 7] [--number 3000]
+     (A/B: run it with each checkout's interpreter, alternating: /other/.venv/bin/python -m bench.studies.bench_sample_work)
 One `PlantNode` on a `virtual` bus with two more handles on the channel (the edge's and the recorder tap's), as in
 `sea-hil run`. Per part, thread CPU time (`time.thread_time`) per limb-sample, best of `--repeat` rounds of
 `--number` samples (the least disturbed round; on a loaded machine the spread is printed too):

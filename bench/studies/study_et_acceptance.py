@@ -9,7 +9,7 @@ constants -10 %, a 0.03 N m, 0.5 Hz sine disturbance on both joints: bounds rati
 sets another nominal-model mismatch, e.g. `all=+10%` for the table in docs/session.md). The TT table holds TT at
 10-100 ms with and without prediction; the last line is TT with prediction at a plain 5 ms each way.
 
-Run: python -m bench.study_et_acceptance [--scenario nominal|robust|both] [--links NAME ...] [--mismatch SPEC]
+Run: python -m bench.studies.study_et_acceptance [--scenario nominal|robust|both] [--links NAME ...] [--mismatch SPEC]
 """
 from __future__ import annotations
 

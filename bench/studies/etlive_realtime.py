@@ -9,7 +9,7 @@ sample the controller was listening: the cause of the new scheme's old real-time
 Real-time figures depend on the machine's load: run it in a quiet window. Each run takes the session's wall time
 (about 13 s on an idle machine).
 
-Run: python -m bench.etlive_realtime [RUNS] [OUT_DIR]      (markdown rows to stdout)
+Run: python -m bench.studies.etlive_realtime [RUNS] [OUT_DIR]      (markdown rows to stdout)
 """
 from __future__ import annotations
 

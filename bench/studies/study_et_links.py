@@ -1,7 +1,7 @@
 """Issue 16 design study on the offline engine: total link messages and max tracking error per method and link
 (the table of docs/et-over-links.md). Deterministic (seed 1).
 
-Run: python -m bench.study_et_links [ideal|5ms|10ms|20ms ...]
+Run: python -m bench.studies.study_et_links [ideal|5ms|10ms|20ms ...]
 """
 from __future__ import annotations
 

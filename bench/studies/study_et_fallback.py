@@ -3,10 +3,10 @@ scenario and `trigger.edge_fallback`, the new ET's total link messages, max trac
 (`EdgeEvents.max_stale_ns`: the edge ran on a setpoint computed before the oldest state it still waited an answer
 to) for seeds 1-N, on the offline session engine (= the lockstep session; deterministic per seed).
 
-Scenarios as bench/study_et_acceptance.py: `nominal` and `robust` (`--mismatch`, default all=+10 %, and a 0.03 N m,
+Scenarios as bench/studies/study_et_acceptance.py: `nominal` and `robust` (`--mismatch`, default all=+10 %, and a 0.03 N m,
 0.5 Hz sine on both joints).
 
-Run: python -m bench.study_et_fallback [--seeds N] [--mismatch SPEC] [LINK_SPEC ...]
+Run: python -m bench.studies.study_et_fallback [--seeds N] [--mismatch SPEC] [LINK_SPEC ...]
      (default link: the issue's 20 ms, 5 ms jitter, GE 0.01/0.3/0.8 each way)
 """
 from __future__ import annotations

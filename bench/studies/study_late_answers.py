@@ -2,7 +2,7 @@
 slower than the tools' tables, both trigger placements, with the default 0.2 s and off (0). Deterministic (seed 1).
 Prints total link messages and the max tracking error per joint (docs/deviations.md section 16).
 
-Run: python -m bench.study_late_answers [LINK ...]   (default: delay=150ms and delay=60ms,jitter=80ms each way)
+Run: python -m bench.studies.study_late_answers [LINK ...]   (default: delay=150ms and delay=60ms,jitter=80ms each way)
 """
 from __future__ import annotations
 

@@ -2,7 +2,7 @@
 against one `advance` per limb. CPU time (thread_time, best of 7 repeats), so it is less load-sensitive than wall time;
 still, measure on a quiet machine for final figures.
 
-Run: python -m bench.bench_batched [--limbs 1,2,4,8]
+Run: python -m bench.studies.bench_batched [--limbs 1,2,4,8]
 Prints, per hot message: cantools strict `encode` / `decode` vs the plan's generated pack / unpack (us per frame);
 the codec's cost per limb-sample (feedback encode + decode, voltage encode + decode; classic and CAN FD); and the
 driver's integration of one period for N limbs: N `DriverCore.step` calls vs one `step_all` (us per limb-sample).
