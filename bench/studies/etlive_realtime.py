@@ -4,7 +4,7 @@
 session at a time. Per run: total link messages of the measured cycle and their ratio to TT at 10 ms (2002 on
 these links: one state and one setpoint per 10 ms), max tracking error (summary.json), the driver's tick misses,
 and from the recording the state the controller answered first (its sample time = how long after the edge's first
-sample the controller was listening: the cause of the new scheme's old real-time failure, docs/et-over-links.md).
+sample the controller was listening: the cause of the new scheme's old real-time failure, docs/studies/et-over-links.md).
 
 Real-time figures depend on the machine's load: run it in a quiet window. Each run takes the session's wall time
 (about 13 s on an idle machine).

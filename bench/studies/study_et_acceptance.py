@@ -6,7 +6,7 @@ error against periodic TT's at the same total messages (interpolated between per
 
 Scenarios: `nominal` (exact nominal model, no disturbance) and `robust` (nominal model masses +10 %, spring
 constants -10 %, a 0.03 N m, 0.5 Hz sine disturbance on both joints: bounds ratio + 0.10, error x 2; `--mismatch`
-sets another nominal-model mismatch, e.g. `all=+10%` for the table in docs/session.md). The TT table holds TT at
+sets another nominal-model mismatch, e.g. `all=+10%` for the table in docs/studies/et-acceptance.md). The TT table holds TT at
 10-100 ms with and without prediction; the last line is TT with prediction at a plain 5 ms each way.
 
 Run: python -m bench.studies.study_et_acceptance [--scenario nominal|robust|both] [--links NAME ...] [--mismatch SPEC]

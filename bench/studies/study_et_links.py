@@ -1,5 +1,5 @@
 """Issue 16 design study on the offline engine: total link messages and max tracking error per method and link
-(the table of docs/et-over-links.md). Deterministic (seed 1).
+(the table of docs/studies/et-over-links.md). Deterministic (seed 1).
 
 Run: python -m bench.studies.study_et_links [ideal|5ms|10ms|20ms ...]
 """
