@@ -21,6 +21,7 @@ samples per thread group (bench/studies/cpu_profile.py).
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import sys
 from pathlib import Path
@@ -93,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
                          "machine; no tick counts then)")
     ap.add_argument("extra", nargs="*", help="more `sea-hil run` arguments (after --)")
     args = ap.parse_args(argv)
-    sys.stdout.reconfigure(line_buffering=True)   # each table as soon as its count is done, also into a file
+    if isinstance(sys.stdout, io.TextIOWrapper):
+        sys.stdout.reconfigure(line_buffering=True)   # each table as soon as its count is done, also into a file
     if args.quick:
         args.limbs, args.runs, args.window, args.profile = "1", 1, 3.0, False
     out = []

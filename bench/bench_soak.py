@@ -130,7 +130,7 @@ def recording_check(mcap: Path) -> dict[str, Any]:
     # setpoints the edge never received either (its sequence tracker's `seq_lost`, beside the recorder's tap in the
     # host's Zenoh session) were dropped on the way to the host (figure 10c), not by the recorder
     host_lost = max(0, int(edge.get("seq_lost", 0)))
-    out = {"complete": data.complete, "closed_by": final.get("closed_by", ""), "messages": sum(counts.values()),
+    out: dict[str, Any] = {"complete": data.complete, "closed_by": final.get("closed_by", ""), "messages": sum(counts.values()),
            "writer_dropped": int(final.get("dropped", -1)), "write_errors": int(final.get("write_errors", -1)),
            "recorder_dropped_ops": int(final.get("recorder_dropped_ops", -1)),
            "topic_count_mismatches": sum(counts.get(t, 0) != n for t, n in writer_counts.items()),

@@ -25,6 +25,8 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
 import zenoh
@@ -63,14 +65,15 @@ def _keys(mode: str) -> tuple[str, str]:
     return (_LIMB.state, _LIMB.setpoint) if mode == "tls" else (PING, PONG)
 
 
-def _config(mode: str, certs: Path | None, node: str, **endpoints: list[str]) -> zenoh.Config:
+def _config(mode: str, certs: Path | None, node: str, *, listen: list[str] | tuple[str, ...] = (),
+            connect: list[str] | tuple[str, ...] = ()) -> zenoh.Config:
     """Plain, or (tls) mutual TLS + ACL as `node` with the certificates in `certs`."""
     if mode != "tls" or certs is None:
-        return make_config(**endpoints)
+        return make_config(listen=listen, connect=connect)
     z = ZenohConfig.model_validate({"tls": {"enabled": True, "root_ca_certificate": str(certs / "ca.pem"),
                                             "certificate": str(certs / f"{node}.pem"),
                                             "private_key": str(certs / f"{node}.key")}, "acl": {"enabled": True}})
-    return make_config(settings=security_settings(z), **endpoints)
+    return make_config(settings=security_settings(z), listen=listen, connect=connect)
 SENTINEL = b"timeout"
 
 
@@ -88,14 +91,16 @@ def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
     counters = PayloadCounters()
     ping, pong = _keys(mode)
     receive, _, payloads = SHAPE[mode]
-    latest = receive == "latest"
-    sub = (LatestSubscriber(session, ping) if latest
-           else session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)))
+    recv: Callable[[], zenoh.Sample | None]
+    if receive == "latest":
+        recv = partial(LatestSubscriber(session, ping).recv, 1.0)
+    else:
+        recv = session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)).recv
     pub = _publisher(session, pong, mode)
     print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
     while True:
-        sample = sub.recv(1.0) if latest else sub.recv()
+        sample = recv()
         if sample is None:
             continue
         data = sample.payload.to_bytes()

@@ -12,6 +12,7 @@ import threading
 import time
 from collections import defaultdict
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import psutil
@@ -177,7 +178,8 @@ class _Progress:
 
     def __init__(self, stream) -> None:
         self.cond = threading.Condition()
-        self.n, self.sim_s, self.setpoints, self.first_setpoint_t = 0, 0.0, 0, None
+        self.n, self.sim_s, self.setpoints = 0, 0.0, 0
+        self.first_setpoint_t: float | None = None
         self.tail: list[str] = []
         threading.Thread(target=self._run, args=(stream,), daemon=True).start()
 
@@ -195,6 +197,9 @@ class _Progress:
             self.n = -1
             self.cond.notify_all()
 
+    def _moved_on(self, seen: int) -> bool:
+        return self.n != seen
+
     def next_line(self, after_t: float, proc: subprocess.Popen) -> float:
         """Wait for the first progress line after monotonic time `after_t` (and, first, a setpoint); its sim s."""
         with self.cond:
@@ -204,7 +209,7 @@ class _Progress:
                     raise RuntimeError("session ended before the window closed (lengthen --cycles or shorten "
                                        "it); its last lines:\n" + "".join(self.tail))
                 if self.first_setpoint_t is not None and time.monotonic() >= after_t:
-                    self.cond.wait_for(lambda seen=seen: self.n != seen)
+                    self.cond.wait_for(partial(self._moved_on, seen))
                     if self.n < 0:
                         continue
                     return self.sim_s
@@ -252,6 +257,7 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             root = psutil.Process(proc.pid)
             prog = _Progress(proc.stderr)
             prog.next_line(0.0, proc)   # the first setpoint
+            assert prog.first_setpoint_t is not None
             sim_a = prog.next_line(prog.first_setpoint_t + warm_s, proc)
             a, t_a = snapshot(root), time.monotonic()
             names = {pid: thread_names(pid)[0] for pid in {pid for pid, _ in a}}   # threads ending in the window

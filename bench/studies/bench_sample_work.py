@@ -24,7 +24,7 @@ from sea_hil.config.loader import load_config
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import Feedback, VoltageCmd
+from sea_hil.protocol.can_frames import FEEDBACK_PARTS, Feedback, VoltageCmd
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.recorder.can_tap import RawFrame
 from sea_hil.stats.histogram import LogHistogram
@@ -55,7 +55,8 @@ def parts(limbs: int) -> dict[str, Callable[[], None]]:
     def edge() -> None:
         while (msg := edge_bus.recv(0)) is not None:
             frame = codec.decode(msg)
-            fb = frame if isinstance(frame, Feedback) else assembler.push(frame)
+            fb = (frame if isinstance(frame, Feedback)
+                  else assembler.push(frame) if isinstance(frame, FEEDBACK_PARTS) else None)
             if fb is not None:
                 state["t_us"] = unwrap_us(state["t_us"], fb.t_us)
                 loop.record(2.1e-4)

@@ -31,6 +31,7 @@ def point(spec: str, seed: int, fallback: str, disturbance: str | None, mismatch
     res = run_engine(scenario_config(None, ov, disturbance, mismatch), "et")
     s = session_summary(res.data, "et")
     t = s["transmissions"]
+    assert res.edge is not None, "the trigger at the edge runs the edge's event core"
     stale_ms = res.edge.max_stale_ns // 10**6
     return t["uplink_msgs"] + t["downlink_msgs"], max(s["tracking"]["max_abs_error_rad"]), stale_ms
 
