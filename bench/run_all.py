@@ -40,6 +40,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
     ("bench_ros2_export", "ros2", ["--runs", "3"], ["--quick"], 60),   # a lockstep session, then 3 exports
+    ("bench_ipc_bus", "ipc", ["--runs", "3"], ["--quick"], 60),   # the ipc CAN bus between two processes
 ]
 # opt-in (`--long`): the endurance figures take many minutes of one real-time session each
 LONG_STEPS: list[tuple[str, str, list[str], list[str], int]] = [

@@ -1,7 +1,8 @@
 """Open python-can buses from a one-string spec and send with a bounded retry when the transmit queue is full.
 
 Specs: ``socketcan:IFNAME`` (e.g. ``socketcan:vcan0``), ``virtual:NAME`` (in-process python-can bus, for tests and
-single-process runs; opened as `FastVirtualBus`) and ``udp_multicast:GROUP`` (python-can's UDP multicast bus between
+single-process runs; opened as `FastVirtualBus`), ``ipc:NAME`` (the lossless bus between the processes of one host,
+`sea_hil.protocol.ipc_bus.IpcBus`) and ``udp_multicast:GROUP`` (python-can's UDP multicast bus between
 processes/hosts; GROUP is an IPv4 or IPv6 multicast address such as ``239.74.163.2``, python-can's default port
 43113; needs ``msgpack``). A udp_multicast bus is opened with a large socket receive buffer (`RX_BUFFER_BYTES`): with
 the default 208 KiB a recorder that paused for a batch lost ~6 % of the frames of a four-process session (issue 32);
@@ -22,6 +23,7 @@ from can.interfaces.virtual import VirtualBus, channels_lock
 
 from sea_hil.config.wire_names import parse_can_spec
 from sea_hil.errors import BusError, ConfigError
+from sea_hil.protocol.ipc_bus import IpcBus
 from sea_hil.queues import timed_get
 
 
@@ -83,6 +85,8 @@ def open_bus(spec: str, *, receive_own_messages: bool = False, fd: bool = False)
     try:
         if interface == "virtual":
             return FastVirtualBus(channel=channel, **kwargs)
+        if interface == "ipc":
+            return IpcBus(channel=channel, **kwargs)
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
         if interface == "udp_multicast":
             enlarge_rx_buffer(bus)

@@ -9,7 +9,7 @@ and their buses are the same: only the reading side is shared.
 
 How: `FastVirtualBus` handles (the `virtual:` buses of one process) get one shared receive queue (each handle's
 queue on its channel is replaced by it, so a frame sent on bus k still reaches only bus k's other handles); buses
-with a file descriptor (socketcan, udp_multicast) are waited for together with `select`. Anything else (e.g. the
+with a file descriptor (socketcan, ipc, udp_multicast) are waited for together with `select`. Anything else (e.g. the
 bus-timing model's `TimedBus`) cannot be merged: `can_merge` says so and the caller keeps one node per bus.
 """
 from __future__ import annotations

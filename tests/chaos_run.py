@@ -10,6 +10,7 @@ import json
 import os
 import shlex
 import sys
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -21,7 +22,6 @@ CHAOS = REPO / "tests" / "multicast" / "chaos.py"
 CHAOS_TEST = "tests/test_chaos.py::test_chaos_kills_and_restarts_keep_the_invariants[on]"
 CHAOS_RUN_KEY = pytest.StashKey["BackgroundRun | AfterRun"]()   # its `directory` holds the config and output
 TIMEOUT_S = 240
-GROUP = "239.74.163.23"
 SEED = 19
 # the compose services' config (client mode, through the router) with a short flush period: a SIGKILLed recorder
 # loses at most its open chunk, and a state is in the file within ~0.1 s. The drive's safety envelope is the default
@@ -51,8 +51,9 @@ def chaos_run(directory: Path, limits: str) -> BackgroundRun:
     config.write_text((REPO / "configs" / "session.toml").read_text() + overlay, encoding="utf-8")
     out = directory / "session"
     out.mkdir()
-    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(CHAOS))} {shlex.quote(str(config))} {shlex.quote(str(out))} {GROUP} {SEED}")
+    can = f"ipc:chaos-{uuid.uuid4().hex[:12]}"   # a fresh channel: other runs on the host share the filesystem
+    script = (f"ip link set lo up && exec {shlex.quote(sys.executable)} "
+              f"{shlex.quote(str(CHAOS))} {shlex.quote(str(config))} {shlex.quote(str(out))} {can} {SEED}")
     return BackgroundRun(directory, ["unshare", "--net", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c",
                                      script], TIMEOUT_S)
 

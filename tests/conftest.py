@@ -31,7 +31,7 @@ SERIAL_FILES = frozenset({
     "test_pre_refactor_equality.py", "test_recorder_process.py", "test_recording.py", "test_replay.py",
     "test_robustness_session.py", "test_run_secure.py", "test_runtime.py", "test_safety.py", "test_secure.py",
     "test_session.py", "test_session_engine.py", "test_session_signals.py", "test_sessionwatch.py",
-    "test_udp_multicast.py", "test_uml_vcan.py", "test_verdict.py", "test_zsession.py",
+    "test_ipc_bus.py", "test_udp_multicast.py", "test_uml_vcan.py", "test_verdict.py", "test_zsession.py",
 })
 
 

@@ -133,17 +133,16 @@ class Rig:
         self._builder.close()
 
 
-# ---- edge kill/restart across processes: udp_multicast CAN inside a private network namespace ------------------
-EDGE_GROUP = "239.74.163.17"
-
-
+# ---- edge kill/restart across processes: ipc CAN, inside a private network namespace ----------------------------
 def run_edge_kill_in_netns(timeout_s: float = 120.0) -> dict[str, float]:
-    """Run `python tests/faults_helpers.py edge-kill` under `unshare --net` (lo up, multicast routed to lo) and
-    return its JSON report."""
+    """Run `python tests/faults_helpers.py edge-kill ipc:NAME` (a fresh channel: other runs share the filesystem)
+    under `unshare --net --pid` (lo up) and return its JSON report."""
     import json
     import shlex
-    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(Path(__file__).resolve()))} edge-kill {EDGE_GROUP}")
+    import uuid
+    spec = f"ipc:edge-kill-{uuid.uuid4().hex[:12]}"
+    script = (f"ip link set lo up && exec {shlex.quote(sys.executable)} "
+              f"{shlex.quote(str(Path(__file__).resolve()))} edge-kill {spec}")
     # its own PID namespace too: if the helper is killed (the timeout) its plant, controller and edge die with it
     res = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "--mount-proc", "sh", "-c", script],
                          capture_output=True, text=True, cwd=REPO, timeout=timeout_s, check=False,
@@ -152,7 +151,7 @@ def run_edge_kill_in_netns(timeout_s: float = 120.0) -> dict[str, float]:
     return json.loads(res.stdout.strip().splitlines()[-1])
 
 
-def _edge_kill_main(group: str) -> dict[str, float]:
+def _edge_kill_main(spec: str) -> dict[str, float]:
     """Plant, controller and edge as separate `sea-hil` processes; SIGKILL the edge, then restart it. Times from
     the kill to the driver's FAULT heartbeat and from the restart to its RUNNING heartbeat."""
     import signal
@@ -160,7 +159,6 @@ def _edge_kill_main(group: str) -> dict[str, float]:
     from sea_hil.errors import MalformedFrame
     from sea_hil.protocol.can_codec import SeaCodec
     from sea_hil.protocol.can_frames import Heartbeat
-    spec = f"udp_multicast:{group}"
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
     codec, bus = SeaCodec([NODE]), open_bus(spec)
     state = {"s": DriverState.INIT, "flags": ""}
@@ -213,5 +211,5 @@ def _edge_kill_main(group: str) -> dict[str, float]:
 if __name__ == "__main__":
     import json
     if sys.argv[1:2] != ["edge-kill"] or len(sys.argv) != 3:
-        raise SystemExit("usage: faults_helpers.py edge-kill GROUP")
+        raise SystemExit("usage: faults_helpers.py edge-kill CAN_SPEC")
     print(json.dumps(_edge_kill_main(sys.argv[2])))

@@ -17,6 +17,7 @@ import json
 import shlex
 import subprocess
 import sys
+import uuid
 from pathlib import Path
 from typing import Any
 
@@ -33,8 +34,6 @@ from sea_hil.session.run import RunOptions, run_session
 
 TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "topology.py"
 PEER_TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "peer_topology.py"
-GROUP = "239.74.163.19"
-PEER_GROUP = "239.74.163.20"
 REPO = Path(__file__).resolve().parents[1]
 # configs/session.toml (the compose services' shared config: client mode) plus a short session: a 1 s gait after a
 # 0.25 s lead-in; the drive limits and the setpoint envelope are derived for the default 10 s gait
@@ -57,7 +56,7 @@ CAN_COMPLETENESS = ("can_command", "can_frames")
 
 
 def deterministic(summary: dict[str, Any], *, can: bool = True) -> dict[str, Any]:
-    """Every deterministic field but each limb's bus (the topologies run on udp_multicast, `run` on its virtual bus);
+    """Every deterministic field but each limb's bus (the topologies run on an ipc bus, `run` on its virtual bus);
     without `can` also what only a recorder on the CAN bus has."""
     out = dict(summary_deterministic(summary))
     out["limbs"] = [{k: v for k, v in limb.items() if k != "bus"} for limb in out.get("limbs", [])]
@@ -86,10 +85,12 @@ def lockstep_run(short_config: Path, tmp_path_factory: pytest.TempPathFactory) -
     return json.loads(json.dumps(peer))
 
 
-def _in_netns(script_path: Path, config: Path, out: Path, group: str) -> dict[str, Any]:
-    """Run a topology script in its own network and PID namespaces; its JSON line."""
-    script = (f"ip link set lo up && ip route add 224.0.0.0/4 dev lo && exec {shlex.quote(sys.executable)} "
-              f"{shlex.quote(str(script_path))} {shlex.quote(str(config))} {shlex.quote(str(out))} {group}")
+def _in_netns(script_path: Path, config: Path, out: Path) -> dict[str, Any]:
+    """Run a topology script in its own network and PID namespaces, CAN on an ipc bus of its own (a fresh channel
+    name: other test runs on the host share the filesystem); its JSON line."""
+    can = f"ipc:topology-{uuid.uuid4().hex[:12]}"
+    script = (f"ip link set lo up && exec {shlex.quote(sys.executable)} "
+              f"{shlex.quote(str(script_path))} {shlex.quote(str(config))} {shlex.quote(str(out))} {can}")
     # its own PID namespace too: if the script dies (even by SIGKILL on the timeout) every node process dies with it
     result = subprocess.run(["unshare", "--net", "--pid", "--fork", "--kill-child", "sh", "-c", script],
                             capture_output=True, text=True, timeout=400, check=False, stdin=subprocess.DEVNULL)
@@ -103,7 +104,7 @@ def test_compose_topology_through_a_router_equals_peer_to_peer(short_config: Pat
     require_netns("compose topology")
     out = tmp_path / "compose"
     out.mkdir()
-    report = _in_netns(TOPOLOGY, short_config, out, GROUP)
+    report = _in_netns(TOPOLOGY, short_config, out)
     assert report["codes"] == {"controller": 0, "edge": 0, "plant": 0, "recorder": 0}, report
     compose = json.loads(Path(report["summary"]).read_text())
     assert load_config(short_config).zenoh.mode == "client"
@@ -125,7 +126,7 @@ def test_readme_peer_to_peer_topology_records_every_channel(short_config: Path, 
     peer_config.write_text(SHORT, encoding="utf-8")
     out = tmp_path / "peer"
     out.mkdir()
-    report = _in_netns(PEER_TOPOLOGY, peer_config, out, PEER_GROUP)
+    report = _in_netns(PEER_TOPOLOGY, peer_config, out)
     assert report["codes"] == {"controller": 0, "edge": 0, "plant": 0, "recorder": 0, "late": 0}, report
     edge, ctrl, late = (json.loads(report["stdout"][n]) for n in ("edge", "controller", "late"))
     for node in (edge, ctrl, late):

@@ -5,7 +5,7 @@
   restarted controller resumes the session (edge sends CLEAR_ERRORS, driver RUNNING again);
 - a 1 s total link outage (both directions, link emulator): same safe state, recovery, drops counted in the stats;
 - the recorder process is SIGKILLed: the MCAP file is readable and holds everything flushed before the kill.
-The edge kill/restart runs across processes on udp_multicast CAN in a private network namespace (test_edge_kill).
+The edge kill/restart runs across processes on ipc CAN in a private network namespace (test_edge_kill).
 Measured times are printed (`pytest -s`).
 """
 from __future__ import annotations
@@ -148,8 +148,7 @@ def _recorded(path: Path) -> int:
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root for a private network namespace")
-def test_edge_kill_and_restart_over_udp_multicast() -> None:
-    pytest.importorskip("msgpack")
+def test_edge_kill_and_restart_over_ipc_can() -> None:
     from faults_helpers import run_edge_kill_in_netns
     report = run_edge_kill_in_netns()
     assert report["safe_ms"] < 1000 and report["resumed_ms"] < 30_000, report

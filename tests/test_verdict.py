@@ -17,6 +17,8 @@ from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.recorder.reader import read_session
+from sea_hil.report.console import end_of_run_rows
+from sea_hil.report.session_summary import split_edge_stats
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.report.verdict import COUNTER_RULES, verdict
 from sea_hil.session.run import RunOptions, run_session
@@ -235,6 +237,32 @@ def test_lockstep_has_no_tick_deadlines() -> None:
     s = {"lockstep": True, "timing": {"driver": {"ticks": 100, "tick_misses": 50}}}
     assert verdict(s)["status"] == "ok"
     assert verdict({**s, "lockstep": False})["reasons"][0]["code"] == "tick_misses"
+
+
+def _cia402_realtime(misses: int, floor_pct: float) -> dict[str, Any]:
+    """A real-time cia402 summary as session_summary lays it out: SYNCs sent under `edge`, missed periods (wall-time
+    derived) under `timing.edge`, the host's floor under `timing.driver`."""
+    det, timing = split_edge_stats({"cia402_syncs": 10_000 - misses, "cia402_sync_misses": misses})
+    return {"lockstep": False, "edge": det, "timing": {"edge": timing, "driver": {
+        "ticks": 10_000, "tick_misses": 0, "floor": {"ticks": 500, "misses": 0, "miss_pct": floor_pct,
+                                                    "lateness_us_p99": 80.0, "duration_s": 0.5}}}}
+
+
+def test_cia402_sync_misses_are_judged_like_tick_misses_against_the_host_floor() -> None:
+    """The cia402 profile's SYNC producer (the edge) misses periods: degraded above sync_miss_max_pct + factor x the
+    host's floor, of the periods due (SYNCs sent + missed); shown in the end-of-run table below the threshold too;
+    nothing in lockstep."""
+    s = _cia402_realtime(100, 0.2)                       # 1 % of the periods, above 0.1 + 3 x 0.2 = 0.7 %
+    assert "cia402_sync_misses" in s["timing"]["edge"] and "cia402_syncs" in s["edge"]
+    r = {x["code"]: x for x in verdict(s)["reasons"]}["sync_misses"]
+    assert r["value"] == pytest.approx(1.0) and r["threshold"] == pytest.approx(0.7) and r["floor_pct"] == 0.2
+    assert "100 of 10000" in r["message"] and "sync_miss_floor_factor" in r["message"]
+    assert verdict(_cia402_realtime(100, 0.4))["status"] == "ok"                    # 1 % <= 0.1 + 3 x 0.4
+    assert verdict(s, VerdictConfig(sync_miss_max_pct=1.0))["status"] == "ok"
+    assert verdict({**s, "lockstep": True})["status"] == "ok"
+    assert verdict(_cia402_realtime(0, 0.0))["status"] == "ok"
+    assert "SYNC misses: 3 of 10000 periods" in dict(end_of_run_rows(_cia402_realtime(3, 0.0)))["warnings"]
+    assert "SYNC" not in dict(end_of_run_rows(_cia402_realtime(0, 0.0)))["warnings"]
 
 
 def test_strict_simulate_exits_3_on_saturation(tmp_path: Path) -> None:

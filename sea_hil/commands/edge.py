@@ -9,7 +9,7 @@ from sea_hil.commands.node_cli import add_node_args, node_session, print_result,
 
 def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("edge", help="edge node: CAN<->Zenoh bridge running the backstepping inner loop")
-    p.add_argument("--can", metavar="SPEC", help="socketcan:vcan0 | virtual:NAME | udp_multicast:GROUP")
+    p.add_argument("--can", metavar="SPEC", help="socketcan:vcan0 | virtual:NAME | ipc:NAME | udp_multicast:GROUP")
     p.add_argument("--node", type=int, default=1, help="driver node id")
     p.add_argument("--controller", choices=("tt", "et"), default="et",
                    help="the trigger the edge runs with --trigger edge (the controller's mode)")

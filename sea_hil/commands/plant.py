@@ -15,7 +15,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser("plant", help="emulated SEA motor driver node on a CAN bus",
                        description="Integrate the limb model in real time and answer CAN voltage frames like drive "
                                    "firmware: feedback at --rate, heartbeat, watchdog, e-stop, clear-errors.")
-    p.add_argument("--can", metavar="SPEC", help="socketcan:vcan0 | virtual:NAME | udp_multicast:GROUP "
+    p.add_argument("--can", metavar="SPEC", help="socketcan:vcan0 | virtual:NAME | ipc:NAME | udp_multicast:GROUP "
                                                  "(default from config)")
     p.add_argument("--node", type=int, action="append", help="node id served (repeatable for several limbs; with "
                                                               "--can-profile cia402: hip and knee id per limb)")

@@ -37,7 +37,7 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--inner", choices=("edge", "remote"), default="edge",
                    help="where the backstepping voltage loop runs (edge = next to CAN at 1 kHz; remote = in the "
                         "controller at the 10 ms sample rate, voltages tunnelled to CAN)")
-    p.add_argument("--can", metavar="SPEC", help="CAN bus: virtual:NAME (default), socketcan:vcan0, udp_multicast:GROUP")
+    p.add_argument("--can", metavar="SPEC", help="CAN bus: virtual:NAME (default), socketcan:vcan0, ipc:NAME, udp_multicast:GROUP")
     p.add_argument("--node", type=int, default=1, help="driver node id (of the first limb)")
     p.add_argument("--can-profile", choices=("sea", "cia402"), help="sea = the DBC protocol; cia402 = CANopen "
                    "CiA 402, the edge as the master of the limb's two nodes (--lockstep only; docs/cia402.md); "

@@ -1,4 +1,4 @@
-"""The names the config accepts for the wire: CAN bus specs (`socketcan:IFNAME`, `virtual:NAME`,
+"""The names the config accepts for the wire: CAN bus specs (`socketcan:IFNAME`, `virtual:NAME`, `ipc:NAME`,
 `udp_multicast:GROUP`) and Zenoh key chunks (a prefix, a limb name). Checked when a config is loaded, and by the
 wire layer (`sea_hil.protocol.canbus`, `sea_hil.protocol.keys`) with the same rules."""
 from __future__ import annotations
@@ -8,9 +8,19 @@ import re
 
 from sea_hil.errors import ConfigError
 
-INTERFACES = ("socketcan", "virtual", "udp_multicast")
+INTERFACES = ("socketcan", "virtual", "ipc", "udp_multicast")
 _IFNAME = re.compile(r"[A-Za-z0-9_.\-]{1,15}")  # Linux IFNAMSIZ (16) minus the NUL
-_USAGE = "expected 'socketcan:IFNAME', 'virtual:NAME' or 'udp_multicast:GROUP'"
+_IPC_NAME = re.compile(r"[A-Za-z0-9_\-][A-Za-z0-9_.\-]{0,39}")   # one file name, not hidden, short (sun_path)
+_USAGE = "expected 'socketcan:IFNAME', 'virtual:NAME', 'ipc:NAME' or 'udp_multicast:GROUP'"
+
+
+def validate_ipc_channel(channel: str) -> str:
+    """An `ipc` channel names a directory (`sea_hil.protocol.ipc_bus.channel_dir`): 1-40 characters of
+    A-Z a-z 0-9 _ . -, not starting with '.'."""
+    if not isinstance(channel, str) or not _IPC_NAME.fullmatch(channel):
+        raise ConfigError(f"bad ipc channel {channel!r}: 1-40 characters of A-Z a-z 0-9 _ . -, not starting "
+                          "with '.'")
+    return channel
 
 
 def parse_can_spec(spec: str) -> tuple[str, str]:
@@ -26,6 +36,11 @@ def parse_can_spec(spec: str) -> tuple[str, str]:
     if interface == "virtual" and (not channel or channel != channel.strip()):
         raise ConfigError(f"bad CAN spec {spec!r}: virtual channel name must be non-empty without "
                           "surrounding spaces")
+    if interface == "ipc":
+        try:
+            validate_ipc_channel(channel)
+        except ConfigError as err:
+            raise ConfigError(f"bad CAN spec {spec!r}: {err}") from err
     if interface == "udp_multicast":
         try:
             group = ipaddress.ip_address(channel)

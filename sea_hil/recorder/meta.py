@@ -78,3 +78,4 @@ def write_session_header(rec: _HeaderTarget, config: SeaHilConfig | None = None,
     if config is not None:
         rec.add_metadata(META_CONFIG, _flatten("", config.model_dump(mode="json"), {}))
         rec.add_attachment(CONFIG_ATTACHMENT, config_to_toml(config).encode(), "application/toml")
+

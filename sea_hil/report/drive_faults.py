@@ -12,6 +12,12 @@ the edge when setpoints are fresh again (real time; a lockstep session never cle
 e-stop needs the user. `after_session`: the latch began after the last measured sample (the `/tracking` record of the largest cycle
 time `t_s`): in real time the edge stops commanding once setpoints stop and the drive's watchdog takes the limb
 to its safe state, as designed; summary.json lists such a latch, the verdict does not count it.
+
+A cia402 session (docs/cia402.md) has no DBC heartbeat: a latch is read from the nodes' statusword TPDOs instead
+(CiA 402 FAULT or FAULT REACTION ACTIVE; a statusword out of it ends the latch, as the fault reset does), its
+flags from the EMCY codes the node sent since its last statusword outside FAULT (`EMCY_CODES` back to the drive's
+error flags), `node_id` the CANopen node's. The frames are decoded as the bus configured them
+(`protocol.cia402_decode`).
 """
 from __future__ import annotations
 
@@ -21,7 +27,13 @@ from sea_hil.errors import MalformedFrame
 from sea_hil.fault_explain import SAFE, clear_policy, flag_names
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, DriverState, ErrorFlags, Heartbeat
-from sea_hil.recorder.reader import SessionData
+from sea_hil.protocol.cia402_decode import Cia402Decoder
+from sea_hil.protocol.cia402_od import EMCY_CODES
+from sea_hil.recorder.reader import RecordedMessage, SessionData
+from sea_hil.recorder.session_config import canopen_decoder
+
+FLAG_OF_CODE = {code: flag for flag, code in EMCY_CODES.items()}
+CIA402_FAULT_STATES = (0x08, 0x0F)   # statusword & 0x4F: FAULT, FAULT REACTION ACTIVE (CiA 402)
 
 
 def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[int, Heartbeat]]:
@@ -40,13 +52,41 @@ def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[i
     return out
 
 
+def _cia402_states(raw: list[RecordedMessage], decoder: Cia402Decoder) -> list[tuple[int, Heartbeat]]:
+    """A cia402 recording's statusword TPDOs as the latch reader's (time, state) pairs: FAULT with the flags of the
+    node's EMCYs since its last statusword outside FAULT, else RUNNING (module docstring)."""
+    out: list[tuple[int, Heartbeat]] = []
+    flags: dict[int, ErrorFlags] = {}
+    for m in raw:
+        p = m.payload
+        try:
+            d = decoder.decode(int(p["can_id"]), bytes.fromhex(p["data_hex"]), extended=bool(p.get("is_extended")))
+        except (KeyError, TypeError, ValueError):
+            continue
+        if d.kind == "EMCY":
+            flags[d.node_id] = flags.get(d.node_id, ErrorFlags(0)) | FLAG_OF_CODE.get(d.values.get("error_code", 0),
+                                                                                       ErrorFlags(0))
+        elif "statusword" in d.values:
+            fault = d.values["statusword"] & 0x4F in CIA402_FAULT_STATES
+            hb = Heartbeat(d.node_id, DriverState.FAULT if fault else DriverState.RUNNING,
+                           flags.get(d.node_id, ErrorFlags(0)) if fault else ErrorFlags(0), 0, 0, 0)
+            if not fault:
+                flags.pop(d.node_id, None)
+            out.append((m.log_time_ns, hb))
+    return out
+
+
 def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     """Every safe-state latch of every drive of the recording, in time order (see the module docstring)."""
-    codec = SeaCodec(fd=None)
-    hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
     raw = data.messages.get("/can/raw", [])
     if not raw:
         return []
+    decoder = canopen_decoder(data)
+    if decoder is not None:
+        states = _cia402_states(raw, decoder)
+    else:
+        hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
+        states = _heartbeats(data, SeaCodec(fd=None), hb_cmd)
     t0_ns = raw[0].log_time_ns
     tracking = data.messages.get("/tracking", [])
     last = max(tracking, key=lambda m: m.payload.get("t_s", float("-inf")), default=None)
@@ -54,7 +94,7 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     open_: dict[int, dict[str, Any]] = {}
     last_ns: dict[int, int] = {}
     latches: list[dict[str, Any]] = []
-    for t_ns, hb in _heartbeats(data, codec, hb_cmd):
+    for t_ns, hb in states:
         last_ns[hb.node_id] = t_ns
         cur = open_.get(hb.node_id)
         if hb.state in SAFE:

@@ -24,16 +24,17 @@ from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.completeness import completeness_block
 from sea_hil.report.drive_faults import drive_faults
-from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
+from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs, sync_block
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 from sea_hil.report.verdict import verdict, verdict_config_of
 
 # edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
 # re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
-# extra commands on real-time setpoint arrival (`latency_*` go to timing.latency_us)
+# extra commands on real-time setpoint arrival, the cia402 SYNC producer's missed periods (`latency_*` go to
+# timing.latency_us)
 EDGE_TIMING_PREFIXES = ("latency_", "apply_latency_us_", "loop_us_", "can_")   # can_: the bus-timing model
 EDGE_TIMING_KEYS = frozenset({"loop_overruns", "lockstep_resends", "lockstep_startup_resends", "arrival_commands",
-                              "seq_duplicates", "stale_setpoints"})
+                              "seq_duplicates", "stale_setpoints", "cia402_sync_misses"})
 
 
 def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
@@ -171,6 +172,9 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     driver = driver_block(data)
     if driver is not None:
         summary[TIMING_KEY]["driver"] = driver
+    sync = sync_block(per)
+    if sync is not None:
+        summary[TIMING_KEY]["sync"] = sync
     summary["drive_faults"] = drive_faults(data)
     rec = recording_block(data)
     if rec is not None:

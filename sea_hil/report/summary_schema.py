@@ -53,6 +53,7 @@ TIMING = _object({
     "edge": {"type": "object", "additionalProperties": _NUMBER},             # wall-time-derived edge counters
     "driver": _object({"ticks": _COUNT, "tick_misses": _COUNT, "floor": FLOOR},   # `run`: summed over the buses'
                       required=("ticks", "tick_misses")),                    # drivers; floor: real time only
+    "sync": _object({"syncs": _COUNT, "misses": _COUNT}),                  # cia402: summed over the limbs' edges
     "can_bus": {"type": "object", "additionalProperties": CAN_BUS},          # [can] emulate_bitrate, per bus spec
     "rejections": {"type": "object", "additionalProperties": _COUNT},       # sessions: wall-time-derived classes
 }, required=())

@@ -3,8 +3,8 @@ figure and its threshold (docs/verdict.md).
 
 - `invalid`: a drive latched its safe state (a soft-limit fault, a watchdog trip, an e-stop: `drive_faults`); the
   limb stopped following the controller, whatever the tracking figures say.
-- `degraded`: a counter above its `[verdict]` threshold (`COUNTER_RULES`): driver tick misses beyond the host's own
-  floor, late samples, late or lost setpoints and states, envelope rejections, saturated inner steps, rejections,
+- `degraded`: a counter above its `[verdict]` threshold (`COUNTER_RULES`): driver tick misses (and the cia402
+  profile's SYNC misses) beyond the host's own floor, late samples, late or lost setpoints and states, envelope rejections, saturated inner steps, rejections,
   recording losses, a recording incomplete against the nodes' own counters (`completeness`, issue 32).
 
 Pure: summary (and thresholds) in, verdict out, so `sea-hil report` on the recording reproduces `run`'s. A counter
@@ -20,7 +20,7 @@ from typing import Any
 
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.protocol.payload_fields import RejectReason
-from sea_hil.report.console import field
+from sea_hil.report.console import field, sync_periods
 
 OK, DEGRADED, INVALID = "ok", "degraded", "invalid"
 STRICT_EXIT = 3   # `--strict`: the exit status of a run whose verdict is not ok
@@ -103,22 +103,42 @@ def _fault_reasons(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def _tick_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
-    drv = field(summary, "driver")
-    if summary.get("lockstep", False) or not isinstance(drv, Mapping) or not drv.get("ticks"):
-        return []    # lockstep has no deadlines: simulated time waits for every node
-    pct = 100.0 * drv.get("tick_misses", 0) / drv["ticks"]
-    floor = drv.get("floor") or {}
+def _deadline_reason(code: str, what: str, misses: int, total: int, floor: Mapping[str, Any], max_pct: float,
+                     factor: float, names: tuple[str, str]) -> list[dict[str, Any]]:
+    """Real-time deadlines (`misses` of `total`) beyond `max_pct` % plus `factor` x the host's empty-loop floor: the
+    emulator's, not the host's (docs/verdict.md). `names`: the two `[verdict]` keys, for the message."""
+    pct = 100.0 * misses / total
     floor_pct = float(floor.get("miss_pct", 0.0))
-    limit = cfg.tick_miss_max_pct + cfg.tick_miss_floor_factor * floor_pct
+    limit = max_pct + factor * floor_pct
     if pct <= limit:
         return []
     where = (f"host's empty-loop floor {floor_pct:.3f} % over {floor.get('duration_s', 0):g} s at start-up"
              if floor else "host floor not measured")
-    return [_reason("tick_misses", DEGRADED, f"driver missed {drv.get('tick_misses', 0)} of {drv['ticks']} ticks "
-                                            f"({pct:.3f} %), above {limit:.3f} % = {cfg.tick_miss_max_pct:g} % + "
-                                            f"{cfg.tick_miss_floor_factor:g} x the {where}",
+    return [_reason(code, DEGRADED, f"{what} {misses} of {total} ({pct:.3f} %), above {limit:.3f} % = "
+                                    f"verdict.{names[0]} {max_pct:g} % + verdict.{names[1]} {factor:g} x the {where}",
                     round(pct, 4), round(limit, 4), floor_pct=floor_pct)]
+
+
+def _tick_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    drv = field(summary, "driver")
+    if summary.get("lockstep", False) or not isinstance(drv, Mapping) or not drv.get("ticks"):
+        return []    # lockstep has no deadlines: simulated time waits for every node
+    return _deadline_reason("tick_misses", "driver missed", int(drv.get("tick_misses", 0)), int(drv["ticks"]),
+                            drv.get("floor") or {}, cfg.tick_miss_max_pct, cfg.tick_miss_floor_factor,
+                            ("tick_miss_max_pct", "tick_miss_floor_factor"))
+
+
+def _sync_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    """The cia402 profile's SYNC misses, judged like the driver's tick misses (the SYNC period is the inner loop's:
+    a missed one is a sample the limb did not get), against the same host floor."""
+    periods = sync_periods(summary)
+    if summary.get("lockstep", False) or periods is None:
+        return []    # lockstep: one SYNC per answered sample, no deadline
+    drv = field(summary, "driver")
+    floor = (drv.get("floor") or {}) if isinstance(drv, Mapping) else {}
+    return _deadline_reason("sync_misses", "the edge's SYNC producer missed", periods[0], periods[1], floor,
+                            cfg.sync_miss_max_pct, cfg.sync_miss_floor_factor,
+                            ("sync_miss_max_pct", "sync_miss_floor_factor"))
 
 
 def _counter_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
@@ -182,7 +202,8 @@ def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> lis
 def verdict(summary: Mapping[str, Any], cfg: VerdictConfig | None = None) -> dict[str, Any]:
     """The verdict of a summary (see the module docstring)."""
     cfg = cfg or VerdictConfig()
-    reasons = _fault_reasons(summary) + _tick_reason(summary, cfg) + _counter_reasons(summary, cfg) \
+    reasons = _fault_reasons(summary) + _tick_reason(summary, cfg) + _sync_reason(summary, cfg) \
+        + _counter_reasons(summary, cfg) \
         + _completeness_reasons(summary, cfg)
     status = INVALID if any(r["severity"] == INVALID for r in reasons) else DEGRADED if reasons else OK
     return {"status": status, "reasons": reasons}

@@ -2,7 +2,7 @@
 
 The session is the compose topology (tests/multicast/topology.py): a Zenoh router (a zenoh-python session in
 router mode in a process of its own, standing for zenohd) and `sea-hil plant | edge | controller | record` as processes of their own in
-client mode, CAN on `udp_multicast:GROUP`. This process also listens to the bus (the drive's heartbeats) and to the
+client mode, CAN on `ipc:NAME` (the lossless one-host bus). This process also listens to the bus (the drive's heartbeats) and to the
 edge's states through the router. A seeded RNG picks 10 faults (each kind at least three times) at random times in
 a 60 s window; a fault waits until the session has recovered from the previous one. After each, asserted:
 - edge or controller SIGKILLed: the drive reports FAULT (safe state: zero voltage, watchdog) within the setpoint
@@ -14,7 +14,7 @@ a 60 s window; a fault waits until the session has recovered from the previous o
   without a gap; a new recorder (new file) is started and the drive never left RUNNING;
 - at the end every node is ended and no process of the session is left.
 
-Usage: python tests/multicast/chaos.py CONFIG.toml OUT_DIR GROUP SEED  (prints one JSON line: the fault log)
+Usage: python tests/multicast/chaos.py CONFIG.toml OUT_DIR CAN_SPEC SEED  (prints one JSON line: the fault log)
 Run under ``unshare --net --pid --fork --kill-child --mount-proc`` (tests/test_chaos.py). Waits are on events or polls with a
 deadline, never sleeps used for synchronisation.
 """
@@ -149,12 +149,12 @@ def _recorded_states(path: Path) -> list[int]:
 
 
 class Chaos:
-    def __init__(self, config: Path, out: Path, group: str, seed: int) -> None:
+    def __init__(self, config: Path, out: Path, can: str, seed: int) -> None:
         self.cfg = load_config(config)
         self.out, self.config = out, config
         self.rng = random.Random(seed)
         self.endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-        self.can = f"udp_multicast:{group}"
+        self.can = can
         self.procs: dict[str, subprocess.Popen[bytes]] = {}
         self.started: list[subprocess.Popen[bytes]] = []
         self.recordings: list[Path] = []

@@ -1,14 +1,14 @@
 """The README's multi-host commands as separate processes, peer-to-peer on one host (issue 32): `sea-hil edge
 --listen tcp/127.0.0.1:PORT`, `sea-hil record --connect` to it (a Zenoh client of the edge: `sea_hil.commands.record.
-as_observer`), `sea-hil plant` and `sea-hil controller --connect` to it; CAN on `udp_multicast:GROUP`; plant, edge
+as_observer`), `sea-hil plant` and `sea-hil controller --connect` to it; CAN on `ipc:NAME` (the lossless one-host bus); plant, edge
 and controller with `--lockstep`. No router: the edge is the only listener.
 
 A second recorder starts late, once the controller has exited (the session is over but for the edge's final
 statistics): its file must say which channels it lacks and by how much.
 
-Usage: python tests/multicast/peer_topology.py CONFIG.toml OUT_DIR GROUP  (prints one JSON line: exit codes, each
+Usage: python tests/multicast/peer_topology.py CONFIG.toml OUT_DIR CAN_SPEC  (prints one JSON line: exit codes, each
 node's stdout, the summary of the full recording, the completeness of the late one). The caller
-(tests/test_compose_topology.py) runs it under ``unshare --net --pid`` with ``lo`` up and a multicast route. Ordering
+(tests/test_compose_topology.py) runs it under ``unshare --net --pid`` with ``lo`` up. Ordering
 is by events, never by sleeping: the recorder's "recording" line before the plant starts, the controller's exit
 before the late recorder, its "recording" line before the edge is stopped, the edge's exit (it publishes its final
 statistics first) before the recorders are stopped. Every process is ended, also on failure.
@@ -98,9 +98,9 @@ def wait_listening(port: int, proc: subprocess.Popen[str]) -> None:
     raise RuntimeError(f"the edge never listened on {port} (exit {proc.poll()})")
 
 
-def run(config: Path, out: Path, group: str) -> dict[str, object]:
+def run(config: Path, out: Path, can: str) -> dict[str, object]:
     port = free_tcp_port()
-    cmds = readme_commands(config, out, port, f"udp_multicast:{group}")
+    cmds = readme_commands(config, out, port, can)
     nodes: dict[str, Node] = {}
     codes: dict[str, int] = {}
     try:

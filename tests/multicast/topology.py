@@ -1,13 +1,13 @@
 """The docker-compose topology as separate processes: a Zenoh router (a zenoh-python session in router mode standing
 for zenohd) and the compose file's `sea-hil plant | edge | controller | record` services, each a process of its own
 running the command docker-compose.yml gives it, with only the host-specific parts substituted: the router's
-endpoint (a free loopback port), the CAN bus (`udp_multicast:GROUP` for vcan0), the config (/config/session.toml)
+endpoint (a free loopback port), the CAN bus (an `ipc:NAME` bus for vcan0: the processes of one host), the config (/config/session.toml)
 and the output (/runs); plant, edge and controller get `--lockstep`. So the Zenoh nodes run in client mode
 (session.toml) and know only the router. One lockstep session; writes OUT/summary.json from the recording.
 
-Usage: python tests/multicast/topology.py CONFIG.toml OUT_DIR GROUP  (prints one JSON line: exit codes, summary path)
-The caller (tests/test_compose_topology.py) runs it under ``unshare --net`` with ``lo`` up and a multicast route, so
-the group and the router's port never leave the namespace. Ordering is by events, never by sleeping: the nodes start
+Usage: python tests/multicast/topology.py CONFIG.toml OUT_DIR CAN_SPEC  (prints one JSON line: exit codes, summary path)
+The caller (tests/test_compose_topology.py) runs it under ``unshare --net --pid`` with ``lo`` up, so the router's
+port never leaves the namespace and every node dies with the script; the ipc channel is the caller's, unique. Ordering is by events, never by sleeping: the nodes start
 once the router sees the recorder's subscription; the edge is stopped when the controller has exited, and the
 recorder once the router has forwarded the edge's final statistics. Every process is ended, also on failure.
 """
@@ -59,11 +59,11 @@ def _wait(event: threading.Event, what: str) -> None:
         raise TimeoutError(f"timed out waiting for {what}")
 
 
-def run(config: Path, out: Path, group: str) -> dict[str, object]:
+def run(config: Path, out: Path, can: str) -> dict[str, object]:
     cfg = load_config(config)
     keys = Keys.from_config(cfg.zenoh)
     endpoint = f"tcp/127.0.0.1:{free_tcp_port()}"
-    cmds = compose_commands(config, out, endpoint, f"udp_multicast:{group}")
+    cmds = compose_commands(config, out, endpoint, can)
     router = open_session(make_config(mode="router", listen=[endpoint]))
     procs: dict[str, subprocess.Popen[bytes]] = {}
     recorder_ready, edge_final = threading.Event(), threading.Event()
