@@ -1,4 +1,4 @@
-"""A member of an `ipc` CAN bus in a process of its own, for tests/test_ipc_bus.py and bench/bench_ipc_bus.py.
+"""A member of an `ipc` CAN bus in a process of its own, for tests/test_ipc_bus.py.
 
 Usage: python tests/ipc/member.py DIRECTORY CHANNEL send COUNT SENDER_ID [SNDBUF_BYTES]
        python tests/ipc/member.py DIRECTORY CHANNEL idle
@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import can
 
-import can  # noqa: E402
-
-from sea_hil.protocol.ipc_bus import SNDBUF_BYTES, IpcBus  # noqa: E402
+from sea_hil.protocol.ipc_bus import SNDBUF_BYTES, IpcBus
 
 
 def main(argv: list[str]) -> int:
