@@ -1,6 +1,6 @@
 """Figure 5: downlink bandwidth of event-triggered (ET) vs time-triggered (TT) control, with tracking errors.
 
-Run: python bench/bench_bandwidth.py [--runs 1] [--json OUT] [--workdir DIR]
+Run: python -m bench.bench_bandwidth [--runs 1] [--json OUT] [--workdir DIR]
 Per run: `sea-hil run --controller {et,tt} --cycles 1` in real time and with `--lockstep`. Figures come from each
 summary.json (computed from the MCAP recording): downlink messages and payload bytes per walking cycle, uplink
 messages, max/RMS tracking errors. Lockstep runs are deterministic (seed 0), so one run each suffices.
@@ -12,9 +12,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, command_line, emit, record, sea_hil_run  # noqa: E402
+from bench.benchlib import bench_args, command_line, emit, record, sea_hil_run
 
 
 def _row(s: dict[str, Any], timing: str, run: int) -> dict[str, Any]:

@@ -1,6 +1,6 @@
 """Figure 3: closed-loop sense -> setpoint latency of a real-time `sea-hil run` on loopback.
 
-Run: python bench/bench_closed_loop_latency.py [--runs 5] [--controller et] [--secure] [--json OUT]
+Run: python -m bench.bench_closed_loop_latency [--runs 5] [--controller et] [--secure] [--json OUT]
 Each run is one `sea-hil run --controller et --cycles 1 --out DIR` (plant + edge + recorder here, controller in a
 child process over Zenoh TCP on loopback). The latency is the edge's: from publishing state k to applying the
 setpoint computed from state k (one host's monotonic clock), summary.json `timing.latency_us`. The edge takes setpoints
@@ -20,9 +20,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, command_line, emit, pct, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
+from bench.benchlib import bench_args, command_line, emit, pct, record, sea_hil_run, sea_hil_run_cmd
 
 GOAL_MEDIAN_US, GOAL_P99_US = 1000.0, 3000.0
 

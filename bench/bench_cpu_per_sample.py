@@ -1,6 +1,6 @@
 """Steady-state CPU per limb-sample of a real-time `sea-hil run --limbs N`, per process and per thread (issue 17).
 
-Run: python bench/bench_cpu_per_sample.py [--limbs 1,2,4] [--runs 3] [--warm 2] [--window 6] [--profile]
+Run: python -m bench.bench_cpu_per_sample [--limbs 1,2,4] [--runs 3] [--warm 2] [--window 6] [--profile]
      [--compare OTHER_SEA_HIL] [--json OUT] [--end-after-window] [-- EXTRA sea-hil run ARGS]
 `--compare PATH`: an A/B against another checkout's `sea-hil` executable (e.g. a worktree of the base commit with its
 own venv): its runs (A) and this checkout's (B) alternate, A B A B ..., so both see the same load.
@@ -16,19 +16,19 @@ machine still inflates it somewhat (cache, migrations); the load average is prin
 its end: on a loaded machine its SCHED_IDLE recorder catches up for minutes; the tick counts are then not known.
 `--profile`: one more run per count, not in the table (py-spy's sampling inflates the target's CPU), with a
 `py-spy record --nonblocking --gil` of the session process over its window, printing the top functions by own
-samples per thread group (bench/cpu_profile.py).
+samples per thread group (bench/studies/cpu_profile.py).
 """
 from __future__ import annotations
 
 import argparse
+import io
 import json
 import sys
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchlib import emit, record  # noqa: E402
-from cpu_window import WindowResult, measure  # noqa: E402
+from bench.benchlib import emit, record
+from bench.cpu_window import WindowResult, measure
 
 FIGURES = "cdefgh"   # BENCHMARKS.md figures 6c, 6d, ... in the order of --limbs
 
@@ -94,7 +94,8 @@ def main(argv: list[str] | None = None) -> int:
                          "machine; no tick counts then)")
     ap.add_argument("extra", nargs="*", help="more `sea-hil run` arguments (after --)")
     args = ap.parse_args(argv)
-    sys.stdout.reconfigure(line_buffering=True)   # each table as soon as its count is done, also into a file
+    if isinstance(sys.stdout, io.TextIOWrapper):
+        sys.stdout.reconfigure(line_buffering=True)   # each table as soon as its count is done, also into a file
     if args.quick:
         args.limbs, args.runs, args.window, args.profile = "1", 1, 3.0, False
     out = []

@@ -1,7 +1,7 @@
 """Figure 4: real-time timing of the emulated SEA driver node (`PlantNode` at 1 kHz on a python-can `virtual` bus)
 and, with `--edge`, of the edge inner loop answering it.
 
-Run: python bench/bench_driver_timing.py [--duration 60] [--rate 1000] [--load] [--edge] [--runs 1] [--json OUT]
+Run: python -m bench.bench_driver_timing [--duration 60] [--rate 1000] [--load] [--edge] [--runs 1] [--json OUT]
 Without `--edge` a responder thread answers every feedback with a VoltageCmd (driver alone). With `--edge` the
 driver is answered by the real `EdgeNode` fed over Zenoh by a setpoint echo process (bench/limbrig.py, one limb):
 both loops in one process as `sea-hil run` runs them. `--load` adds a configuration with a busy-loop process
@@ -13,22 +13,19 @@ from __future__ import annotations
 import sys
 import threading
 import uuid
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+import can
 
-import can  # noqa: E402
-from benchlib import bench_args, cpu_loader, emit, record  # noqa: E402
-from limbrig import RigResult, run_rig  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from sea_hil.protocol.can_assembly import FeedbackAssembler  # noqa: E402
-from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import FEEDBACK_PARTS, VoltageCmd  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
-from sea_hil.stats.histogram import LogHistogram  # noqa: E402
+from bench.benchlib import bench_args, cpu_loader, emit, record
+from bench.limbrig import RigResult, run_rig
+from sea_hil.config.loader import load_config
+from sea_hil.plant_emulator.node import PlantNode, TickStats
+from sea_hil.protocol.can_assembly import FeedbackAssembler
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import FEEDBACK_PARTS, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.stats.histogram import LogHistogram
 
 NODE = 1
 GOAL_P99_US, GOAL_MISS = 300.0, 0.001

@@ -1,6 +1,6 @@
 """The `ipc` CAN bus between two processes (protocol/ipc_bus.py): throughput, per-frame latency, frames lost.
 
-Run: python bench/bench_ipc_bus.py [--runs 3] [--frames 50000] [--pings 5000] [--stall-s 0.5] [--udp GROUP]
+Run: python -m bench.bench_ipc_bus [--runs 3] [--frames 50000] [--pings 5000] [--stall-s 0.5] [--udp GROUP]
                                    [--json OUT] [--quick]
 Per run, in a fresh channel directory:
   throughput  a child process (this script with `--blast`) sends `--frames` classic 8-byte frames as fast as the bus
@@ -22,17 +22,14 @@ import subprocess
 import sys
 import tempfile
 import time
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+import can
 
-import can  # noqa: E402
-from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-
-from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
-from sea_hil.protocol.ipc_bus import IpcBus  # noqa: E402
+from bench.benchlib import REPO, bench_args, emit, pct, record, stop_process, wait_ready
+from sea_hil.errors import SeaHilError
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.ipc_bus import IpcBus
 
 CHANNEL = "bench"
 PING_ID, PONG_ID, BLAST_ID = 0x10, 0x11, 0x20
@@ -77,7 +74,7 @@ def echo(directory: str) -> None:
 
 
 def _child(*args: str) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, str(Path(__file__).resolve()), *args], stdin=subprocess.PIPE,
+    return subprocess.Popen([sys.executable, "-m", "bench.bench_ipc_bus", *args], cwd=REPO, stdin=subprocess.PIPE,
                             stdout=subprocess.PIPE)
 
 

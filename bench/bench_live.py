@@ -1,8 +1,8 @@
 """Figure 8: what the live view costs the 1 kHz loops: real-time sessions with and without `--foxglove`.
 
-Run: python bench/bench_live.py [--runs 3] [--controller et] [--json OUT]
+Run: python -m bench.bench_live [--runs 3] [--controller et] [--json OUT]
 Each run is a pair of real-time `sea-hil run --controller et --cycles 1` sessions, one plain and one with
-`--foxglove 0 --foxglove-wait` watched by a client subscribed to every live channel (tests/foxglove_ws_client.py, the
+`--foxglove 0 --foxglove-wait` watched by a client subscribed to every live channel (bench/foxglove_ws_client.py, the
 test suite's independent client, at nice 10: what a Foxglove app with the shipped layout open costs). The
 order alternates per pair so a drift in machine load does not favour one side. Per session: closed-loop latency p99
 (summary.json `latency_us`, the edge's state k published -> setpoint(k) applied) and driver tick misses (the
@@ -25,16 +25,12 @@ import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
-
-from benchlib import REPO, bench_args, command_line, emit, record, sea_hil_run  # noqa: E402
-from foxglove_ws_client import receive  # noqa: E402
-from sessionwatch import watch_run  # noqa: E402
-
-from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.live.channels import CHANNELS, END_MESSAGE  # noqa: E402
-from sea_hil.recorder.reader import read_session  # noqa: E402
+from bench.benchlib import REPO, bench_args, command_line, emit, record, sea_hil_run
+from bench.foxglove_ws_client import receive
+from bench.sessionwatch import watch_run
+from sea_hil.errors import SeaHilError
+from sea_hil.live.channels import CHANNELS, END_MESSAGE
+from sea_hil.recorder.reader import read_session
 
 GOAL_RATIO = 1.10
 LOADED_MISS_PCT = 1.0   # a quiet machine misses < 0.1 % (figure 4); a baseline above 1 % is not a fair baseline

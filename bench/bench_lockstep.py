@@ -1,6 +1,6 @@
 """Wall time of lockstep sessions: `sea-hil run --lockstep --controller {et,tt} --cycles N`, N runs each.
 
-Run: python bench/bench_lockstep.py [--runs 3] [--controllers et,tt] [--cycles 1] [--config FILE]
+Run: python -m bench.bench_lockstep [--runs 3] [--controllers et,tt] [--cycles 1] [--config FILE]
 Each run is a fresh `python -m sea_hil.cli run --lockstep --quiet` process. Prints one JSON object: per controller
 the session wall time (`wall_s` of summary.json: start of the nodes to the closed MCAP), the whole process wall
 time (start-up, summary and figures included), both per walking cycle, as median/min/max over the runs.

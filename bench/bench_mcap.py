@@ -1,6 +1,6 @@
 """Figure 7: MCAP recorder throughput (messages/s) and file size per session minute.
 
-Run: python bench/bench_mcap.py [--runs 3] [--session FILE.mcap] [--json OUT]
+Run: python -m bench.bench_mcap [--runs 3] [--session FILE.mcap] [--json OUT]
 The message mix is a real session's: `--session` (a `sea-hil run` recording) or, by default, a fresh
 `sea-hil run --controller et --cycles 1` (real time). Throughput: every message of that session is replayed into a
 new `sea_hil.recorder.writer.SessionRecorder` (config compression/chunking, queue large enough that nothing drops) as fast
@@ -16,13 +16,10 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, emit, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.recorder.reader import RecordedMessage, read_session  # noqa: E402
-from sea_hil.recorder.writer import SessionRecorder  # noqa: E402
+from bench.benchlib import bench_args, emit, record, sea_hil_run, sea_hil_run_cmd
+from sea_hil.config.loader import load_config
+from sea_hil.recorder.reader import RecordedMessage, read_session
+from sea_hil.recorder.writer import SessionRecorder
 
 
 def replay(messages: list[tuple[str, RecordedMessage]], out: Path) -> tuple[float, int, int]:

@@ -1,6 +1,6 @@
 """CPU of the recorder child's work per CAN frame: unpickle a batch, decode, encode, write MCAP (issue 33).
 
-Run: python bench/bench_recorder_child.py [--runs 3] [--samples 5000] [--json OUT]
+Run: python -m bench.bench_recorder_child [--runs 3] [--samples 5000] [--json OUT]
 The frames are what one classic-CAN limb sends per sample (FEEDBACK_ANGLE, FEEDBACK_JOINT1, FEEDBACK_JOINT2,
 VOLTAGE_CMD; values varying per sample), shipped as the CAN tap ships them (`CANS` operations of 64 frames, 8 per
 pickle) and applied by `sea_hil.recorder.process._apply` into a zstd `SessionRecorder` in a temporary directory, in
@@ -17,14 +17,12 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-from benchlib import bench_args, emit, record  # noqa: E402
-
-from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import T_US_MODULUS, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd  # noqa: E402
-from sea_hil.recorder.can_tap import CanTap, RawFrame  # noqa: E402
-from sea_hil.recorder.process import CANS, _apply  # noqa: E402
-from sea_hil.recorder.writer import SessionRecorder  # noqa: E402
+from bench.benchlib import bench_args, emit, record
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import T_US_MODULUS, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd
+from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.process import CANS, _apply
+from sea_hil.recorder.writer import SessionRecorder
 
 FRAMES_PER_SAMPLE = 4
 

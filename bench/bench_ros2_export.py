@@ -1,6 +1,6 @@
 """Issue 30: export time of a 10 s session to a rosbag2 directory (`sea-hil export RUN.mcap --ros2 DIR`).
 
-Run: python bench/bench_ros2_export.py [--runs 3] [--session FILE.mcap] [--json OUT]
+Run: python -m bench.bench_ros2_export [--runs 3] [--session FILE.mcap] [--json OUT]
 The source is `--session` (a `sea-hil run` recording) or, by default, a fresh lockstep
 `sea-hil run --controller et --cycles 1` (10 s gait + 0.5 s lead-in; lockstep only makes the recording faster to
 produce here, its message mix is a real-time session's: every frame of 1 kHz feedback and commands). Each run is the
@@ -16,12 +16,9 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import REPO, bench_args, emit, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
-
-from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.recorder.reader import read_session  # noqa: E402
+from bench.benchlib import REPO, bench_args, emit, record, sea_hil_run, sea_hil_run_cmd
+from sea_hil.errors import SeaHilError
+from sea_hil.recorder.reader import read_session
 
 GOAL_S = 10.0
 

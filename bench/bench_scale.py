@@ -1,6 +1,6 @@
 """Figure 6: how many limbs (2 SEAs each, own node ids, one CAN bus) one machine runs in real time at 1 kHz.
 
-Run: python bench/bench_scale.py [--limbs 1,2,4,6,8] [--layout threads,mux] [--duration 10] [--runs 1] [--json OUT]
+Run: python -m bench.bench_scale [--limbs 1,2,4,6,8] [--layout threads,mux] [--duration 10] [--runs 1] [--json OUT]
 Each limb count and layout runs the limb rig of bench/limbrig.py for `--duration` s of wall time: one PlantNode (the
 batched driver) serving node ids 1..N on one virtual bus + one edge core per limb (backstepping inner loop), either
 each in its own thread (`threads`) or all served by one EdgeMux thread (`mux`, one edge per bus), fed by a setpoint
@@ -10,7 +10,7 @@ CPU per limb-sample. A count passes when the driver's miss rate and the edges' m
 period or missing) are below 0.1 % and the closed-loop p99 is <= 3 ms. Every count is run (no early stop).
 Real-time figures: measure on a quiet machine; the load average at the start is in the record.
 `--session`: instead of the rig, a whole `sea-hil run --limbs N --cycles 1` per count (controllers and recorder
-included; bench/session_profile.py), printing the same columns from its summary.json plus the CPU per limb-sample of
+included; bench/studies/session_profile.py), printing the same columns from its summary.json plus the CPU per limb-sample of
 every process and thread group (add `--fd` for the CAN FD profile: four limbs per bus, one driver for all four).
 """
 from __future__ import annotations
@@ -18,16 +18,15 @@ from __future__ import annotations
 import json
 import os
 import sys
+import tempfile
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, emit, record  # noqa: E402
-from limbrig import RigResult, run_rig  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.session.limbs import limb_load_pct  # noqa: E402
+from bench.benchlib import bench_args, emit, record
+from bench.limbrig import RigResult, run_rig
+from bench.studies.session_profile import profile, report
+from sea_hil.config.loader import load_config
+from sea_hil.session.limbs import limb_load_pct
 
 MAX_MISS = 0.001
 MAX_CLOSED_LOOP_P99_US = 3000.0
@@ -64,10 +63,7 @@ def sweep(limbs: list[int], layout: str, duration_s: float, warmup_s: float) -> 
 
 
 def session_sweep(limbs: list[int], fd: bool) -> list[dict[str, Any]]:
-    """Each count as a whole real-time session (bench/session_profile.py); one line per count plus its CPU table."""
-    import tempfile
-
-    from session_profile import profile, report
+    """Each count as a whole real-time session (bench/studies/session_profile.py); one line per count plus its CPU table."""
     out = []
     with tempfile.TemporaryDirectory(prefix="sea-hil-scale-") as tmp:
         extra = []

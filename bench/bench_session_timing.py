@@ -1,7 +1,7 @@
 """Figure 4s: driver tick misses of the default real-time session (`sea-hil run --controller et --cycles 1`), and,
 with `--levers`, the `[timing]` levers measured one by one in interleaved A/B pairs (docs/timing.md).
 
-Run: python bench/bench_session_timing.py [--runs 3] [--levers LEVER,...] [--pairs 2] [--json OUT]
+Run: python -m bench.bench_session_timing [--runs 3] [--levers LEVER,...] [--pairs 2] [--json OUT]
 (levers: fifo, fifo-process, fifo-session; the busy-wait tail, GC in the slack, the switch interval and CPU pinning
 were measured as no gain and removed, docs/timing.md)
 A tick miss is a skipped driver deadline (a tick later than one whole period: summary.json `timing.driver`
@@ -18,9 +18,7 @@ import tempfile
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, command_line, emit, pct, record, sea_hil_run, sea_hil_run_cmd  # noqa: E402
+from bench.benchlib import bench_args, command_line, emit, pct, record, sea_hil_run, sea_hil_run_cmd
 
 GOAL_MISS_PCT = 0.1
 OFF = {"realtime_priority": 0, "realtime_scope": "driver"}

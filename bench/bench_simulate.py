@@ -1,6 +1,6 @@
 """CPU cost of the offline closed loop: `closed_loop.simulate(cfg, mode)` for one walking cycle, N runs (figure 1).
 
-Run: python bench/bench_simulate.py [--runs 5] [--mode et] [--config FILE] [--no-jit] [--cold] [--json OUT]
+Run: python -m bench.bench_simulate [--runs 5] [--mode et] [--config FILE] [--no-jit] [--cold] [--json OUT]
 Prints the warm-up (first call: numba import + JIT compile or load from numba's disk cache) separately, then the
 median/min/max CPU seconds (time.process_time) of the timed runs and simulated seconds per CPU second.
 --cold points numba's cache at an empty temporary directory, so the warm-up includes a full compile.
@@ -13,17 +13,13 @@ import statistics
 import sys
 import tempfile
 import time
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, emit, record  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.config.root import SeaHilConfig  # noqa: E402
-from sea_hil.jit import compiled  # noqa: E402
-from sea_hil.offline.closed_loop import simulate  # noqa: E402
-from sea_hil.offline.drive_kernel import make_session_steps  # noqa: E402
+from bench.benchlib import bench_args, emit, record
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.jit import compiled
+from sea_hil.offline.closed_loop import simulate
+from sea_hil.offline.drive_kernel import make_session_steps
 
 BASELINE_CPU_S = 0.32  # per 10 s cycle before the numba kernel (pure Python, issue 6)
 GOAL_REALTIME_X = 200.0

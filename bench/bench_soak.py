@@ -1,7 +1,7 @@
 """Figure 10: soak, a long real-time session: memory growth, lost CAN frames, dropped Zenoh messages, recording
 completeness.
 
-Run: python bench/bench_soak.py --minutes 10 [--sample-s 1] [--workdir DIR] [--json OUT]
+Run: python -m bench.bench_soak --minutes 10 [--sample-s 1] [--workdir DIR] [--json OUT]
 One real-time `sea-hil run --controller et --cycles N` (N walking cycles of `trajectory.period_s` covering the
 minutes), watched for stalls (bench/sessionwatch.py). While the controller runs, every process of the session
 (`run`: plant + edge + recorder taps; the controller child; the recorder child) is sampled every `--sample-s`
@@ -37,13 +37,10 @@ from typing import Any
 import numpy as np
 import psutil
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import REPO, bench_args, command_line, emit, record  # noqa: E402
-from sessionwatch import watch_run  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.recorder.reader import RecordedMessage, read_session  # noqa: E402
+from bench.benchlib import REPO, bench_args, command_line, emit, record
+from bench.sessionwatch import watch_run
+from sea_hil.config.loader import load_config
+from sea_hil.recorder.reader import RecordedMessage, read_session
 
 GOAL_RSS_MB = 5.0
 FIRST_MINUTE_S = 60.0
@@ -133,7 +130,7 @@ def recording_check(mcap: Path) -> dict[str, Any]:
     # setpoints the edge never received either (its sequence tracker's `seq_lost`, beside the recorder's tap in the
     # host's Zenoh session) were dropped on the way to the host (figure 10c), not by the recorder
     host_lost = max(0, int(edge.get("seq_lost", 0)))
-    out = {"complete": data.complete, "closed_by": final.get("closed_by", ""), "messages": sum(counts.values()),
+    out: dict[str, Any] = {"complete": data.complete, "closed_by": final.get("closed_by", ""), "messages": sum(counts.values()),
            "writer_dropped": int(final.get("dropped", -1)), "write_errors": int(final.get("write_errors", -1)),
            "recorder_dropped_ops": int(final.get("recorder_dropped_ops", -1)),
            "topic_count_mismatches": sum(counts.get(t, 0) != n for t, n in writer_counts.items()),
@@ -211,7 +208,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--sample-s", type=float, default=1.0, help="sampling period of the processes (about)")
     ap.add_argument("--workdir", type=Path, help="keep the run directory here (default: temporary, kept on failure)")
     ap.add_argument("--tracemalloc", action="store_true",
-                    help="leak finder: run `run` under tracemalloc (bench/soak_tracemalloc.py) and write the "
+                    help="leak finder: run `run` under tracemalloc (bench/studies/soak_tracemalloc.py) and write the "
                          "allocations grown between minute 1 and the end of the session to tracemalloc.txt")
     args = ap.parse_args(argv)
     period_s = load_config(None).trajectory.period_s
@@ -222,7 +219,7 @@ def main(argv: list[str] | None = None) -> int:
     run_args = ["run", "--controller", "et", "--cycles", str(cycles), "--out", str(out)]
     cmd = [sys.executable, "-m", "sea_hil.cli", *run_args]
     if args.tracemalloc:
-        cmd = [sys.executable, str(Path(__file__).parent / "soak_tracemalloc.py"), str(out / "tracemalloc.txt"),
+        cmd = [sys.executable, "-m", "bench.studies.soak_tracemalloc", str(out / "tracemalloc.txt"),
                str(FIRST_MINUTE_S), str(minutes * 60.0), "--", *run_args]
     sampler = Sampler()
     # the post-run phase prints nothing: the recorder child drains its backlog, then `run` reads the file back

@@ -1,6 +1,6 @@
 """A 1,000-point offline sweep with delay, jitter and loss (figure 9): wall time of `sea-hil sweep --engine offline`.
 
-Run: python bench/bench_sweep.py [--runs 1] [--jobs N] [--scheme default|paper] [--quick] [--json OUT]
+Run: python -m bench.bench_sweep [--runs 1] [--jobs N] [--scheme default|paper] [--quick] [--json OUT]
 The grid: eta 0.2,0.3,0.5,0.8,1.2 x r 0.05,0.1,0.2 (15 ET points + 1 TT reference per link condition) x delay
 0,5,10,20 ms x jitter 0,1,2,5 ms x loss 0,0.01,0.02,0.05 = 64 link conditions, 1,024 points, one 10 s walking cycle
 each (plus the 0.5 s lead-in), seed 1, on the embedded local Dask cluster (`--jobs` worker processes). The wall time
@@ -24,9 +24,7 @@ import tempfile
 import time
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import REPO, bench_args, emit, record  # noqa: E402
+from bench.benchlib import REPO, bench_args, emit, record
 
 GOAL_S = 60.0
 GRID = {"--eta": "0.2,0.3,0.5,0.8,1.2", "--r": "0.05,0.1,0.2", "--delay-ms": "0,5,10,20", "--jitter-ms": "0,1,2,5",

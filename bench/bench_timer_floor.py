@@ -1,6 +1,6 @@
 """Figure 4f: the host's floor for the 1 kHz goals -- tick misses of an empty absolute-deadline loop.
 
-Run: python bench/bench_timer_floor.py [--runs 5] [--duration 20] [--json OUT]
+Run: python -m bench.bench_timer_floor [--runs 5] [--duration 20] [--json OUT]
 One thread, nothing else of the project: sleep to the next 1 ms deadline (start + k * period), read the clock, count
 a miss when the wake-up is later than one whole period (the deadlines passed are skipped, as `RealTimePacer` does:
 docs/timing.md, "What a tick miss is"). SCHED_FIFO at the driver's default priority where permitted (else normal
@@ -11,14 +11,9 @@ driver's goal (< 0.1 % of ticks missed) cannot be met on a host whose empty loop
 from __future__ import annotations
 
 import os
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import bench_args, emit, pct, record  # noqa: E402
-
-from sea_hil.runtime.timer_floor import empty_loop  # noqa: E402  (the product's: `sea-hil run` measures it too)
+from bench.benchlib import bench_args, emit, pct, record
+from sea_hil.runtime.timer_floor import empty_loop  # the product's: `sea-hil run` measures it too
 
 GOAL_MISS_PCT = 0.1
 FIFO_PRIORITY = 50   # `[timing] realtime_priority`'s default

@@ -1,6 +1,6 @@
 """Figure 2: Zenoh hop latency through the project's publish/decode path vs a raw zenoh-python ping-pong.
 
-Run: python bench/bench_zenoh_hop.py [--runs 5] [--pings 2000] [--secure] [--profile] [--json OUT]
+Run: python -m bench.bench_zenoh_hop [--runs 5] [--pings 2000] [--secure] [--profile] [--json OUT]
 This process listens on a free loopback TCP port; an echo child process (this script with `--echo`) connects.
 One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
@@ -25,18 +25,18 @@ import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+import zenoh
 
-import zenoh  # noqa: E402
-from benchlib import bench_args, emit, pct, record, stop_process, wait_ready  # noqa: E402
-
-from sea_hil.config.comms import ZenohConfig  # noqa: E402
-from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.protocol.keys import Keys  # noqa: E402
-from sea_hil.protocol.payload_hot import encode_setpoint, encode_state  # noqa: E402
-from sea_hil.protocol.payloads import (  # noqa: E402
+from bench.benchlib import REPO, bench_args, emit, pct, record, stop_process, wait_ready
+from sea_hil.config.comms import ZenohConfig
+from sea_hil.errors import SeaHilError
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.payload_hot import encode_setpoint, encode_state
+from sea_hil.protocol.payloads import (
     PAYLOAD_SIZE,
     MsgType,
     PayloadCounters,
@@ -44,10 +44,10 @@ from sea_hil.protocol.payloads import (  # noqa: E402
     StatePayload,
     TriggerReason,
 )
-from sea_hil.protocol.zcerts import make_certs  # noqa: E402
-from sea_hil.protocol.zlatest import LatestSubscriber  # noqa: E402
-from sea_hil.protocol.zsecurity import security_settings  # noqa: E402
-from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
+from sea_hil.protocol.zcerts import make_certs
+from sea_hil.protocol.zlatest import LatestSubscriber
+from sea_hil.protocol.zsecurity import security_settings
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher
 
 MODES = ("raw", "project", "blocking")
 PROFILE_MODES = ("options", "latest", "codec")
@@ -65,14 +65,15 @@ def _keys(mode: str) -> tuple[str, str]:
     return (_LIMB.state, _LIMB.setpoint) if mode == "tls" else (PING, PONG)
 
 
-def _config(mode: str, certs: Path | None, node: str, **endpoints: list[str]) -> zenoh.Config:
+def _config(mode: str, certs: Path | None, node: str, *, listen: list[str] | tuple[str, ...] = (),
+            connect: list[str] | tuple[str, ...] = ()) -> zenoh.Config:
     """Plain, or (tls) mutual TLS + ACL as `node` with the certificates in `certs`."""
     if mode != "tls" or certs is None:
-        return make_config(**endpoints)
+        return make_config(listen=listen, connect=connect)
     z = ZenohConfig.model_validate({"tls": {"enabled": True, "root_ca_certificate": str(certs / "ca.pem"),
                                             "certificate": str(certs / f"{node}.pem"),
                                             "private_key": str(certs / f"{node}.key")}, "acl": {"enabled": True}})
-    return make_config(settings=security_settings(z), **endpoints)
+    return make_config(settings=security_settings(z), listen=listen, connect=connect)
 SENTINEL = b"timeout"
 
 
@@ -90,14 +91,16 @@ def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
     counters = PayloadCounters()
     ping, pong = _keys(mode)
     receive, _, payloads = SHAPE[mode]
-    latest = receive == "latest"
-    sub = (LatestSubscriber(session, ping) if latest
-           else session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)))
+    recv: Callable[[], zenoh.Sample | None]
+    if receive == "latest":
+        recv = partial(LatestSubscriber(session, ping).recv, 1.0)
+    else:
+        recv = session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)).recv
     pub = _publisher(session, pong, mode)
     print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
     while True:
-        sample = sub.recv(1.0) if latest else sub.recv()
+        sample = recv()
         if sample is None:
             continue
         data = sample.payload.to_bytes()
@@ -159,8 +162,8 @@ def batch(mode: str, pings: int, certs: Path | None = None) -> tuple[list[int], 
     endpoint = f"{'tls' if mode == 'tls' else 'tcp'}/127.0.0.1:{free_tcp_port()}"
     session = open_session(_config(mode, certs, "edge", listen=[endpoint]))
     cert_args = ["--certs", str(certs)] if mode == "tls" and certs is not None else []
-    proc = subprocess.Popen([sys.executable, __file__, "--echo", endpoint, "--mode", mode, *cert_args],
-                            stdout=subprocess.PIPE)
+    proc = subprocess.Popen([sys.executable, "-m", "bench.bench_zenoh_hop", "--echo", endpoint, "--mode", mode,
+                             *cert_args], cwd=REPO, stdout=subprocess.PIPE)
     ping, pong = _keys(mode)
     dog = None
     try:

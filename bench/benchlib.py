@@ -27,9 +27,8 @@ from typing import Any
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.runtime.processes import end_process  # noqa: E402
+from sea_hil.errors import SeaHilError
+from sea_hil.runtime.processes import end_process
 
 REPO = Path(__file__).resolve().parent.parent
 
@@ -44,11 +43,15 @@ def bench_args(description: str, runs: int) -> argparse.ArgumentParser:
 
 
 def command_line(argv: Sequence[str] | None = None) -> str:
-    """The command that reproduces this run (script path relative to the repository, without --json)."""
+    """The command that reproduces this run (`python -m bench.NAME ARGS`, without --json); the script's path when
+    it was not run as a module."""
     args = list(sys.argv[1:] if argv is None else argv)
     if "--json" in args:
         i = args.index("--json")
         del args[i:i + 2]
+    spec = getattr(sys.modules["__main__"], "__spec__", None)
+    if spec is not None and spec.name.startswith("bench."):
+        return shlex.join(["python", "-m", spec.name, *args])
     script = Path(sys.argv[0]).resolve()
     try:
         script_s = str(script.relative_to(REPO))

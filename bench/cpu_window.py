@@ -12,12 +12,13 @@ import threading
 import time
 from collections import defaultdict
 from dataclasses import dataclass
+from functools import partial
 from pathlib import Path
 
 import psutil
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-from sea_hil.runtime.processes import end_process  # noqa: E402
+from bench.studies.cpu_profile import finish_record, start_record
+from sea_hil.runtime.processes import end_process
 
 PROGRESS = re.compile(r"sim\s+([\d.]+)/[\d.]+ s .*setpoints (\d+)\s+states (\d+)")
 PYSPY_TID = re.compile(r'^Thread (\d+) \([^)]*\): "([^"]*)"', re.M)
@@ -177,7 +178,8 @@ class _Progress:
 
     def __init__(self, stream) -> None:
         self.cond = threading.Condition()
-        self.n, self.sim_s, self.setpoints, self.first_setpoint_t = 0, 0.0, 0, None
+        self.n, self.sim_s, self.setpoints = 0, 0.0, 0
+        self.first_setpoint_t: float | None = None
         self.tail: list[str] = []
         threading.Thread(target=self._run, args=(stream,), daemon=True).start()
 
@@ -195,6 +197,9 @@ class _Progress:
             self.n = -1
             self.cond.notify_all()
 
+    def _moved_on(self, seen: int) -> bool:
+        return self.n != seen
+
     def next_line(self, after_t: float, proc: subprocess.Popen) -> float:
         """Wait for the first progress line after monotonic time `after_t` (and, first, a setpoint); its sim s."""
         with self.cond:
@@ -204,7 +209,7 @@ class _Progress:
                     raise RuntimeError("session ended before the window closed (lengthen --cycles or shorten "
                                        "it); its last lines:\n" + "".join(self.tail))
                 if self.first_setpoint_t is not None and time.monotonic() >= after_t:
-                    self.cond.wait_for(lambda seen=seen: self.n != seen)
+                    self.cond.wait_for(partial(self._moved_on, seen))
                     if self.n < 0:
                         continue
                     return self.sim_s
@@ -252,13 +257,13 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             root = psutil.Process(proc.pid)
             prog = _Progress(proc.stderr)
             prog.next_line(0.0, proc)   # the first setpoint
+            assert prog.first_setpoint_t is not None
             sim_a = prog.next_line(prog.first_setpoint_t + warm_s, proc)
             a, t_a = snapshot(root), time.monotonic()
             names = {pid: thread_names(pid)[0] for pid in {pid for pid, _ in a}}   # threads ending in the window
             roles_a = _roles(root)
             spy = None
             if profile:
-                from cpu_profile import start_record
                 spy = start_record(proc.pid, window_s, Path(tmp))
             sim_b = prog.next_line(t_a + window_s, proc)
             b = snapshot(root)
@@ -267,7 +272,6 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
             roles = {**roles_a, **_roles(root)}
             hot = ""
             if spy is not None:
-                from cpu_profile import finish_record
                 hot = finish_record(spy)
             if end_after:
                 _kill_tree(root)

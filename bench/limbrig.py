@@ -20,23 +20,20 @@ import sys
 import time
 import uuid
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+import zenoh
 
-import zenoh  # noqa: E402
-from benchlib import stop_process, wait_ready  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.config.root import SeaHilConfig  # noqa: E402
-from sea_hil.controller.edge import EdgeNode  # noqa: E402
-from sea_hil.controller.edge_mux import EdgeMux  # noqa: E402
-from sea_hil.plant_emulator.node import PlantNode, TickStats  # noqa: E402
-from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode  # noqa: E402
-from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher  # noqa: E402
-from sea_hil.session.builder import SessionBuilder  # noqa: E402
-from sea_hil.stats.histogram import LogHistogram  # noqa: E402
+from bench.benchlib import REPO, stop_process, wait_ready
+from sea_hil.config.loader import load_config
+from sea_hil.config.root import SeaHilConfig
+from sea_hil.controller.edge import EdgeNode
+from sea_hil.controller.edge_mux import EdgeMux
+from sea_hil.plant_emulator.node import PlantNode, TickStats
+from sea_hil.protocol.payloads import PayloadCounters, SetpointPayload, StatePayload, TriggerReason, encode
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher
+from sea_hil.session.builder import SessionBuilder
+from sea_hil.stats.histogram import LogHistogram
 
 PREFIX = "sea"
 
@@ -126,7 +123,8 @@ def run_rig(limbs: int, duration_s: float, rate_hz: float = 1000.0, warmup_s: fl
     warm = (0, 0)
     with SessionBuilder(cfg) as b:
         session = b.zenoh(listen=[endpoint], connect=())
-        proc = subprocess.Popen([sys.executable, __file__, "--feeder", endpoint], stdout=subprocess.PIPE)
+        proc = subprocess.Popen([sys.executable, "-m", "bench.limbrig", "--feeder", endpoint], cwd=REPO,
+                                stdout=subprocess.PIPE)
         b.callback(stop_process, proc)
         plant_bus = b.bus(channel)
         buses = [b.bus(channel) for _ in ids] if layout == "threads" else [b.bus(channel)] * limbs

@@ -110,16 +110,16 @@ def render(records: list[dict[str, Any]], *, preliminary: bool, total_s: float, 
     machines = list(dict.fromkeys(_host_line(h) for h in hosts))
     lines = ["# Benchmarks", ""]
     if preliminary:
-        lines += ["> **PRELIMINARY** — produced by `python bench/run_all.py --quick` (tiny sizes, one run, a machine "
+        lines += ["> **PRELIMINARY** — produced by `python -m bench.run_all --quick` (tiny sizes, one run, a machine "
                   "busy with other work). The numbers only show that every script runs; the figures are the ones "
-                  "of a full `python bench/run_all.py` in a quiet window.", ""]
+                  "of a full `python -m bench.run_all` in a quiet window.", ""]
     lines += [header, "",
               f"Host{'s' if len(machines) > 1 else ''}: {'; '.join(machines) or _host_line(host)} (newest first; "
               f"each figure's notes name its machine when there are several), Python {host.get('python')}, "
               f"eclipse-zenoh {host.get('eclipse-zenoh')}, python-can {host.get('python-can')}, mcap "
               f"{host.get('mcap')}. The scripts of this run took {total_s:.0f} s.", "",
               "median / min–max are over the per-run values of each figure's metric; p99 is defined per figure "
-              "(notes below). Every row is reproducible with the command beside it; `python bench/run_all.py` "
+              "(notes below). Every row is reproducible with the command beside it; `python -m bench.run_all` "
               "re-runs all of them and rewrites this file (`--quick` for a smoke run).", ""]
     lines += summary_table(records) + ["", "## Notes per figure", ""]
     for r in records:

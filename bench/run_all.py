@@ -1,6 +1,6 @@
-"""Run every benchmark (figures 1-8) and regenerate BENCHMARKS.md from their JSON results.
+"""Run every benchmark (the figures of BENCHMARKS.md) and regenerate BENCHMARKS.md from their JSON results.
 
-Run: python bench/run_all.py [--quick] [--only NAME,...] [--render-only] [--results DIR] [--out BENCHMARKS.md]
+Run: python -m bench.run_all [--quick] [--only NAME,...] [--render-only] [--results DIR] [--out BENCHMARKS.md]
 Each script runs as a child process with `--json DIR/<name>.json`; its output is streamed with a progress prefix.
 A failing script becomes a FAILED row, the others still run. The full run takes about 8 minutes on the 2-core
 development machine; `--quick` (every script in its smoke mode) about 1-2 minutes, marked PRELIMINARY.
@@ -18,12 +18,9 @@ import time
 from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from benchlib import REPO, now_iso, record  # noqa: E402
-from report_md import render  # noqa: E402
-
-from sea_hil.errors import SeaHilError  # noqa: E402
+from bench.benchlib import REPO, now_iso, record
+from bench.report_md import render
+from sea_hil.errors import SeaHilError
 
 BENCH = Path(__file__).resolve().parent
 # name, figure, full arguments, quick arguments, rough full-mode seconds
@@ -42,6 +39,8 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_recorder_child", "7c", ["--runs", "3"], ["--quick"], 30),
     ("bench_live", "8", ["--runs", "3"], ["--quick"], 150),
     ("bench_sweep", "9", ["--runs", "1"], ["--quick"], 60),
+    ("bench_ros2_export", "ros2", ["--runs", "3"], ["--quick"], 60),   # a lockstep session, then 3 exports
+    ("bench_ipc_bus", "ipc", ["--runs", "3"], ["--quick"], 60),   # the ipc CAN bus between two processes
 ]
 # opt-in (`--long`): the endurance figures take many minutes of one real-time session each
 LONG_STEPS: list[tuple[str, str, list[str], list[str], int]] = [
@@ -49,8 +48,9 @@ LONG_STEPS: list[tuple[str, str, list[str], list[str], int]] = [
 ]
 
 
-def _accepts_json(script: Path) -> bool:
-    out = subprocess.run([sys.executable, str(script), "--help"], capture_output=True, text=True, timeout=60)
+def _accepts_json(module: str) -> bool:
+    out = subprocess.run([sys.executable, "-m", module, "--help"], cwd=REPO, capture_output=True, text=True,
+                         timeout=60)
     return "--json" in out.stdout
 
 
@@ -102,13 +102,13 @@ def parse_lockstep(text: str, cmd: str, runs: int) -> list[dict[str, Any]]:
 
 
 def run_step(name: str, args: list[str], results: Path, timeout_s: float) -> list[dict[str, Any]]:
-    script = BENCH / f"{name}.py"
-    cmd_s = " ".join(["python", f"bench/{name}.py", *args])
-    if not script.exists():
+    module = f"bench.{name}"
+    cmd_s = " ".join(["python", "-m", module, *args])
+    if not (BENCH / f"{name}.py").exists():
         return []
     out_json = results / f"{name}.json"
-    use_json = _accepts_json(script)
-    cmd = [sys.executable, str(script), *args, *(["--json", str(out_json)] if use_json else [])]
+    use_json = _accepts_json(module)
+    cmd = [sys.executable, "-m", module, *args, *(["--json", str(out_json)] if use_json else [])]
     status, text = _stream(cmd, f"[{name}]", timeout_s)
     if status != 0:
         raise SeaHilError(f"exit status {status}: {text.strip().splitlines()[-1] if text.strip() else ''}")
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         try:
             run_step(name, chosen, args.results, timeout_s=max(10 * est_s, 300))
         except Exception as err:  # noqa: BLE001 - one failing benchmark must not stop the others
-            fail = {"figure": fig, "title": name, "command": f"python bench/{name}.py {' '.join(chosen)}",
+            fail = {"figure": fig, "title": name, "command": f"python -m bench.{name} {' '.join(chosen)}",
                     "error": str(err)[:300], "date": now_iso()}
             (args.results / f"{name}.json").write_text(json.dumps([fail]) + "\n", encoding="utf-8")
             print(f"=== {name} FAILED: {err}", flush=True)
@@ -156,7 +156,7 @@ def main(argv: list[str] | None = None) -> int:
             records += json.loads(path.read_text(encoding="utf-8"))
     records.sort(key=lambda r: str(r["figure"]))
     total_s = time.monotonic() - t0
-    header = f"Generated {now_iso()} by `python bench/run_all.py{' --quick' if args.quick else ''}`."
+    header = f"Generated {now_iso()} by `python -m bench.run_all{' --quick' if args.quick else ''}`."
     args.out.write_text(render(records, preliminary=args.quick, total_s=total_s, header=header), encoding="utf-8")
     print(f"=== wrote {args.out} ({len(records)} rows) in {total_s:.0f} s", flush=True)
     return 0

@@ -24,8 +24,7 @@ from pathlib import Path
 
 import psutil
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-from sea_hil.runtime.processes import end_process  # noqa: E402
+from sea_hil.runtime.processes import end_process
 
 PROGRESS = re.compile(r"sim\s+([\d.]+)/[\d.]+ s .*setpoints (\d+)\s+states (\d+)")
 
@@ -49,7 +48,8 @@ class _Follower:
     def __init__(self, stream, copy_to: Path, find: re.Pattern[str] | None) -> None:
         self.lock = threading.Lock()
         self.last_line_t = self.advanced_t = time.monotonic()
-        self.sim_s, self.setpoints, self.last_progress, self.found = -1.0, -1, "", None
+        self.sim_s, self.setpoints, self.last_progress = -1.0, -1, ""
+        self.found: str | None = None
         self.found_event = threading.Event()
         self.tail: list[str] = []
         self._find = find

@@ -19,12 +19,13 @@ import zenoh
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.cia402_master import Cia402Master, Frame
 from sea_hil.controller.edge import EdgeNode, receive_stamped
-from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, DriverState, ErrorFlags, Feedback
 from sea_hil.protocol.canbus import CanHandle
+from sea_hil.protocol.cia402_od import EMCY_CODES
 from sea_hil.runtime.clock import Clock
 from sea_hil.runtime.lockstep import LockstepEdgeSync
 
-LIMIT_CODES = {0x8612, 0x8400, 0x8311}    # the drive's soft-limit EMCY codes (plant_emulator/cia402_axis.py)
+LIMIT_CODES = {code for flag, code in EMCY_CODES.items() if flag & LIMIT_FLAGS}   # the drive's soft-limit EMCY codes
 
 
 def _message(f: Frame) -> can.Message:

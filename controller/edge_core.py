@@ -29,6 +29,7 @@ from sea_hil.controller.edge_events import EdgeEvents
 from sea_hil.controller.envelope import EnvelopeGate, SetpointEnvelope
 from sea_hil.controller.inner import InnerLoop
 from sea_hil.controller.nominal import nominal_params
+from sea_hil.drive_latches import LatchLog, latch_stats
 from sea_hil.errors import MalformedFrame
 from sea_hil.fault_explain import LatchWatch, latch_level
 from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
@@ -370,6 +371,7 @@ class EdgeCore:
         self.counters = EdgeCounters()
         self.latches = LatchWatch(cfg.safety.drive if cfg.safety.drive.enabled else None,
                                   (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))   # a drive latch, explained once
+        self.latch_log = LatchLog()               # every latch, counted in `stats` (the recording may have no CAN tap)
         self.payloads = PayloadCounters()
         seed = cfg.link.seed
         self.publisher = StatePublisher(LinkedPublisher(_Sink(state_sink), LinkEmulator(cfg.link.uplink, f"{seed}/up")),
@@ -387,6 +389,7 @@ class EdgeCore:
         self.record_sink = record_sink            # the edge trigger's tracking records (the shell publishes them)
         self.t_us_full = 0
         self.sample_t_ns = 0
+        self.first_sample_t_ns = 0
         self.last_fb_seq: int | None = None
         self.last_fb: Feedback | None = None
         self.last_rx_ns = 0            # monotonic receive time of last_fb (0: unknown)
@@ -425,14 +428,20 @@ class EdgeCore:
             log.debug("ignored frame: %s", err)
             return None
         if isinstance(frame, Heartbeat):
-            self.driver_state, self.driver_flags = frame.state, frame.flags
-            if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:   # once per latch: the limit,
-                log.log(latch_level(frame), "%s", line)         # the measured value, who clears it
+            self.on_heartbeat(frame)
         elif isinstance(frame, Feedback):
             return frame
         elif isinstance(frame, FeedbackAngle | FeedbackJoint1 | FeedbackJoint2):   # the three classic parts
             return self.assembler.push(frame)
         return None
+
+    def on_heartbeat(self, frame: Heartbeat) -> None:
+        """The drive's state from its HEARTBEAT: explained once per latch (log line), counted per latch at the current
+        sample time (`latch_log`, the `drive_latch*` fields of `stats`, sea_hil/drive_latches.py)."""
+        self.driver_state, self.driver_flags = frame.state, frame.flags
+        self.latch_log.on_heartbeat(self.sample_t_ns, frame)
+        if (line := self.latches.on_heartbeat(frame, self.last_fb)) is not None:   # once per latch: the limit,
+            log.log(latch_level(frame), "%s", line)         # the measured value, who clears it
 
     def accept(self, fb: Feedback, rx_ns: int) -> bool:
         """Take `fb` (received at monotonic `rx_ns`) as the current sample; False (counted) if its sample time does
@@ -445,6 +454,8 @@ class EdgeCore:
             return False
         self.last_fb_seq = fb.seq
         self.last_fb, self.last_rx_ns = fb, rx_ns
+        if not c.feedback:
+            self.first_sample_t_ns = t_us_full * 1000
         c.feedback += 1
         self.t_us_full = t_us_full
         self.sample_t_ns = t_us_full * 1000
@@ -556,6 +567,15 @@ class EdgeCore:
                          self.driver_state.name)
         self._stopped = not command and (self._stopped or self.counters.commands_sent > 0)
 
+    def ran_elsewhere(self, accepted: int, commanded: int, saturated: int) -> None:
+        """The offline session engine ran samples of this edge in its compiled kernel (sea_hil/offline/drive_kernel.py:
+        this core's own inner step, between the samples it hands the core): `accepted` samples not passed to `accept`,
+        `commanded` inner steps (VOLTAGE_CMDs), `saturated` of them clipped. Counted as the shell would count them,
+        so `stats` is the session's; no loop time is recorded (none was measured)."""
+        self.counters.feedback += accepted
+        self.counters.commands_sent += commanded
+        self.inner.saturated_steps += saturated
+
     # ---- counters out -------------------------------------------------------------------------------------------
     def stats(self) -> dict[str, float]:
         """The edge's flat counters (the fields of its stats record; keys read by the session summary)."""
@@ -591,7 +611,7 @@ class EdgeCore:
                    **percentiles_us("apply_latency", c.apply_latency, ("p50", "p99", "max")),
                    **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
                    loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
-                   uplink_pending=pub.uplink.pending)
+                   uplink_pending=pub.uplink.pending, **latch_stats(self.latch_log.latches, self.first_sample_t_ns))
         if self.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
             out.update(self.events.stats(), **self.events.fallback_stats())
         return out

@@ -19,7 +19,7 @@ no answer to it comes within `anchor_timeout_ns` (a controller that was not list
 the edge re-anchors on its current sample, and also when no answer at all came for `reanchor_after_ns` (a restarted
 controller: the edge has stopped commanding by then). Before this, the edge anchored on its own first sample whether
 or not the controller received it, so a controller that started listening later ran the trajectory shifted by that
-time (issue 16's real-time failure, docs/et-over-links.md).
+time (issue 16's real-time failure, docs/studies/et-over-links.md).
 
 Overdue answers (the local fallback of a silent downlink, docs/deviations.md section 17): `outstanding` holds the
 states published since the newest answer; `overdue(sample_ns)` says the oldest of them has waited `answer_timeout_ns`

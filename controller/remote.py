@@ -155,7 +155,9 @@ class RemoteController(Node):
         pc = self.payloads.as_dict()
         rejected = pc["rejected"]
         assert isinstance(rejected, dict)
-        return {"states_handled": self.states, "setpoints_sent": self.setpoint_seq,
+        # node_id: the limb's CAN node id (as its edge's record has it), so a recording of several limbs can tell
+        # whose record this is (sea_hil/report/completeness.py)
+        return {"node_id": self.cfg.can.node_ids[0], "states_handled": self.states, "setpoints_sent": self.setpoint_seq,
                 "payload_accepted": pc["accepted"], "payload_rejected": pc["rejected_total"],
                 **{f"payload_rejected_{k}": v for k, v in rejected.items()},
                 "unexpected_payloads": self.unexpected_payloads, "ignored_states": self.ignored_states,

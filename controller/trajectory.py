@@ -71,6 +71,7 @@ class CsvTrajectory:
         self._d1 = self._spline.derivative(1)
         self._d2 = self._spline.derivative(2)
         self._t0, self._t1 = float(t[0]), float(t[-1])
+        self.start_s, self.end_s = self._t0, self._t1     # the file's first and last sample times
         self.period_s = self._t1 - self._t0
         self._periodic = periodic
 

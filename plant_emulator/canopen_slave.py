@@ -16,10 +16,20 @@ import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple, Protocol
 
-from sea_hil.protocol.cia402_od import FORMATS, PDO_INVALID, Entry, Obj, entries_by_key
+from sea_hil.protocol.cia402_od import (
+    BOOT,
+    FORMATS,
+    NMT_ID,
+    OPERATIONAL,
+    PDO_INVALID,
+    PRE_OPERATIONAL,
+    STOPPED,
+    SYNC_DEFAULT,
+    Entry,
+    Obj,
+    entries_by_key,
+)
 
-NMT_ID, SYNC_DEFAULT = 0x000, 0x080
-BOOT, STOPPED, OPERATIONAL, PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F
 # SDO abort codes (CiA 301 table 22)
 TOGGLE, CS_INVALID, UNSUPPORTED, WRITE_ONLY, READ_ONLY = 0x05030000, 0x05040001, 0x06010000, 0x06010001, 0x06010002
 NO_OBJECT, NOT_MAPPABLE, PDO_TOO_LONG, LENGTH = 0x06020000, 0x06040041, 0x06040042, 0x06070010

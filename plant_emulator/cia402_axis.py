@@ -20,19 +20,11 @@ from dataclasses import dataclass, field
 from enum import IntEnum
 
 from sea_hil.mechanics import LimbParams, sea_geometry
-from sea_hil.plant_emulator.canopen_slave import OPERATIONAL, RANGE, CanopenSlave, Frame
+from sea_hil.plant_emulator.canopen_slave import RANGE, CanopenSlave, Frame
 from sea_hil.plant_emulator.soft_limits import INF, DriveLimits
 from sea_hil.protocol.can_frames import ErrorFlags, Feedback
-from sea_hil.protocol.cia402_od import MODE_CST, MODE_VOLTAGE, MODES
+from sea_hil.protocol.cia402_od import EMCY_CODES, EMCY_COMM_LOSS, MODE_CST, MODE_VOLTAGE, MODES, OPERATIONAL
 
-# EMCY error codes (CiA 301 / CiA 402): the drive's fault or warning -> code, error register bits
-EMCY_CODES = {ErrorFlags.POSITION_LIMIT: 0x8612,   # reference limit (software position limit 0x607D)
-              ErrorFlags.VELOCITY_LIMIT: 0x8400,   # velocity speed controller (0x607F exceeded)
-              ErrorFlags.FORCE_LIMIT: 0x8311,      # excess torque (SEA spring force 0x2110 exceeded)
-              ErrorFlags.WATCHDOG: 0x8250,         # RPDO timeout (no target within 0x2012)
-              ErrorFlags.SATURATED: 0x3310,        # output over-voltage: demand above the voltage limit (warning)
-              ErrorFlags.BUS_ERROR: 0x8110}        # CAN overrun, objects lost (a send failed; warning)
-EMCY_COMM_LOSS = 0x8130                            # left NMT OPERATIONAL while OPERATION ENABLED (0x6007 = 1)
 GENERIC, VOLTAGE, COMMUNICATION, PROFILE = 0x01, 0x04, 0x10, 0x20
 
 

@@ -43,8 +43,10 @@ from sea_hil.protocol.frame_plan import FramePlan
 __all__ = ["SeaCodec", "load_database"]
 
 
+@functools.cache
 def load_database() -> cantools.database.can.Database:
-    """Parse the packaged DBC (frame ids masked to the command bits)."""
+    """The packaged DBC (frame ids masked to the command bits), parsed once per process (~25 ms) and shared: read
+    only."""
     text = resources.files("sea_hil.protocol").joinpath("sea.dbc").read_text(encoding="utf-8")
     db = cantools.database.load_string(text, database_format="dbc", frame_id_mask=CMD_MASK, strict=True)
     assert isinstance(db, cantools.database.can.Database)   # a DBC is a CAN database
@@ -82,12 +84,6 @@ class _Layout:
     binding: SignalBinding | None = None   # fields <-> the plan's value tuple (None: through the signal dicts)
 
 
-@functools.cache
-def _codec_database() -> cantools.database.can.Database:
-    """The DBC every codec reads (parsed once per process; read only)."""
-    return load_database()
-
-
 def _layout(cls: type[Frame], name: str) -> _Layout:
     """The immutable layout of message `name` for frame type `cls` (its precompiled frame plan): built once per
     process and shared by every codec (building one costs ~1 ms, a codec ~40 ms: one per edge core, per offline
@@ -98,7 +94,7 @@ def _layout(cls: type[Frame], name: str) -> _Layout:
 
 @functools.cache
 def _built_layout(cls: type[Frame], name: str) -> _Layout:
-    msg = _codec_database().get_message_by_name(name)
+    msg = load_database().get_message_by_name(name)
     sigs, used = [], 0
     for s in msg.signals:
         if s.byte_order != "little_endian" or s.minimum is None or s.maximum is None:

@@ -209,7 +209,8 @@ def profile_messages(fd: bool) -> dict[type[Frame], str]:
         if name:
             out[cls] = name
     return out
-FEEDBACK_PARTS: tuple[type, ...] = (FeedbackAngle, FeedbackJoint1, FeedbackJoint2)
+FEEDBACK_PARTS: tuple[type[FeedbackAngle], type[FeedbackJoint1], type[FeedbackJoint2]] = (FeedbackAngle, FeedbackJoint1,
+                                                                                           FeedbackJoint2)
 
 
 class SignalBinding:

@@ -12,12 +12,16 @@ from __future__ import annotations
 import struct
 from dataclasses import dataclass
 
+from sea_hil.protocol.can_frames import ErrorFlags
+
 BOOLEAN, INTEGER8, INTEGER16, INTEGER32, UNSIGNED8, UNSIGNED16, UNSIGNED32, VISIBLE_STRING = 1, 2, 3, 4, 5, 6, 7, 9
 FORMATS = {BOOLEAN: "<B", INTEGER8: "<b", INTEGER16: "<h", INTEGER32: "<i", UNSIGNED8: "<B", UNSIGNED16: "<H",
            UNSIGNED32: "<I"}
 VAR, ARRAY, RECORD = 7, 8, 9
 PDO_INVALID = 0x8000_0000     # COB-ID bit 31: the PDO does not exist / is disabled
 RTR_NOT_ALLOWED = 0x4000_0000
+NMT_ID, SYNC_DEFAULT = 0x000, 0x080                                   # CiA 301 pre-defined connection set
+BOOT, STOPPED, OPERATIONAL, PRE_OPERATIONAL = 0x00, 0x04, 0x05, 0x7F  # NMT states (the heartbeat's byte)
 DEVICE_TYPE = 0x0002_0192     # CiA 402 (0x192), servo drive (bit 17 of the additional information)
 VENDOR_ID = 0x0000_0000       # no CiA-assigned vendor id: an emulator (docs/cia402.md)
 PRODUCT_CODE = 0x5EA4_0200
@@ -26,6 +30,15 @@ MODE_CST = 10                 # cyclic synchronous torque
 MODE_VOLTAGE = -1             # manufacturer-specific: target motor voltage 0x2000 (the paper's input, Eq. 6)
 MODES = (0, MODE_CST, MODE_VOLTAGE)
 SUPPORTED_MODES = 1 << 9 | 1 << 16   # 0x6502: CST (bit 9) and manufacturer bit 16 = mode -1
+
+# EMCY error codes (CiA 301 / CiA 402): the drive's fault or warning -> code (docs/cia402.md, Faults and EMCY)
+EMCY_CODES = {ErrorFlags.POSITION_LIMIT: 0x8612,   # reference limit (software position limit 0x607D)
+              ErrorFlags.VELOCITY_LIMIT: 0x8400,   # velocity speed controller (0x607F exceeded)
+              ErrorFlags.FORCE_LIMIT: 0x8311,      # excess torque (SEA spring force 0x2110 exceeded)
+              ErrorFlags.WATCHDOG: 0x8250,         # RPDO timeout (no target within 0x2012)
+              ErrorFlags.SATURATED: 0x3310,        # output over-voltage: demand above the voltage limit (warning)
+              ErrorFlags.BUS_ERROR: 0x8110}        # CAN overrun, objects lost (a send failed; warning)
+EMCY_COMM_LOSS = 0x8130                            # left NMT OPERATIONAL while OPERATION ENABLED (0x6007 = 1)
 
 
 @dataclass(frozen=True)

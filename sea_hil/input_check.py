@@ -22,7 +22,6 @@ periods: it has no drive firmware and no edge); not the single-node commands (`p
 from __future__ import annotations
 
 from collections.abc import Iterator
-from pathlib import Path
 from typing import NamedTuple
 
 import numpy as np
@@ -30,12 +29,7 @@ import numpy as np
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.nominal import nominal_params
 from sea_hil.controller.smc import smc_law
-from sea_hil.controller.trajectory import (
-    LeadIn,
-    _read_csv,  # the loader's own checks: columns, numbers, increasing
-    lead_in_duration_s,
-    make_trajectory,
-)
+from sea_hil.controller.trajectory import CsvTrajectory, GaitTrajectory, LeadIn, lead_in_duration_s, make_trajectory
 from sea_hil.errors import ConfigError, SeaHilError
 from sea_hil.protocol.link_trace import load_trace
 
@@ -79,21 +73,21 @@ def _start_pose(cfg: SeaHilConfig) -> Iterator[Problem]:
                           "plant.end_stops.max_rad", "rad")
 
 
-def _csv(cfg: SeaHilConfig) -> Iterator[Problem]:
-
-    t, _ = _read_csv(Path(cfg.trajectory.csv_path))
-    if abs(float(t[0])) > 1e-9:
+def _csv(cfg: SeaHilConfig, traj: CsvTrajectory) -> Iterator[Problem]:
+    """The CSV's times start the cycle at 0 (the loader checked its columns, numbers and increasing times)."""
+    if abs(traj.start_s) > 1e-9:
         yield Problem("trajectory.csv_path", f"trajectory.csv_path: {cfg.trajectory.csv_path}: the first sample is "
-                                             f"at t = {t[0]:g} s; the cycle starts at t = 0 (the times must cover "
-                                             f"[0, {t[-1]:g}] s)")
+                                             f"at t = {traj.start_s:g} s; the cycle starts at t = 0 (the times must "
+                                             f"cover [0, {traj.end_s:g}] s)")
 
 
-def _motion(cfg: SeaHilConfig) -> tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray,
-                                        np.ndarray]:
-    """The desired motion the drive will be asked for: (key, t, theta, omega, alpha) of one cycle, then (t, theta,
-    omega) of the lead-in from the start pose at rest (t < 0)."""
+Motion = tuple[str, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray]
+
+
+def _motion(cfg: SeaHilConfig, traj: GaitTrajectory | CsvTrajectory) -> Motion:
+    """The desired motion the drive will be asked for along `traj` (the config's trajectory, made once): (key, t,
+    theta, omega, alpha) of one cycle, then (t, theta, omega) of the lead-in from the start pose at rest (t < 0)."""
     tc = cfg.trajectory
-    traj = make_trajectory(tc)
     key = "trajectory.csv_path" if tc.kind == "csv" else "trajectory.period_s"
     t = np.arange(0.0, traj.period_s + CHECK_STEP_S / 2, CHECK_STEP_S)
     s = [traj.sample(float(v)) for v in t]
@@ -120,8 +114,8 @@ def _tag(message: str, what: str) -> str:
     return f"{words[0]} {words[1]} {words[-5]}"   # joint, quantity, the limit's key
 
 
-def _trajectory(cfg: SeaHilConfig) -> Iterator[Problem]:
-    key, t, theta, omega, alpha, tl, lq, lw = _motion(cfg)
+def _trajectory(cfg: SeaHilConfig, traj: GaitTrajectory | CsvTrajectory) -> Iterator[Problem]:
+    key, t, theta, omega, alpha, tl, lq, lw = _motion(cfg, traj)
     drive, stops = cfg.safety.drive, cfg.plant.end_stops
     start_bad = any(True for _ in _start_pose(cfg))   # then the lead-in starts outside: said once, of the start
     said: set[str] = set()   # (joint, quantity, limit) of the trajectory: the lead-in ending on it is not said again
@@ -207,9 +201,10 @@ def problems(cfg: SeaHilConfig, *, motion: bool = True, offline: bool = False) -
     if not motion:
         return out
     try:
-        if cfg.trajectory.kind == "csv":
-            out += list(_csv(cfg))
-        out += list(_trajectory(cfg))
+        traj = make_trajectory(cfg.trajectory)   # the file read once, with the loader's own checks and words
+        if isinstance(traj, CsvTrajectory):
+            out += list(_csv(cfg, traj))
+        out += list(_trajectory(cfg, traj))
     except SeaHilError as err:   # an unreadable trajectory: the loader's own line
         key = "trajectory.csv_path" if cfg.trajectory.kind == "csv" else "trajectory"
         out.append(Problem(key, f"{key}: {err}"))

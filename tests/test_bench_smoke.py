@@ -10,16 +10,11 @@ from pathlib import Path
 
 import pytest
 
+from bench import bench_bandwidth, bench_closed_loop_latency, run_all
+from bench.report_md import render
+from sea_hil.runtime import timer_floor
+
 REPO = Path(__file__).resolve().parent.parent
-BENCH = REPO / "bench"
-sys.path.insert(0, str(BENCH))
-
-import bench_bandwidth  # noqa: E402
-import bench_closed_loop_latency  # noqa: E402
-import run_all  # noqa: E402
-from report_md import render  # noqa: E402
-
-from sea_hil.runtime import timer_floor  # noqa: E402
 
 KEYS = {"figure", "title", "command", "runs", "metric", "unit", "median", "p99", "min", "max", "baseline", "goal",
         "goal_met", "date", "host", "notes", "details"}
@@ -27,7 +22,7 @@ KEYS = {"figure", "title", "command", "runs", "metric", "unit", "median", "p99",
 
 def _run_script(name: str, tmp_path: Path, *args: str) -> list[dict]:
     out = tmp_path / f"{name}.json"
-    proc = subprocess.run([sys.executable, str(BENCH / f"{name}.py"), *args, "--json", str(out)], cwd=REPO,
+    proc = subprocess.run([sys.executable, "-m", f"bench.{name}", *args, "--json", str(out)], cwd=REPO,
                           capture_output=True, text=True, timeout=120)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     records = json.loads(out.read_text())
@@ -39,7 +34,7 @@ def _check_shape(records: list[dict]) -> None:
     assert isinstance(records, list) and records
     for r in records:
         assert KEYS <= set(r), KEYS - set(r)
-        assert r["command"].startswith("python bench/")
+        assert r["command"].startswith("python -m bench.")
         assert "--json" not in r["command"]
         assert r["runs"] >= 1 and r["host"]["cores"] >= 1
         assert r["goal_met"] in (True, False, None)
@@ -126,13 +121,13 @@ def _summary(controller: str, downlink: int) -> dict:
 def test_bandwidth_and_latency_records():
     rows = [bench_bandwidth._row(_summary("et", 300), "realtime", 1),
             bench_bandwidth._row(_summary("tt", 1000), "realtime", 1)]
-    rec = bench_bandwidth._record("realtime", "5a", rows, 1, "python bench/bench_bandwidth.py")
+    rec = bench_bandwidth._record("realtime", "5a", rows, 1, "python -m bench.bench_bandwidth")
     _check_shape([rec])
     assert rec["median"] == 300 and rec["baseline"] == 1000 and rec["ratio"] == pytest.approx(0.3)
     assert rec["goal_met"] is True
     def lat(p99_us: float) -> dict:
         return bench_closed_loop_latency.latency_record(
-            [{"p50_us": 900.0, "p99_us": p99_us}, {"p50_us": 1100.0, "p99_us": p99_us}], "et", "python bench/l.py")
+            [{"p50_us": 900.0, "p99_us": p99_us}, {"p50_us": 1100.0, "p99_us": p99_us}], "et", "python -m bench.l")
     ok, bad = lat(2500.0), lat(3500.0)
     _check_shape([ok, bad])
     assert (ok["median"], ok["min"], ok["max"], ok["p99"]) == (1000.0, 900.0, 1100.0, 2500.0)
@@ -140,14 +135,14 @@ def test_bandwidth_and_latency_records():
 
 
 def test_run_all_parsers_and_render():
-    sim = run_all.parse_simulate("CPU s per run: median 0.300  min 0.250  max 0.400\n", "python bench/x.py", 3)
+    sim = run_all.parse_simulate("CPU s per run: median 0.300  min 0.250  max 0.400\n", "python -m bench.x", 3)
     lock = run_all.parse_lockstep('{"runs": 3, "cycles": 1, "et": {"session_wall_s_per_cycle": {"median": 9.0, '
                                   '"min": 8.5, "max": 9.5}, "process_wall_s_per_cycle": {"median": 11.0}}}',
-                                  "python bench/y.py", 3)
+                                  "python -m bench.y", 3)
     _check_shape(sim + lock)
     assert (sim[0]["median"], sim[0]["min"], sim[0]["max"]) == (0.3, 0.25, 0.4)
     assert lock[0]["figure"] == "1b" and lock[0]["median"] == 9.0
-    failed = {"figure": "2", "title": "bench_zenoh_hop", "command": "python bench/bench_zenoh_hop.py",
+    failed = {"figure": "2", "title": "bench_zenoh_hop", "command": "python -m bench.bench_zenoh_hop",
               "error": "boom", "date": "now"}
     md = render(sim + lock + [failed], preliminary=True, total_s=1.0, header="hdr")
     assert "PRELIMINARY" in md and "FAILED: boom" in md
@@ -175,8 +170,8 @@ def test_a_file_of_figures_from_two_machines_names_each_figures_machine():
 def test_secure_latency_record_pairs_each_secure_run_with_its_plain_one():
     plain = [{"run": 1, "p50_us": 1000.0, "p99_us": 3000.0}, {"run": 2, "p50_us": 2000.0, "p99_us": 4000.0}]
     secure = [{"run": 1, "p50_us": 1200.0, "p99_us": 3300.0}, {"run": 2, "p50_us": 2100.0, "p99_us": 6000.0}]
-    base = bench_closed_loop_latency.latency_record(plain, "et", "python bench/l.py")
-    rec = bench_closed_loop_latency.secure_record(secure, plain, base, "python bench/l.py --secure")
+    base = bench_closed_loop_latency.latency_record(plain, "et", "python -m bench.l")
+    rec = bench_closed_loop_latency.secure_record(secure, plain, base, "python -m bench.l --secure")
     _check_shape([rec])
     assert [d["pair_p50_ratio"] for d in rec["details"]] == pytest.approx([1.2, 1.05])
     assert [d["pair_p99_ratio"] for d in rec["details"]] == pytest.approx([1.1, 1.5])

@@ -2,13 +2,9 @@
 from __future__ import annotations
 
 import json
-import sys
 from pathlib import Path
 
-BENCH = Path(__file__).resolve().parent.parent / "bench"
-sys.path.insert(0, str(BENCH))
-
-import bench_soak  # noqa: E402
+from bench import bench_soak
 
 
 def test_growth_after_the_first_minute_and_records() -> None:
@@ -25,7 +21,7 @@ def test_growth_after_the_first_minute_and_records() -> None:
     assert abs(g["run"]["cpu_pct"] - 50.0) < 1e-6
     rec = {"can_seq_gaps": 9, "can_rejected": 0, "can_feedback_short": 0, "can_command_short": 0,
            "zenoh_down_dropped": 0, "controller_states_skipped": 5, "recorder_lost": 0, "plant_ticks": 1, "messages": 1}
-    rss, can, zen, comp = bench_soak.soak_records(g, rec, 5.0, "ok", 300.0, "python bench/bench_soak.py")
+    rss, can, zen, comp = bench_soak.soak_records(g, rec, 5.0, "ok", 300.0, "python -m bench.bench_soak")
     assert rss["goal_met"] is True and rss["median"] == g["recorder"]["growth_mb"]
     assert can["goal_met"] is True and comp["goal_met"] is True and zen["median"] == 0
     grown = bench_soak.soak_records({**g, "run": {**g["run"], "growth_mb": 6.0}}, rec, 5.0, "ok", 0.0, "x")

@@ -4,6 +4,7 @@ refuses the same config at load with that line (exit 2, nothing started) unless 
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import pytest
 
@@ -72,6 +73,8 @@ BROKEN = {
                                 (0.3, 0.05, 0.28)], "trajectory.csv_path", ("not strictly increasing",)),
     "csv_outside_limits": ("", _smooth(amp=0.8), "trajectory.csv_path",
                            ("hip trajectory angle", "safety.drive.position_max_rad[0] = 0.66")),
+    "csv_path_empty": ('[trajectory]\nkind = "csv"\ncsv_path = ""\n', None, "trajectory.csv_path",
+                       ("needs trajectory.csv_path",)),
     "missing_trace": ('[link.uplink]\ntrace_path = "/nonexistent/trace.csv"\n', None, "link.uplink.trace_path",
                       ("/nonexistent/trace.csv",)),
     "answer_deadline": ("[link.uplink]\ndelay_s = 0.15\n[link.downlink]\ndelay_s = 0.1\n", None,
@@ -139,3 +142,21 @@ def test_simulate_checks_what_its_offline_loop_has(tmp_path: Path, capsys: pytes
     cfg.write_text(BROKEN["start_beyond_end_stop"][0], encoding="utf-8")
     with pytest.raises(ConfigError, match="plant.end_stops.min_rad"):
         config_from_args(args, check="offline")
+
+
+def test_the_trajectory_csv_is_read_once(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """The check reads the CSV once (the loader's own checks, the start time and the motion from one
+    `make_trajectory`), not once for its start time and again for the motion."""
+    from sea_hil.config.loader import load_config
+    from sea_hil.input_check import problems
+    csv = Path(_csv(tmp_path, _smooth()))
+    opened: list[Path] = []
+    real_open = Path.open
+
+    def counting_open(self: Path, *args: Any, **kwargs: Any) -> Any:
+        if self == csv:
+            opened.append(self)
+        return real_open(self, *args, **kwargs)
+    monkeypatch.setattr(Path, "open", counting_open)
+    cfg = load_config(overrides={"trajectory": {"kind": "csv", "csv_path": str(csv)}})
+    assert problems(cfg) == [] and len(opened) == 1, opened

@@ -3,9 +3,16 @@
 four-process topologies are tests/test_compose_topology.py."""
 from __future__ import annotations
 
+import json
+from pathlib import Path
+
 import jsonschema
+import pytest
 from test_session_summary import _session
 
+from sea_hil.cli import main
+from sea_hil.commands.report import node_counters_of
+from sea_hil.errors import ConfigError
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_block
 from sea_hil.report.session_summary import session_summary
@@ -76,3 +83,97 @@ def test_a_cut_off_recording_checked_against_the_nodes_own_summaries() -> None:
     assert block["incomplete"] == ["state", "downlink"] and block["unverified"] == []
     assert (block["channels"]["state"]["missing"], block["channels"]["downlink"]["missing"]) == (175 - 59, 1)
     assert block["counters_from_node_summaries"] == ["controller", "edge"] and not block["complete"]
+
+
+# ---- several limbs: each limb's channels against its own nodes' counters ------------------------------------------
+LIMBS_META = {"limb1": "1 virtual:sea-hil0", "limb2": "2 virtual:sea-hil1"}
+
+
+def _as_limb(data: SessionData, limb: str) -> dict[str, list[RecordedMessage]]:
+    """`data`'s messages (limb1's keys) as those of `limb`."""
+    def moved(m: RecordedMessage) -> RecordedMessage:
+        key = m.payload.get("key")
+        return m if not isinstance(key, str) else RecordedMessage(m.log_time_ns, m.publish_time_ns, {
+            **m.payload, "key": key.replace("/limb1/", f"/{limb}/")}, m.sequence)
+    return {topic: [moved(m) for m in msgs] for topic, msgs in data.messages.items()}
+
+
+def two_limbs(published2: range = PUBLISHED, edge2: dict[str, int] | None = None,
+              edge1: dict[str, int] | None = None, controller_node_ids: bool = True) -> SessionData:
+    """A recording of two limbs (node ids 1 and 2), each with its edge's and controller's final record (the
+    controller's with its limb's `node_id`, as `sea-hil controller` writes it, or without: an outside controller);
+    limb2's recorder kept `published2` of its states."""
+    one, two = _session(20, 170, PUBLISHED, EVENTS), _as_limb(_session(20, 170, published2, EVENTS), "limb2")
+    data = SessionData(messages={t: one.messages.get(t, []) + two.get(t, []) for t in {*one.messages, *two}},
+                       metadata={"sea-hil.limbs": dict(LIMBS_META)})
+    data.messages["/stats"] = [
+        *(_final("edge", **{"node_id": n, "uplink_msgs": len(PUBLISHED), **(extra or {})})
+          for n, extra in ((1, edge1), (2, edge2))),
+        *(_final("controller", setpoints_sent=len(EVENTS), **({"node_id": n} if controller_node_ids else {}))
+          for n in (1, 2))]
+    return data
+
+
+def test_two_complete_limbs_are_complete() -> None:
+    for by_node in (True, False):
+        block = completeness_block(two_limbs(controller_node_ids=by_node))
+        jsonschema.validate(block, COMPLETENESS_SCHEMA)
+        assert block["complete"] and block["incomplete"] == [], block
+        assert ("downlink.limb2" in block["channels"]) is by_node and ("downlink" in block["channels"]) is not by_node
+
+
+def test_one_limbs_surplus_does_not_hide_anothers_shortfall() -> None:
+    """limb2's recorder missed its first 40 states; limb1's file holds 40 states more than its edge counted (an
+    edge restarted mid-session: the records of its first run). Summed over the limbs the state channel balances;
+    per limb it does not."""
+    data = two_limbs(published2=range(41, 176), edge1={"uplink_msgs": len(PUBLISHED) - 40})
+    block = completeness_block(data)
+    assert not block["complete"] and block["incomplete"] == ["state.limb2"], block
+    c = block["channels"]["state.limb2"]
+    assert (c["expected"], c["recorded"], c["missing"]) == (175, 135, 40)
+    assert block["channels"]["state.limb1"]["extra"] == 40
+    reasons = session_summary(data, "et")["verdict"]["reasons"]
+    assert [(r["code"], r.get("channel")) for r in reasons] == [("recording_incomplete", "state.limb2")], reasons
+
+
+def test_a_limb_without_its_nodes_final_records_is_unverified() -> None:
+    data = two_limbs()
+    data.messages["/stats"] = [m for m in data.messages["/stats"] if m.payload.get("node_id") != 2]
+    block = completeness_block(data)
+    assert sorted(block["unverified"]) == ["downlink.limb2", "state.limb2"], block
+    assert block["never_seen"] == ["edge final stats (limb2)", "controller final stats (limb2)"]
+    supplied = completeness_block(data, [("edge", {"node_id": 2, "uplink_msgs": len(PUBLISHED)})])
+    assert supplied["unverified"] == ["downlink.limb2"] and supplied["counters_from_node_summaries"] == [
+        "edge (limb2)"]
+
+
+def _node_file(tmp: Path, name: str, kind: str, **counters: int) -> Path:
+    path = tmp / name
+    path.write_text("a table line first\n" + json.dumps({"node": kind, "finished": True, "counters": counters}) + "\n",
+                    encoding="utf-8")
+    return path
+
+
+def test_two_node_summaries_of_one_node_are_refused(tmp_path: Path, capsys: pytest.CaptureFixture[str]) -> None:
+    """`report --node-summary A --node-summary B` with two summaries of the same node: exit 2, one line naming both
+    (the second silently replaced the first); two limbs' edges (different node_id) are both used."""
+    rec = tmp_path / "run.mcap"
+    rec.write_bytes(b"")       # never read: the summaries are checked first
+    a = _node_file(tmp_path, "a.json", "edge", node_id=1, uplink_msgs=10)
+    b = _node_file(tmp_path, "b.json", "edge", node_id=1, uplink_msgs=12)
+    assert main(["report", str(rec), "--out", str(tmp_path / "o"), "--node-summary", str(a), "--node-summary",
+                 str(b)]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "a second edge summary of node 1" in err[0] and "a.json" in err[0], err
+    c1 = _node_file(tmp_path, "c1.json", "controller", setpoints_sent=3)     # an outside controller: no node_id
+    c2 = _node_file(tmp_path, "c2.json", "controller", node_id=2, setpoints_sent=3)
+    with pytest.raises(ConfigError, match="a second controller summary"):
+        node_counters_of([c1, c2])
+    two = _node_file(tmp_path, "two.json", "edge", node_id=2, uplink_msgs=len(PUBLISHED))
+    assert node_counters_of([a, two]) == [("edge", {"node_id": 1, "uplink_msgs": 10}),
+                                          ("edge", {"node_id": 2, "uplink_msgs": len(PUBLISHED)})]
+    data = two_limbs()
+    data.messages["/stats"] = [m for m in data.messages["/stats"] if m.payload.get("node") != "edge"]
+    block = completeness_block(data, node_counters_of([_node_file(tmp_path, "e1.json", "edge", node_id=1,
+                                                                  uplink_msgs=len(PUBLISHED)), two]))
+    assert block["counters_from_node_summaries"] == ["edge (limb1)", "edge (limb2)"] and block["unverified"] == []

@@ -136,10 +136,10 @@ def test_a_failure_while_writing_leaves_nothing(tmp_path: Path, capsys, monkeypa
 def test_the_bench_script_times_the_cli_on_a_recording(tmp_path: Path):
     _wall_clock_recording(tmp_path / "rt.mcap", False)
     out = tmp_path / "bench.json"
-    proc = subprocess.run([sys.executable, str(REPO / "bench" / "bench_ros2_export.py"), "--quick", "--session",
+    proc = subprocess.run([sys.executable, "-m", "bench.bench_ros2_export", "--quick", "--session",
                            str(tmp_path / "rt.mcap"), "--json", str(out)], cwd=REPO, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
     (rec,) = json.loads(out.read_text())
     assert (rec["figure"], rec["runs"], rec["unit"]) == ("ros2", 1, "s") and rec["median"] > 0
-    assert rec["command"].startswith("python bench/bench_ros2_export.py") and rec["details"][0]["bag_bytes"] > 0
+    assert rec["command"].startswith("python -m bench.bench_ros2_export") and rec["details"][0]["bag_bytes"] > 0

@@ -1,5 +1,5 @@
 """The live view (issue 18): a lockstep `sea-hil run --foxglove 0 --foxglove-wait` session watched by an independent
-Foxglove WebSocket client (tests/foxglove_ws_client.py, no foxglove-sdk code); what it receives matches the MCAP
+Foxglove WebSocket client (bench/foxglove_ws_client.py, no foxglove-sdk code); what it receives matches the MCAP
 recording of the same session."""
 from __future__ import annotations
 
@@ -12,8 +12,8 @@ import sys
 import threading
 
 import pytest
-from foxglove_ws_client import receive
 
+from bench.foxglove_ws_client import receive
 from sea_hil.live.channels import CHANNELS, END_MESSAGE, LOG_LEVELS
 from sea_hil.protocol.can_codec import load_database
 from sea_hil.protocol.can_frames import CMD_MASK

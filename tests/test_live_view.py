@@ -157,8 +157,8 @@ def test_close_sends_the_end_line_and_waits_for_the_clients_to_leave():
     import threading
 
     import websockets
-    from foxglove_ws_client import SUBPROTOCOLS
 
+    from bench.foxglove_ws_client import SUBPROTOCOLS
     from sea_hil.live.channels import END_MESSAGE
     from sea_hil.live.server import LiveServer
     srv = LiveServer(LiveConfig(port=0))

@@ -57,6 +57,7 @@ EDGE_ADDED: dict[str, float] = {"setpoints_out_of_envelope": 0,   # issue 19: th
                                  "epoch_old": 0, "epoch_foreign": 0,  # issue 19: session epochs (no replays here)
                                  "late_samples": 0,   # issue 19: real time only, lockstep answers every sample
                                  "late_setpoints": 0,  # issue 19: no answer older than max_answer_age_s here
+                                 "drive_latches": 0,   # issue 29: the edge counts every drive latch (none here)
                                  # issue 29: the edge's payload rejections by class (none on the paper's path)
                                  **{f"payload_rejected_{r.value}": 0 for r in RejectReason}}
 # The one documented difference: payload version 2 (issue 19) added the 8-byte session epoch to every payload header,

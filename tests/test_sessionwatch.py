@@ -8,10 +8,9 @@ from pathlib import Path
 
 import psutil
 
-REPO = Path(__file__).resolve().parent.parent
-sys.path.insert(0, str(REPO / "bench"))
+from bench.sessionwatch import watch_run
 
-from sessionwatch import watch_run  # noqa: E402
+REPO = Path(__file__).resolve().parent.parent
 
 FAKE = textwrap.dedent("""
     import subprocess, sys, threading

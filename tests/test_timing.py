@@ -12,6 +12,7 @@ from types import SimpleNamespace
 
 import pytest
 
+from bench import bench_session_timing as bst
 from sea_hil.config.loader import load_config
 from sea_hil.config.timing import TimingConfig
 from sea_hil.errors import ConfigError
@@ -151,10 +152,6 @@ def test_sched_fifo_is_applied_and_undone_where_permitted() -> None:
 
 def test_session_timing_bench_records() -> None:
     """bench/bench_session_timing.py (figure 4s) from rows, without a session: median of the runs, goal, A/B."""
-    import sys
-    from pathlib import Path
-    sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "bench"))
-    import bench_session_timing as bst
     rows = [{"ticks": 10_000, "tick_misses": m, "miss_pct": m / 100, "cpu_us_per_tick": 500.0, "latency_p50_us": 1e3,
              "latency_p99_us": 3e3, "wall_s": 12.0} for m in (5, 30, 8)]
     rec = bst.default_record(rows)

@@ -12,11 +12,15 @@ from typing import Any
 
 import jsonschema
 import pytest
+from test_completeness import two_limbs
 
 from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.report.console import end_of_run_rows
+from sea_hil.report.session_summary import session_summary, split_edge_stats
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.report.verdict import COUNTER_RULES, verdict
 from sea_hil.session.run import RunOptions, run_session
@@ -84,6 +88,26 @@ def test_the_latch_is_explained_once_in_the_recording(forced: tuple[Path, int, s
     assert len(lines) == 1, lines
     assert "FAULT POSITION_LIMIT" in lines[0] and "hip angle 0.9" in lines[0]
     assert "above safety.drive.position_max_rad[0] = 0.66 rad" in lines[0] and "needs the user" in lines[0]
+
+
+def test_without_a_can_tap_the_edges_latch_count_judges(forced: tuple[Path, int, str]) -> None:
+    """A recording without a CAN tap (`sea-hil record` without `--can`: no /can/raw) of the faulted drive: the latch
+    the edge counted from the heartbeats it received makes the verdict invalid, with the same flags and time; with
+    the tap, the heartbeats in the file judge and the edge's count is not added (one reason, not two)."""
+    data = read_session(forced[0] / "session.mcap")
+    tapped = session_summary(data, "et")
+    data.messages.pop("/can/raw")
+    untapped = session_summary(data, "et")
+    assert [(f["source"], f["flags"]) for f in tapped["drive_faults"]] == [("can", ["POSITION_LIMIT"])]
+    assert [(f["source"], f["flags"]) for f in untapped["drive_faults"]] == [("edge", ["POSITION_LIMIT"])]
+    assert tapped["edge"]["drive_latches"] == 1 == untapped["edge"]["drive_latches"]
+    assert untapped["verdict"]["status"] == "invalid"
+    faults = [r for r in untapped["verdict"]["reasons"] if r["severity"] == "invalid"]
+    assert [r["code"] for r in faults] == ["drive_fault"] and faults[0]["flags"] == ["POSITION_LIMIT"]
+    assert [r["code"] for r in tapped["verdict"]["reasons"] if r["severity"] == "invalid"] == ["drive_fault"]
+    edge_t, can_t = untapped["drive_faults"][0]["t_s"], tapped["drive_faults"][0]["t_s"]
+    assert abs(edge_t - can_t) <= 0.002, (edge_t, can_t)   # the same heartbeat: the sample clock vs the tap's
+    assert untapped["drive_faults"][0]["in_fault_s"] > 10.0 and not untapped["drive_faults"][0]["cleared"]
 
 
 def test_report_reproduces_the_verdict(forced: tuple[Path, int, str], tmp_path: Path,
@@ -231,10 +255,69 @@ def test_every_counter_rule_names_a_threshold_and_degrades_above_it() -> None:
             "status"] == "ok"
 
 
+def test_every_limbs_edge_counters_are_judged() -> None:
+    """Two limbs (a synthetic recording, tests/test_completeness.py): limb2's edge lost 3 setpoints and rejected 2
+    out of the envelope, limb1's nothing; the top-level `edge` block is limb1's, yet the verdict names limb2."""
+    s = session_summary(two_limbs(edge2={"seq_lost": 3, "setpoints_out_of_envelope": 2}), "et")
+    jsonschema.validate(s, SUMMARY_SCHEMA)
+    assert "seq_lost" not in s["edge"] and [e["edge"].get("seq_lost") for e in s["limbs"]] == [None, 3]
+    reasons = {(r["code"], r.get("limb")): r for r in s["verdict"]["reasons"]}
+    assert set(reasons) == {("lost_setpoints", "limb2"), ("envelope_rejections", "limb2")}, s["verdict"]
+    assert reasons[("lost_setpoints", "limb2")]["value"] == 3
+    assert reasons[("lost_setpoints", "limb2")]["message"].startswith("limb2: ")
+    one = session_summary(two_limbs(edge1={"seq_lost": 1}), "et")   # limb1's own counter: named too
+    assert [(r["code"], r.get("limb")) for r in one["verdict"]["reasons"]] == [("lost_setpoints", "limb1")]
+
+
+@pytest.mark.parametrize("table,key", [("late_setpoints_max = -1", "verdict.late_setpoints_max"),
+                                       ("lost_setpoint_max = 3", "verdict.lost_setpoint_max"),   # a typo
+                                       ("envelope_rejections_max = 'a few'", "verdict.envelope_rejections_max")])
+def test_a_bad_verdict_table_in_the_recording_is_an_error(table: str, key: str, tmp_path: Path,
+                                                          capsys: pytest.CaptureFixture[str]) -> None:
+    """`report` of a recording whose attached config.toml has a bad [verdict] table: exit 2, one line naming the key
+    (it judged under the defaults without a word: a verdict the session's thresholds did not give)."""
+    path = tmp_path / "bad.mcap"
+    with SessionRecorder(path) as rec:
+        rec.add_attachment("config.toml", f"[verdict]\n{table}\n".encode())
+    assert main(["report", str(path), "--out", str(tmp_path / "out")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "bad [verdict] table" in err[0] and key in err[0], err
+    with SessionRecorder(tmp_path / "garbled.mcap") as rec:
+        rec.add_attachment("config.toml", b"[verdict\n")
+    assert main(["report", str(tmp_path / "garbled.mcap"), "--out", str(tmp_path / "out2")]) == 2
+    assert "config.toml cannot be read" in capsys.readouterr().err
+
+
 def test_lockstep_has_no_tick_deadlines() -> None:
     s = {"lockstep": True, "timing": {"driver": {"ticks": 100, "tick_misses": 50}}}
     assert verdict(s)["status"] == "ok"
     assert verdict({**s, "lockstep": False})["reasons"][0]["code"] == "tick_misses"
+
+
+def _cia402_realtime(misses: int, floor_pct: float) -> dict[str, Any]:
+    """A real-time cia402 summary as session_summary lays it out: SYNCs sent under `edge`, missed periods (wall-time
+    derived) under `timing.edge`, the host's floor under `timing.driver`."""
+    det, timing = split_edge_stats({"cia402_syncs": 10_000 - misses, "cia402_sync_misses": misses})
+    return {"lockstep": False, "edge": det, "timing": {"edge": timing, "driver": {
+        "ticks": 10_000, "tick_misses": 0, "floor": {"ticks": 500, "misses": 0, "miss_pct": floor_pct,
+                                                    "lateness_us_p99": 80.0, "duration_s": 0.5}}}}
+
+
+def test_cia402_sync_misses_are_judged_like_tick_misses_against_the_host_floor() -> None:
+    """The cia402 profile's SYNC producer (the edge) misses periods: degraded above sync_miss_max_pct + factor x the
+    host's floor, of the periods due (SYNCs sent + missed); shown in the end-of-run table below the threshold too;
+    nothing in lockstep."""
+    s = _cia402_realtime(100, 0.2)                       # 1 % of the periods, above 0.1 + 3 x 0.2 = 0.7 %
+    assert "cia402_sync_misses" in s["timing"]["edge"] and "cia402_syncs" in s["edge"]
+    r = {x["code"]: x for x in verdict(s)["reasons"]}["sync_misses"]
+    assert r["value"] == pytest.approx(1.0) and r["threshold"] == pytest.approx(0.7) and r["floor_pct"] == 0.2
+    assert "100 of 10000" in r["message"] and "sync_miss_floor_factor" in r["message"]
+    assert verdict(_cia402_realtime(100, 0.4))["status"] == "ok"                    # 1 % <= 0.1 + 3 x 0.4
+    assert verdict(s, VerdictConfig(sync_miss_max_pct=1.0))["status"] == "ok"
+    assert verdict({**s, "lockstep": True})["status"] == "ok"
+    assert verdict(_cia402_realtime(0, 0.0))["status"] == "ok"
+    assert "SYNC misses: 3 of 10000 periods" in dict(end_of_run_rows(_cia402_realtime(3, 0.0)))["warnings"]
+    assert "SYNC" not in dict(end_of_run_rows(_cia402_realtime(0, 0.0)))["warnings"]
 
 
 def test_strict_simulate_exits_3_on_saturation(tmp_path: Path) -> None:

@@ -5,8 +5,9 @@ import argparse
 from pathlib import Path
 
 from sea_hil.errors import ConfigError
-from sea_hil.recorder.export import export_can, export_csv
+from sea_hil.recorder.export import canopen_path, export_can, export_canopen, export_csv
 from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.session_config import canopen_decoder
 from sea_hil.ros2.export import export_ros2
 
 
@@ -19,7 +20,8 @@ def register(sub: argparse._SubParsersAction) -> None:
                                    "directory with standard ROS 2 messages (docs/ros2.md). At least one output is "
                                    "required.")
     p.add_argument("mcap", type=Path, metavar="RUN.mcap")
-    p.add_argument("--candump", type=Path, metavar="FILE.log", help="candump -L log of every recorded frame")
+    p.add_argument("--candump", type=Path, metavar="FILE.log", help="candump -L log of every recorded frame (a "
+                   "cia402 session: also FILE.canopen.csv, every frame decoded with the EDS's names)")
     p.add_argument("--asc", type=Path, metavar="FILE.asc", help="Vector ASC log of every recorded frame")
     p.add_argument("--csv", type=Path, metavar="DIR", help="one CSV per channel into DIR")
     p.add_argument("--ros2", type=Path, metavar="DIR",
@@ -43,6 +45,10 @@ def _main(args: argparse.Namespace) -> int:
               "messages recovered")
     if args.candump:
         print(f"{args.candump}: {export_can(data, args.candump, 'candump', args.channel)} frames (candump -L)")
+        decoder = canopen_decoder(data)
+        if decoder is not None:   # a cia402 session: the frames' meaning, in the EDS's names, beside the log
+            out = canopen_path(args.candump)
+            print(f"{out}: {export_canopen(data, out, decoder)} frames decoded (CANopen, the EDS's names)")
     if args.asc:
         print(f"{args.asc}: {export_can(data, args.asc, 'asc')} frames (ASC)")
     if args.csv:

@@ -29,7 +29,7 @@ def register(sub: argparse._SubParsersAction) -> None:
 def _main(args: argparse.Namespace) -> int:
     if not args.recording.is_file():
         raise RecordingError(f"no such recording: {args.recording}")
-    summary = run_report(args.recording, args.out, _node_counters(args.node_summary))
+    summary = run_report(args.recording, args.out, node_counters_of(args.node_summary))
     if args.json:
         print(json.dumps(summary, indent=2, sort_keys=True))
         for what, value in verdict_rows(summary):   # the verdict on stderr too: stdout stays the summary's JSON
@@ -39,11 +39,13 @@ def _main(args: argparse.Namespace) -> int:
     return 0
 
 
-def _node_counters(paths: list[Path]) -> dict[str, dict[str, Any]]:
-    """node kind -> counters of each `--node-summary` file (its last line: a node's `--json` output). Checked for
+def node_counters_of(paths: list[Path]) -> list[tuple[str, dict[str, Any]]]:
+    """(node kind, counters) of each `--node-summary` file (its last line: a node's `--json` output). Checked for
     the fields used (the node's kind and numeric counters); the full schema is NODE_SUMMARY_SCHEMA (jsonschema is a
-    dev dependency only)."""
-    out: dict[str, dict[str, Any]] = {}
+    dev dependency only). Two of one kind are refused (`ConfigError`) unless both say which node they are and the
+    nodes differ (`node_id`: the edges or controllers of different limbs), so none silently replaces another."""
+    out: list[tuple[str, dict[str, Any]]] = []
+    seen: list[tuple[str, Any, Path]] = []
     for path in paths:
         try:
             summary = json.loads(path.read_text(encoding="utf-8").strip().splitlines()[-1])
@@ -53,5 +55,12 @@ def _node_counters(paths: list[Path]) -> dict[str, dict[str, Any]]:
         if not isinstance(counters, dict) or summary.get("node") not in KINDS or not all(
                 isinstance(v, (int, float)) and not isinstance(v, bool) for v in counters.values()):
             raise ConfigError(f"--node-summary {path}: not a node summary (the last line of sea-hil NODE ... --json)")
-        out[summary["node"]] = counters
+        kind, node_id = summary["node"], counters.get("node_id")
+        for other_kind, other_id, other in seen:
+            if other_kind == kind and (node_id is None or other_id is None or node_id == other_id):
+                which = "" if node_id is None or other_id is None else f" of node {node_id}"
+                raise ConfigError(f"--node-summary {path}: a second {kind} summary{which} (the first: {other}); "
+                                  f"give each node's once (several limbs: each limb's, told apart by node_id)")
+        seen.append((kind, node_id, path))
+        out.append((kind, counters))
     return out

@@ -35,10 +35,11 @@ def _default_data() -> dict[str, Any]:
     return tomllib.loads(default_toml_text())
 
 
-def _one_line(err: ValidationError) -> str:
+def validation_line(err: ValidationError, prefix: str = "") -> str:
+    """A pydantic error on one line: every failing key (`prefix` + its location) and why."""
     parts = []
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"])
+        loc = prefix + ".".join(str(p) for p in e["loc"])
         parts.append(f"{loc}: {e['msg']}")
     return "; ".join(parts)
 
@@ -47,7 +48,7 @@ def config_from_dict(data: dict[str, Any]) -> SeaHilConfig:
     try:
         return SeaHilConfig.model_validate(data)
     except ValidationError as err:
-        raise ConfigError(f"invalid config: {_one_line(err)}") from err
+        raise ConfigError(f"invalid config: {validation_line(err)}") from err
 
 
 def load_config(path: str | Path | None = None, overrides: dict[str, Any] | None = None) -> SeaHilConfig:

@@ -127,7 +127,7 @@ class ControllerConfig(_Frozen):
                                             "observer (third order: the torque and its rate)")
     compensation: Literal["none", "predict"] = Field(
         "predict", description="link-delay compensation: 'predict' (default) = v_x for the state predicted at the "
-        "instant the setpoint acts (issue 16, docs/et-over-links.md); 'none' = the paper's (v_x for the received state)")
+        "instant the setpoint acts (issue 16, docs/session.md); 'none' = the paper's (v_x for the received state)")
     model: NominalModelConfig = NominalModelConfig()
 
 

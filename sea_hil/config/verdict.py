@@ -19,6 +19,12 @@ class VerdictConfig(_Frozen):
                                      "on top of tick_miss_floor_factor x the host's floor (real time only)")
     tick_miss_floor_factor: float = Field(3.0, ge=0, description="multiple of the host's empty-loop floor (measured "
                                           "at start-up) a real-time session may miss before it is the emulator's")
+    sync_miss_max_pct: float = Field(0.1, ge=0, description="cia402 profile: SYNC periods the edge's SYNC producer "
+                                     "missed [% of periods] on top of sync_miss_floor_factor x the host's floor "
+                                     "(real time only)")
+    sync_miss_floor_factor: float = Field(3.0, ge=0, description="cia402 profile: multiple of the host's empty-loop "
+                                          "floor a real-time session's SYNC producer may miss before it is the "
+                                          "emulator's")
     floor_measure_s: float = Field(0.5, ge=0, description="real time: seconds of the empty 1 kHz loop run at "
                                    "start-up to measure the host's floor; 0 = not measured (floor taken as 0)")
     late_samples_max_pct: float = Field(1.0, ge=0, description="real time: feedback samples the edge left "

@@ -95,7 +95,7 @@ def simulate(cfg: SeaHilConfig, mode: str, cycles: int | None = None, jit: bool 
         desired.append(ds.theta_rad)
         held = inner.deflection_m
         args = (x, k0, min(ratio, n_inner - k0), dt_ns, substeps, held or (0.0, 0.0), inner.sliding, held is None, p,
-                pn, inner.gains, inner.observer, dt, pn.voltage_limit, tab, lsb, no_limits, False)
+                pn, inner.gains, inner.observer, dt, pn.voltage_limit, tab, lsb, no_limits, 0)
         call = entry(steps, args) if call is None else call   # the types stay these (`sea_hil.jit.entry`)
         x, _, n_sat, u1, u2, bad_k, inner.observer, _ = call(*args)
         inner.saturated_steps += n_sat

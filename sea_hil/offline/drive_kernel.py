@@ -27,8 +27,8 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
                       limit_v, dist_tab, lsb, lim, faulted):
     """Sample k from the plant state x and its decoded feedback m: the edge's inner step on its nominal model pn
     (`inner_step`: disturbance observer state obs, backstepping voltage) -> quantised, saturated VOLTAGE_CMD -> one
-    driver period of the plant p (0 V once `faulted`: a drive soft limit of `lim`, a `DriveLimits`, was left, checked
-    on every integrated sample with `DriverCore`'s own `limit_bits`).
+    driver period of the plant p (0 V once `faulted`: the `ErrorFlags` bits of the drive soft limits of `lim`, a
+    `DriveLimits`, the plant left, checked on every integrated sample with `DriverCore`'s own `limit_bits`; 0: none).
     Returns (x, m of the new x, saturated, u1, u2 commanded, obs, faulted, finite); not finite: x diverged (m is
     then the old one)."""
     u1, u2, saturated, obs = inner_step(m, vx, s, hold_measured, obs, pn, gains, limit_v, dt_s)
@@ -47,7 +47,7 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
         return x, m, saturated, c1, c2, obs, faulted, False
     if not faulted:         # `DriverCore`'s soft-limit check on the new sample
         d1, d2, _, _ = deflections(x, p)
-        faulted = limit_bits(lim, (x[0], x[1]), (x[2], x[3]), (d1, d2), p.k1, p.k2) != 0
+        faulted = limit_bits(lim, (x[0], x[1]), (x[2], x[3]), (d1, d2), p.k1, p.k2)
     return x, feedback_measurement(x, p, lsb), saturated, c1, c2, obs, faulted, True
 
 
@@ -57,7 +57,8 @@ def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:
     def session_steps(x, k0, n_steps, period_ns, substeps, vx, s, hold_measured, p, pn, gains, obs, dt_s,
                       limit_v, dist_tab, lsb, lim, faulted):
         """Samples k0 .. k0 + n_steps - 1 (`edge_drive_sample`) from the state x of sample k0. Returns (x, m of the
-        new x, saturated steps, max |u1|, max |u2| commanded, first non-finite sample or -1, obs, faulted)."""
+        new x, saturated steps, max |u1|, max |u2| commanded, first non-finite sample or -1, obs, faulted: the latched
+        limit bits)."""
         fingerprint  # noqa: B018  (a closure cell: part of numba's cache key)
         sat_count = 0
         u1_max = 0.0

@@ -14,9 +14,10 @@ limits). The messages a recorder would see (states as delivered, setpoints as pu
 as the recorder's `zenoh_record` builds them (`SessionRecords`) and summarised by `session_summary`, so the summary
 is the session's (tests/test_engine_lockstep.py: bit for bit, over a matrix of links, schemes and faults).
 
-Not replayed: wall-clock quantities (latency, loop times), the edge's `/stats` (its rejections per class are:
-`engine_verdict` puts the edge core's counts in the summary's `rejections` blocks), and `max_abs_voltage_v` is taken up to
-the controller's last sample (a session also records the commands of its shut-down tail).
+The edge core's final `/stats` record is in the messages too (`EdgeCore.stats`, the kernel's samples counted in by
+`EdgeCore.ran_elsewhere`), so `session_summary` builds the `edge` block, the rejections and the verdict by lockstep's
+rule. Not replayed: wall-clock quantities (latency, loop times: `loop_count` is 0), and `max_abs_voltage_v` is taken
+up to the controller's last sample (a session also records the commands of its shut-down tail).
 """
 from __future__ import annotations
 
@@ -30,7 +31,6 @@ from sea_hil.controller.remote_core import ControllerCore
 from sea_hil.controller.trajectory import lead_in_duration_s, make_trajectory
 from sea_hil.dynamics import initial_state
 from sea_hil.errors import SeaHilError
-from sea_hil.fault_explain import POLICY_USER
 from sea_hil.jit import compiled, entry
 from sea_hil.mechanics import limb_params
 from sea_hil.offline.drive_kernel import feedback_measurement, make_session_steps
@@ -38,13 +38,13 @@ from sea_hil.offline.gc_pause import gc_paused
 from sea_hil.offline.wire_quantiser import dbc_resolutions
 from sea_hil.plant_emulator.disturbance import DisturbanceTable
 from sea_hil.plant_emulator.soft_limits import DriveLimits
-from sea_hil.protocol.can_frames import Feedback
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, decode
+from sea_hil.recorder.meta import ENGINE_SESSION_META, META_SESSION
 from sea_hil.recorder.reader import RecordedMessage, SessionData
-from sea_hil.report.session_summary import rejections_blocks, session_summary
-from sea_hil.report.summary import TIMING_KEY
-from sea_hil.report.verdict import verdict
+from sea_hil.report.session_summary import session_summary
+from sea_hil.stats.schema import stats_record
 
 STATE_BYTES, SETPOINT_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
 
@@ -130,27 +130,14 @@ def engine_summary(cfg: SeaHilConfig, mode: str, cycles: int = 1) -> dict[str, A
     summarised without cyclic garbage collection too (sea_hil/offline/gc_pause.py)."""
     with gc_paused():
         res = run_session(cfg, mode, cycles)
-        return engine_verdict(session_summary(res.data, mode), res.drive_faulted, res.saturated_steps, res.samples,
-                              cfg, res.edge_stats)
+        return result_summary(res, mode, cfg)
 
 
-def engine_verdict(summary: dict[str, Any], faulted: bool, saturated_steps: int, samples: int, cfg: SeaHilConfig,
-                   edge_stats: dict[str, Any] | None = None) -> dict[str, Any]:
-    """`summary` with the engine's `drive_faults` (the engine knows only whether a soft limit faulted the drive, not
-    when: `t_s` None; it records no heartbeats), the rejections per class the edge core counted (`edge_stats`, its
-    final `EdgeCore.stats`: the session's `rejections` and `timing.rejections` blocks, which `session_summary` of
-    messages without an edge `/stats` leaves at 0) and its `verdict` under `cfg`'s `[verdict]`, judging the
-    saturated inner steps too (of `samples` driver periods)."""
-    faults = [{"node_id": 1, "t_s": None, "state": "FAULT", "flags": ["soft limit"], "in_fault_s": None,
-               "cleared": False, "clear_policy": POLICY_USER}] if faulted else []
-    out = {**summary, "drive_faults": faults}
-    if edge_stats is not None:
-        rejected, rejected_timing = rejections_blocks(edge_stats)
-        out["rejections"] = rejected
-        out[TIMING_KEY] = {**out.get(TIMING_KEY, {}), "rejections": rejected_timing}
-    edge = {**out.get("edge", {}), "saturated_steps": saturated_steps, "commands_sent": samples}
-    out["verdict"] = verdict({**out, "lockstep": True, "edge": edge}, cfg.verdict)
-    return out
+def result_summary(res: EngineResult, mode: str, cfg: SeaHilConfig) -> dict[str, Any]:
+    """summary.json of an engine session: `session_summary` of its messages (the edge block, rejections, drive
+    latches and verdict from the edge core's final `/stats` record, as lockstep's), judged under `cfg`'s
+    `[verdict]`."""
+    return session_summary(res.data, mode, verdict_cfg=cfg.verdict)
 
 
 def run_session(cfg: SeaHilConfig, mode: str, cycles: int = 1, opts: EngineOptions | None = None) -> EngineResult:
@@ -214,7 +201,7 @@ class _Session:
     def run(self) -> EngineResult:
         cfg, edge, inner = self.cfg, self.edge, self.edge.inner
         m = feedback_measurement(self.x, self.p, self.lsb)  # the feedback of the current sample, as the edge decodes it
-        saturated, u_max, k, faulted = 0, [0.0, 0.0], 0, False
+        saturated, u_max, k, faulted, finished, told = 0, [0.0, 0.0], 0, 0, False, False
         tab: Any = None
         steps: Any = None
         substeps, period, x = cfg.sim.substeps, self.period_ns, self.x
@@ -223,9 +210,13 @@ class _Session:
             fb = Feedback(self.NODE_ID, k & 0xFF, (now // 1000) & 0xFFFF, (m[0], m[1]), (m[2], m[3]), (m[4], m[5]),
                           (m[6], m[7]))
             edge.accept(fb, 0)
+            if faulted and not told:   # the drive latched in the last stretch: its heartbeat, at the next sample
+                told = True
+                edge.on_heartbeat(self._fault_heartbeat(faulted))
             edge.publish(fb)
             edge.poll(now)
             if not self._controller(now):
+                finished = True
                 break
             edge.take_downlink(now)
             nxt = self._next_k(k)
@@ -238,13 +229,28 @@ class _Session:
             steps = entry(self.steps, args) if steps is None else steps   # the types stay these (`entry`)
             x, m, n_sat, u1m, u2m, bad, inner.observer, faulted = steps(*args)
             saturated += n_sat
+            edge.ran_elsewhere(nxt - k - 1, nxt - k, n_sat)   # samples k+1..nxt-1 accepted, k..nxt-1 commanded
             u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
             if bad >= 0:
                 raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * period * 1e-9:.3f} s)")
             k = nxt
+        if finished:     # lockstep's edge answers the sample at which the controller finished (its inner step is
+            edge.ran_elsewhere(0, 1, 0)    # not simulated here: the session ends)
+        if faulted:      # still latched at the end: the drive's last heartbeat
+            edge.on_heartbeat(self._fault_heartbeat(faulted))
         self.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
-        return EngineResult(SessionData(messages=self.rec.messages, complete=True), k, saturated, faulted,
-                            edge.envelope.rejected, edge.events, edge.stats())
+        stats = edge.stats()
+        # the edge's final /stats record, as lockstep's edge writes it at its last sample time (`record_edge_finals`)
+        end_ns = edge.sample_t_ns
+        self.rec.messages["/stats"] = [RecordedMessage(end_ns, end_ns, stats_record("edge", stats, final=True,
+                                                                                    t_ns=end_ns))]
+        data = SessionData(messages=self.rec.messages, metadata={META_SESSION: ENGINE_SESSION_META}, complete=True)
+        return EngineResult(data, k, saturated, bool(faulted), edge.envelope.rejected, edge.events, stats)
+
+    def _fault_heartbeat(self, bits: int) -> Heartbeat:
+        """The HEARTBEAT of a drive in FAULT with the soft-limit `bits` the kernel latched (the engine emulates no
+        heartbeat period: the edge core sees one at the sample after the fault and one at the end)."""
+        return Heartbeat(self.NODE_ID, DriverState.FAULT, ErrorFlags(bits), 0, 0, 0)
 
     def _controller(self, now: int) -> bool:
         """The controller's core answers the states released by `now` (a state released after a newer one is

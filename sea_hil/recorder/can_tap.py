@@ -8,6 +8,15 @@ is the frame's own 8-bit `seq` (0 for frames without one). Faults go to `/log/fa
 driver's state or error flags changing (HEARTBEAT), a frame the DBC refuses, frames missed; with the session's
 config (`configure`), once per latch of a drive's safe state the limit, the measured value and who clears it.
 
+The cia402 profile (a session config with `[can] profile = "cia402"`, `configure`): every frame (NMT, SYNC,
+heartbeat, EMCY, SDO, PDOs) goes to `/can/raw` with its CANopen node id (`node_id`: the id's low 7 bits, 0 for NMT
+and SYNC), nothing is decoded with the DBC; the target voltages of each limb's two RPDOs (object 0x2000, decoded by
+`protocol.cia402_decode` with the mapping the nodes have at the time) make one `/can/command` (`node_id`: the hip
+node's, `seq`: the number of SYNCs seen, mod 256), so the summary's voltages and the recording's completeness check
+read it as in the sea profile. Sample time base: one `can.feedback_rate_hz` period per SYNC (COB-ID 0x080, the
+dictionary's default) seen on the frame's bus, the drive's lockstep clock (frames before the first SYNC: 0), given
+by the bus's recorder node (`stamp`): a frame is recorded at the time it comes with.
+
 Missed frames: feedback and voltage frames carry an 8-bit `seq` that steps by one per sample, and CAN keeps the
 order of one id's frames, so a forward step of n > 1 on one id means n - 1 frames of that id never reached the
 recorder (`SeqGapCounter`). A repeat (step 0: a lockstep re-send) is not a gap. Limits: a loss of a multiple of 256
@@ -38,6 +47,8 @@ from sea_hil.protocol.can_frames import (
     Heartbeat,
     VoltageCmd,
 )
+from sea_hil.protocol.cia402_decode import Cia402Decoder, decoder_for
+from sea_hil.protocol.cia402_od import SYNC_DEFAULT
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, log_message
 
@@ -128,6 +139,12 @@ class CanTap:
         self.frames = self.rejected = 0
         self._driver: dict[int, tuple[DriverState, ErrorFlags]] = {}
         self.latches: LatchWatch | None = None   # `configure`: the session's drive limits explain each latch
+        self.canopen: Cia402Decoder | None = None  # `configure`: a cia402 session (module docstring)
+        self._pairs: tuple[tuple[int, int], ...] = ()
+        self._volts: dict[int, int] = {}           # cia402: node -> its newest target voltage (mV) not yet paired
+        self._syncs = 0                            # cia402: SYNCs decoded (the /can/command seq)
+        self._bus_syncs = 0                        # cia402, sample time base: SYNCs stamped (`stamp`)
+        self._period_ns = 0
 
     def configure(self, config_toml: str) -> None:
         """The session's config (its attached config.toml): from now on a drive's latch gets one `/log/faults` line
@@ -138,11 +155,19 @@ class CanTap:
             cfg = config_from_dict(tomllib.loads(config_toml))
         except (tomllib.TOMLDecodeError, SeaHilError):
             return
+        if cfg.can.profile == "cia402":
+            ids = cfg.can.cia402.node_ids
+            self.canopen = decoder_for(cfg)
+            self._pairs = tuple((ids[i], ids[i + 1]) for i in range(0, len(ids), 2))
+            self._period_ns = round(1e9 / cfg.can.feedback_rate_hz)
+            return
         self.latches = LatchWatch(cfg.safety.drive if cfg.safety.drive.enabled else None,
                                   (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))
 
     def records(self, f: RawFrame) -> list[Record]:
         """The messages of one frame, counted and timed."""
+        if self.canopen is not None:
+            return self._canopen_records(self.canopen, f)
         out, rejected, decoded = can_records(self.codec, f)
         self.frames += 1
         self.rejected += rejected
@@ -175,6 +200,39 @@ class CanTap:
             m.omega_rad_s, m.delta_m = (w[0], w[1]), (d[0], d[1])
         recs.extend(Record("/log/faults", t_ns, t_ns, log_message(t_ns, lv, who, text), seq) for lv, who, text in logs)
         return recs
+
+    def stamp(self, t_ns: int, can_id: int, is_extended: bool = False) -> int:
+        """The log time of a frame received at `t_ns` on this tap's bus: `t_ns`, except in a cia402 session on the
+        sample time base: the bus's SYNCs so far (this one included) times the SYNC period. Called by the recorder
+        node of each bus, so that every bus keeps its own clock when several buses share one recorder process."""
+        if self.canopen is None or self.time_base == "wall":
+            return t_ns
+        if can_id == SYNC_DEFAULT and not is_extended:
+            self._bus_syncs += 1
+        return self._bus_syncs * self._period_ns
+
+    def _canopen_records(self, decoder: Cia402Decoder, f: RawFrame) -> list[Record]:
+        """A cia402 session's frame: `/can/raw`, and `/can/command` when it completes a limb's pair of target
+        voltages (module docstring)."""
+        self.frames += 1
+        d = decoder.decode(f.can_id, f.data, remote=f.is_remote, extended=f.is_extended or f.is_error)
+        if d.kind == "SYNC":
+            self._syncs += 1
+        t_ns = f.t_ns   # stamped by the bus's recorder node (`stamp`)
+        raw = {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
+               "is_extended": f.is_extended, "node_id": d.node_id}
+        out = [Record("/can/raw", t_ns, t_ns, raw)]
+        mv = d.values.get("target_voltage")
+        if mv is None or not d.kind.startswith("RPDO"):
+            return out
+        self._volts[d.node_id] = mv
+        for hip, knee in self._pairs:
+            if d.node_id == knee and hip in self._volts:
+                seq = self._syncs & 0xFF
+                cmd = {"node_id": hip, "seq": seq, "kind": "voltage", "u1_v": self._volts.pop(hip) * 1e-3,
+                       "u2_v": self._volts.pop(knee) * 1e-3}
+                out.append(Record("/can/command", t_ns, t_ns, cmd, seq))
+        return out
 
     def _driver_change(self, hb: Heartbeat) -> list[tuple[LogLevel, str, str]]:
         """A log line when a driver's state or error flags differ from its previous heartbeat's."""

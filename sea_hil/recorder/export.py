@@ -7,6 +7,11 @@
   columns `log_time_ns, publish_time_ns, sequence`, then the payload's fields in first-seen order; nested fields of
   the Foxglove channels are flattened with dots and list indices (`joints.0.position`, `timestamp.sec`). A field a
   message lacks is an empty cell.
+* A cia402 session (`[can] profile = "cia402"` in the recording's attached config): its frames decoded with the
+  drive's object dictionary names (`sea_hil.protocol.cia402_decode`, the source of the EDS): `export_csv`'s
+  `can_raw.csv` gains the columns `canopen_kind` and `canopen` ("TPDO2 node 1: position_actual_value=..."), and
+  `export_canopen(data, path)` writes one CSV of every frame with its meaning (`sea-hil export --candump FILE.log`
+  writes it beside the log as FILE.canopen.csv; the log itself stays a plain, replayable candump -L file).
 """
 from __future__ import annotations
 
@@ -19,10 +24,46 @@ from typing import Any
 import can
 
 from sea_hil.errors import RecordingError
+from sea_hil.protocol.cia402_decode import Cia402Decoder
 from sea_hil.recorder.reader import RecordedMessage, SessionData
+from sea_hil.recorder.session_config import canopen_decoder
 
 CAN_FORMATS = ("candump", "asc")
 BASE_COLUMNS = ("log_time_ns", "publish_time_ns", "sequence")
+CANOPEN_COLUMNS = ("time_s", "can_id", "dlc", "data_hex", "node_id", "kind", "canopen")
+
+
+def canopen_rows(data: SessionData, decoder: Cia402Decoder) -> Iterator[tuple[RecordedMessage, dict[str, Any]]]:
+    """Each `/can/raw` message with its decoded columns (`kind`, `canopen`), in recording order (the decoder follows
+    the nodes' PDO configuration as the bus changed it)."""
+    for m in data.messages.get("/can/raw", []):
+        p = m.payload
+        try:
+            d = decoder.decode(int(p["can_id"]), bytes.fromhex(p["data_hex"]),
+                               extended=bool(p.get("is_extended", False)))
+        except (KeyError, TypeError, ValueError) as err:
+            raise RecordingError(f"/can/raw message at {m.log_time_ns} ns is not a frame: {err}") from err
+        yield m, {"kind": d.kind, "canopen": d.text}
+
+
+def export_canopen(data: SessionData, path: str | os.PathLike[str], decoder: Cia402Decoder) -> int:
+    """Every recorded frame of a cia402 session with its meaning, one CSV row each (`CANOPEN_COLUMNS`; time in
+    seconds as in the candump log); -> rows written."""
+    n = 0
+    with Path(path).open("w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(CANOPEN_COLUMNS)
+        for m, d in canopen_rows(data, decoder):
+            p = m.payload
+            w.writerow((f"{m.log_time_ns * 1e-9:.6f}", f"0x{int(p['can_id']):03X}", p["dlc"], p["data_hex"],
+                        p.get("node_id", ""), d["kind"], d["canopen"]))
+            n += 1
+    return n
+
+
+def canopen_path(log: str | os.PathLike[str]) -> Path:
+    """Where `sea-hil export --candump FILE.log` puts a cia402 session's decoded frames: FILE.canopen.csv."""
+    return Path(log).with_suffix(".canopen.csv")
 
 
 def can_messages(data: SessionData, channel: str | int | None = None) -> Iterator[can.Message]:
@@ -95,10 +136,15 @@ def export_csv(data: SessionData, directory: str | os.PathLike[str]) -> list[Pat
     except OSError as err:
         raise RecordingError(f"cannot create {out}: {err}") from err
     written = []
+    decoder = canopen_decoder(data)
     for topic, msgs in sorted(data.messages.items()):
         if not msgs:
             continue
         columns, rows = _rows(msgs)
+        if topic == "/can/raw" and decoder is not None:   # a cia402 session: each frame's meaning beside it
+            columns += ["canopen_kind", "canopen"]
+            for row, (_, d) in zip(rows, canopen_rows(data, decoder), strict=True):
+                row["canopen_kind"], row["canopen"] = d["kind"], d["canopen"]
         path = out / csv_name(topic)
         with path.open("w", newline="", encoding="utf-8") as fh:
             w = csv.DictWriter(fh, fieldnames=columns, restval="", extrasaction="raise")

@@ -21,6 +21,10 @@ from sea_hil.config.root import SeaHilConfig
 
 META_SESSION, META_CONFIG, META_FINAL = "sea-hil.session", "sea-hil.config", "sea-hil.final"
 CONFIG_ATTACHMENT = "config.toml"
+# `META_SESSION` of the offline session engine's in-memory session (sea_hil/offline/session_engine.py): lockstep, and
+# not a recorder's file (no recorder counters, no controller's final record: nothing to check its completeness by)
+ENGINE_SOURCE = "offline engine"
+ENGINE_SESSION_META = {"lockstep": "True", "source": ENGINE_SOURCE}
 
 
 def _finite(v: Any) -> Any:
@@ -78,3 +82,4 @@ def write_session_header(rec: _HeaderTarget, config: SeaHilConfig | None = None,
     if config is not None:
         rec.add_metadata(META_CONFIG, _flatten("", config.model_dump(mode="json"), {}))
         rec.add_attachment(CONFIG_ATTACHMENT, config_to_toml(config).encode(), "application/toml")
+

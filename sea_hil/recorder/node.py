@@ -178,10 +178,11 @@ class RecorderNode(Node):
                 self.on_can(msg)
                 n += 1
             return n
-        frames, now_ns = [], time.time_ns
+        frames, now_ns, stamp = [], time.time_ns, self.tap.stamp
         while (msg := bus.recv(timeout=0)) is not None:
             t = msg.timestamp
-            frames.append((round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
+            frames.append((stamp(round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.is_extended_id),
+                           msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
                            bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
                            bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
         self.can_forwarded += len(frames)
@@ -190,7 +191,8 @@ class RecorderNode(Node):
 
     def on_can(self, msg: can.Message) -> None:
         """Record one frame, logged at its bus timestamp (receive time when the bus gives none)."""
-        t_ns = round(msg.timestamp * 1e9) if msg.timestamp > 0 else time.time_ns()
+        t_ns = self.tap.stamp(round(msg.timestamp * 1e9) if msg.timestamp > 0 else time.time_ns(),
+                              msg.arbitration_id, msg.is_extended_id)
         frame = RawFrame.of(t_ns, msg)
         if isinstance(self.rec, RecorderProcess):
             self.can_forwarded += 1

@@ -19,10 +19,11 @@ fields a verdict reads; `complete` is true only when both are empty. Every count
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 from sea_hil.recorder.reader import RecordedMessage, SessionData, read_session
+from sea_hil.report.limbs import limb_view, recorded_limbs
 
 COMPLETE, INCOMPLETE, UNVERIFIED, NOT_RECORDED = "complete", "incomplete", "unverified", "not recorded"
 STATUSES = (COMPLETE, INCOMPLETE, UNVERIFIED, NOT_RECORDED)
@@ -102,45 +103,98 @@ def _int(meta: dict[str, str], key: str) -> int | None:
     return int(value) if value is not None and value.lstrip("-").isdigit() else None
 
 
-def completeness_block(data: SessionData, node_counters: Mapping[str, Mapping[str, Any]] | None = None
-                       ) -> dict[str, Any]:
-    """The `completeness` block of summary.json (module docstring). `node_counters` (node kind -> counters, e.g. a
-    node's `--json` summary saved on its host: `sea-hil report --node-summary`) stand in for a final record the
-    file lacks, so a recorder cut off before the edge's final statistics still says how much it missed."""
+NodeCounters = Mapping[str, Mapping[str, Any]] | Sequence[tuple[str, Mapping[str, Any]]]
+
+
+def _pairs(node_counters: NodeCounters | None) -> list[tuple[str, Mapping[str, Any]]]:
+    if node_counters is None:
+        return []
+    return list(node_counters.items()) if isinstance(node_counters, Mapping) else list(node_counters)
+
+
+def _label(kind: str, limb: str | None) -> str:
+    return kind if limb is None else f"{kind} ({limb})"
+
+
+def completeness_block(data: SessionData, node_counters: NodeCounters | None = None) -> dict[str, Any]:
+    """The `completeness` block of summary.json (module docstring). `node_counters` ((node kind, counters) pairs or
+    node kind -> counters, e.g. a node's `--json` summary saved on its host: `sea-hil report --node-summary`) stand in
+    for a final record the file lacks, so a recorder cut off before the edge's final statistics still says how much
+    it missed. Several limbs: each limb's channels (`state.<limb>`, ...) against its own nodes' final records (their
+    `node_id`), so one limb's surplus cannot hide another's shortfall."""
     finals = final_records(data)
-    supplied = sorted(k for k in (node_counters or {}) if not finals.get(k))
-    for kind in supplied:
-        finals[kind] = [dict((node_counters or {})[kind])]
-    edge, ctrl = finals.get("edge", []), finals.get("controller", [])
     meta = data.metadata.get("sea-hil.final", {})
-    channels = {
-        # uplink_msgs counts the states the link emulator kept, also those still held in its delay queue at the end
-        "state": _channel(_unique_count(data, "/zenoh/state"), edge, ("uplink_msgs",),
-                          "edge uplink_msgs - uplink_pending", minus=("uplink_pending",)),
-        "downlink": _channel(_unique_count(data, "/zenoh/setpoint") + _unique_count(data, "/zenoh/voltage"), ctrl,
-                             ("setpoints_sent",), "controller setpoints_sent"),
-    }
     can_tapped = bool(_int(meta, "can_frames")) or bool(data.messages.get("/can/raw"))
-    commands = sum(m.payload.get("kind") == "voltage" for m in data.messages.get("/can/command", []))
-    if can_tapped:
-        channels["can_command"] = _channel(commands, edge, ("commands_sent", "arrival_commands"),
-                                           "edge commands_sent + arrival_commands")
+    limbs = recorded_limbs(data)
+    channels: dict[str, dict[str, Any]] = {}
+    never: list[str] = []
+    supplied: list[str] = []
+    pairs = _pairs(node_counters)
+    if len(limbs) == 1:
+        for kind in NODES:
+            own = finals.get(kind, [])
+            extra = [dict(c) for k, c in pairs if k == kind and c.get("node_id") in (None, limbs[0][1])][-1:] \
+                if not own else []
+            supplied += [kind] if extra else []
+            never += [f"{kind} final stats"] if not own else []
+            finals[kind] = own + extra
+        channels.update(_limb_channels(data, finals["edge"], finals["controller"], can_tapped, ""))
     else:
-        channels["can_command"] = {"status": NOT_RECORDED, "expected": None, "recorded": 0, "missing": None,
-                                   "source": "no CAN tap in this recording"}
+        ctrl_by_node = any("node_id" in f for f in finals.get("controller", []))
+        for name, node_id, _ in limbs:
+            view = limb_view(data, name, node_id)
+            mine = {kind: [f for f in finals.get(kind, []) if f.get("node_id") == node_id] for kind in NODES}
+            for kind in NODES if ctrl_by_node else ("edge",):
+                if not mine[kind]:
+                    never.append(f"{kind} final stats ({name})")
+                    mine[kind] = [dict(c) for k, c in pairs if k == kind and c.get("node_id") == node_id][-1:]
+                    supplied += [_label(kind, name)] if mine[kind] else []
+            channels.update(_limb_channels(view, mine["edge"], mine["controller"], can_tapped, f".{name}",
+                                           downlink=ctrl_by_node))
+        if not ctrl_by_node:   # controller records without the limb's node id (an outside controller): summed
+            ctrl = finals.get("controller", [])
+            recorded = _unique_count(data, "/zenoh/setpoint") + _unique_count(data, "/zenoh/voltage")
+            if len(ctrl) < len(limbs):
+                never.append(f"controller final stats ({len(limbs) - len(ctrl)} of {len(limbs)} limbs)")
+                channels["downlink"] = _channel(recorded, [], (), "controller setpoints_sent of every limb")
+            else:
+                channels["downlink"] = _channel(recorded, ctrl, ("setpoints_sent",),
+                                                "controller setpoints_sent, summed over the limbs")
     lost = _int(meta, "can_frames_missed") if can_tapped else None
     if lost:   # frames missing between those seen: counted against the CAN channel whatever the nodes say
         channels["can_frames"] = {"status": INCOMPLETE, "expected": (_int(meta, "can_frames") or 0) + lost,
                                   "recorded": _int(meta, "can_frames") or 0, "missing": lost,
                                   "source": "recorder can_frames_missed (sequence gaps)"}
-    never = [f"{node} final stats" for node in NODES if not finals.get(node) or node in supplied]
     incomplete = [name for name, c in channels.items() if c["status"] == INCOMPLETE]
     unverified = [name for name, c in channels.items() if c["status"] == UNVERIFIED]
+    file_finals = final_records(data)
     return {"complete": not incomplete and not unverified and not never, "incomplete": incomplete,
             "unverified": unverified, "channels": channels,
-            "final_records": {node: len(recs) for node, recs in sorted(finals.items()) if node not in supplied},
-            **({"counters_from_node_summaries": supplied} if supplied else {}),
+            "final_records": {node: len(recs) for node, recs in sorted(file_finals.items())},
+            **({"counters_from_node_summaries": sorted(supplied)} if supplied else {}),
             "never_seen": never, "can_frames_lost": lost, "recorder_dropped": _int(meta, "dropped") or 0}
+
+
+def _limb_channels(data: SessionData, edge: list[dict[str, Any]], ctrl: list[dict[str, Any]], can_tapped: bool,
+                   suffix: str, downlink: bool = True) -> dict[str, dict[str, Any]]:
+    """The channels of one limb's share of the recording (`suffix`: "" or ".<limb>") against its nodes' records."""
+    channels = {
+        # uplink_msgs counts the states the link emulator kept, also those still held in its delay queue at the end
+        f"state{suffix}": _channel(_unique_count(data, "/zenoh/state"), edge, ("uplink_msgs",),
+                                   "edge uplink_msgs - uplink_pending", minus=("uplink_pending",)),
+    }
+    if downlink:
+        channels[f"downlink{suffix}"] = _channel(
+            _unique_count(data, "/zenoh/setpoint") + _unique_count(data, "/zenoh/voltage"), ctrl,
+            ("setpoints_sent",), "controller setpoints_sent")
+    commands = sum(m.payload.get("kind") == "voltage" for m in data.messages.get("/can/command", []))
+    if can_tapped:
+        channels[f"can_command{suffix}"] = _channel(commands, edge, ("commands_sent", "arrival_commands"),
+                                                    "edge commands_sent + arrival_commands")
+    else:
+        channels[f"can_command{suffix}"] = {"status": NOT_RECORDED, "expected": None, "recorded": 0, "missing": None,
+                                            "source": "no CAN tap in this recording"}
+    return channels
 
 
 def completeness_lines(block: Mapping[str, Any]) -> list[str]:

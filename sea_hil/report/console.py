@@ -35,6 +35,21 @@ def field(summary: Mapping[str, Any], *path: str, default: Any = None) -> Any:
     return default
 
 
+def sync_periods(summary: Mapping[str, Any]) -> tuple[int, int] | None:
+    """The cia402 profile's SYNC deadlines of a run: (periods missed by the edges' SYNC producers, periods due =
+    SYNCs sent + missed), from `timing.sync` (every limb), else the first limb's edge counters `cia402_sync_misses`
+    and `cia402_syncs` (timing.edge and edge); None for a run without them (the sea profile, the offline engine)."""
+    sync = (summary.get("timing") or {}).get("sync")
+    if isinstance(sync, Mapping):
+        misses, syncs = sync.get("misses"), sync.get("syncs")
+    else:
+        edge = {**(summary.get("edge") or {}), **((summary.get("timing") or {}).get("edge") or {})}
+        misses, syncs = edge.get("cia402_sync_misses"), edge.get("cia402_syncs")
+    if not isinstance(misses, (int, float)) or not isinstance(syncs, (int, float)) or syncs + misses <= 0:
+        return None
+    return int(misses), int(syncs + misses)
+
+
 class ProgressSample(NamedTuple):
     """One progress update of a running session; `str()` is the plain progress line."""
     wall_s: float
@@ -129,6 +144,9 @@ def _warnings(summary: Mapping[str, Any]) -> list[str]:
         driver = timing.get("driver") or {}
         if driver.get("tick_misses"):   # shown below the verdict's threshold too: nothing silent
             out.append(f"driver tick misses: {driver['tick_misses']} of {driver.get('ticks', 0)}")
+        sync = sync_periods(summary)
+        if sync is not None and sync[0]:   # the cia402 profile's SYNC producer (the edge), like the tick misses
+            out.append(f"SYNC misses: {sync[0]} of {sync[1]} periods")
     beyond = (summary.get("link_losses") or {}).get("uplink_beyond_model", 0)
     if beyond:
         out.append(f"states lost beyond the uplink model: {beyond}")

@@ -1,27 +1,41 @@
 """Every latch of a drive's safe state in a session recording (summary.json `drive_faults`), read back from the
-drives' own HEARTBEAT frames in `/can/raw`: what a real drive on can0 tells the bus too, so the same code judges a
-session with the emulator and one with a real robot.
+drives' own HEARTBEAT frames in `/can/raw` (`source: "can"`): what a real drive on can0 tells the bus too, so the
+same code judges a session with the emulator and one with a real robot. A recording without a CAN tap (`sea-hil
+record` without `--can`) takes the latches each edge counted from the heartbeats it received (`source: "edge"`, its
+final `/stats` record): never both, so no latch counts twice.
 
-A latch starts at the first heartbeat in FAULT or ESTOP after one that was not (or at the first heartbeat) and ends
-at the next heartbeat out of it (a CLEAR_ERRORS took it back to INIT) or at the recording's last heartbeat (still
-latched). Times are the heartbeat's, so they carry the heartbeat period (`can.heartbeat_rate_hz`, 10 Hz) as their
-resolution: `t_s` is seconds since the recording's first CAN frame (the drive's own clock in lockstep). The flags
-are every error flag the drive reported during the latch; `clear_policy` says who can end it (the edge's policy,
-`EdgeCore.answer` in controller/edge_core.py; the words: sea_hil/fault_explain.py): a watchdog latch is cleared by
-the edge when setpoints are fresh again (real time; a lockstep session never clears), a soft-limit latch or an
-e-stop needs the user. `after_session`: the latch began after the last measured sample (the `/tracking` record of the largest cycle
-time `t_s`): in real time the edge stops commanding once setpoints stop and the drive's watchdog takes the limb
-to its safe state, as designed; summary.json lists such a latch, the verdict does not count it.
+The latch rule is sea_hil/drive_latches.py's (the edge's too). Times are the heartbeat's, so they carry the heartbeat
+period (`can.heartbeat_rate_hz`, 10 Hz) as their resolution: `t_s` is seconds since the recording's first CAN frame
+(the drive's own clock in lockstep; from the edge: since its first sample, on the sample clock). `clear_policy` says
+who can end it (the edge's policy, `EdgeCore.answer` in controller/edge_core.py; the words: sea_hil/fault_explain.py):
+a watchdog latch is cleared by the edge when setpoints are fresh again (real time; a lockstep session never clears),
+a soft-limit latch or an e-stop needs the user. `after_session`: the latch began after the last measured sample (the
+`/tracking` record of the largest cycle time `t_s`): in real time the edge stops commanding once setpoints stop and
+the drive's watchdog takes the limb to its safe state, as designed; summary.json lists such a latch, the verdict does
+not count it. An edge's record details its first `DETAILED` latches (`drive_latches` counts them all).
+
+A cia402 session (docs/cia402.md) has no DBC heartbeat: a latch is read from the nodes' statusword TPDOs instead
+(CiA 402 FAULT or FAULT REACTION ACTIVE; a statusword out of it ends the latch, as the fault reset does), its
+flags from the EMCY codes the node sent since its last statusword outside FAULT (`EMCY_CODES` back to the drive's
+error flags), `node_id` the CANopen node's. The frames are decoded as the bus configured them
+(`protocol.cia402_decode`).
 """
 from __future__ import annotations
 
 from typing import Any
 
+from sea_hil.drive_latches import Latch, LatchLog, latches_of_stats
 from sea_hil.errors import MalformedFrame
-from sea_hil.fault_explain import SAFE, clear_policy, flag_names
+from sea_hil.fault_explain import clear_policy, flag_names
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, DriverState, ErrorFlags, Heartbeat
-from sea_hil.recorder.reader import SessionData
+from sea_hil.protocol.cia402_decode import Cia402Decoder
+from sea_hil.protocol.cia402_od import EMCY_CODES
+from sea_hil.recorder.reader import RecordedMessage, SessionData
+from sea_hil.recorder.session_config import canopen_decoder
+
+FLAG_OF_CODE = {code: flag for flag, code in EMCY_CODES.items()}
+CIA402_FAULT_STATES = (0x08, 0x0F)   # statusword & 0x4F: FAULT, FAULT REACTION ACTIVE (CiA 402)
 
 
 def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[int, Heartbeat]]:
@@ -40,41 +54,84 @@ def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[i
     return out
 
 
+def _cia402_states(raw: list[RecordedMessage], decoder: Cia402Decoder) -> list[tuple[int, Heartbeat]]:
+    """A cia402 recording's statusword TPDOs as the latch reader's (time, state) pairs: FAULT with the flags of the
+    node's EMCYs since its last statusword outside FAULT, else RUNNING (module docstring)."""
+    out: list[tuple[int, Heartbeat]] = []
+    flags: dict[int, ErrorFlags] = {}
+    for m in raw:
+        p = m.payload
+        try:
+            d = decoder.decode(int(p["can_id"]), bytes.fromhex(p["data_hex"]), extended=bool(p.get("is_extended")))
+        except (KeyError, TypeError, ValueError):
+            continue
+        if d.kind == "EMCY":
+            flags[d.node_id] = flags.get(d.node_id, ErrorFlags(0)) | FLAG_OF_CODE.get(d.values.get("error_code", 0),
+                                                                                       ErrorFlags(0))
+        elif "statusword" in d.values:
+            fault = d.values["statusword"] & 0x4F in CIA402_FAULT_STATES
+            hb = Heartbeat(d.node_id, DriverState.FAULT if fault else DriverState.RUNNING,
+                           flags.get(d.node_id, ErrorFlags(0)) if fault else ErrorFlags(0), 0, 0, 0)
+            if not fault:
+                flags.pop(d.node_id, None)
+            out.append((m.log_time_ns, hb))
+    return out
+
+
 def drive_faults(data: SessionData) -> list[dict[str, Any]]:
-    """Every safe-state latch of every drive of the recording, in time order (see the module docstring)."""
-    codec = SeaCodec(fd=None)
-    hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
+    """Every safe-state latch of every drive of the recording, in time order (see the module docstring); without a
+    CAN tap, those the edges counted (`edge_latches`)."""
     raw = data.messages.get("/can/raw", [])
     if not raw:
-        return []
+        return edge_latches(data)
+    decoder = canopen_decoder(data)
+    if decoder is not None:
+        states = _cia402_states(raw, decoder)
+    else:
+        hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
+        states = _heartbeats(data, SeaCodec(fd=None), hb_cmd)
     t0_ns = raw[0].log_time_ns
     tracking = data.messages.get("/tracking", [])
     last = max(tracking, key=lambda m: m.payload.get("t_s", float("-inf")), default=None)
     end_ns = last.log_time_ns if last is not None else None   # the last measured sample (largest cycle time)
-    open_: dict[int, dict[str, Any]] = {}
-    last_ns: dict[int, int] = {}
-    latches: list[dict[str, Any]] = []
-    for t_ns, hb in _heartbeats(data, codec, hb_cmd):
-        last_ns[hb.node_id] = t_ns
-        cur = open_.get(hb.node_id)
-        if hb.state in SAFE:
-            if cur is None:
-                cur = open_[hb.node_id] = {"node_id": hb.node_id, "t_ns": t_ns, "state": hb.state, "flags": hb.flags}
-            else:
-                cur["flags"] |= hb.flags
-                if hb.state is DriverState.ESTOP:
-                    cur["state"] = hb.state
-        elif cur is not None:
-            latches.append(_latch(cur, t_ns, t0_ns, end_ns, cleared=True))
-            del open_[hb.node_id]
-    latches += [_latch(cur, last_ns[n], t0_ns, end_ns, cleared=False) for n, cur in open_.items()]
-    return sorted(latches, key=lambda e: (e["t_s"], e["node_id"]))
+    latches = LatchLog()
+    for t_ns, hb in states:
+        latches.on_heartbeat(t_ns, hb)
+    out = [_latch(la, t0_ns, end_ns is not None and la.t_ns > end_ns, "can") for la in latches.latches]
+    return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
 
 
-def _latch(cur: dict[str, Any], until_ns: int, t0_ns: int, session_end_ns: int | None, *, cleared: bool
-           ) -> dict[str, Any]:
-    state, flags = cur["state"], ErrorFlags(cur["flags"])
-    after = session_end_ns is not None and cur["t_ns"] > session_end_ns
-    return {"node_id": int(cur["node_id"]), "t_s": (cur["t_ns"] - t0_ns) * 1e-9, "state": state.name,
-            "flags": flag_names(flags), "in_fault_s": (until_ns - cur["t_ns"]) * 1e-9, "cleared": cleared,
-            "clear_policy": clear_policy(state, flags), "after_session": after}
+def edge_latches(data: SessionData) -> list[dict[str, Any]]:
+    """The latches each edge counted from the heartbeats it received (its final `/stats` record,
+    sea_hil/drive_latches.py): a recording without a CAN tap (`sea-hil record` without `--can`). `t_s` counts from
+    the edge's first sample; `after_session` maps the edge's sample time onto the controller's time axis (a state's
+    sample time against its tracking record's `t_s`)."""
+    finals = {}
+    for m in data.messages.get("/stats", []):
+        if m.payload.get("final") and m.payload.get("node", "edge") == "edge":
+            finals[int(m.payload.get("node_id", 1))] = m.payload     # the last record per drive
+    end = _cycle_end_sample_ns(data)
+    out = []
+    for stats in finals.values():
+        latches, origin_ns = latches_of_stats(stats)
+        out += [_latch(la, origin_ns, end is not None and la.t_ns > end, "edge") for la in latches]
+    return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
+
+
+def _cycle_end_sample_ns(data: SessionData) -> int | None:
+    """The sample time (drive clock) of the last measured sample: the controller's largest cycle time `t_s` moved onto
+    the sample clock by a state that has both (None without such a state)."""
+    sample_ns = {m.payload.get("seq"): int(m.payload["sample_t_ns"]) for m in data.messages.get("/zenoh/state", [])
+                 if m.payload.get("sample_t_ns") is not None}
+    rows = [m.payload for m in data.messages.get("/tracking", [])]
+    anchor = next((r for r in rows if r.get("state_seq") in sample_ns), None)
+    if anchor is None:
+        return None
+    t0_ns = sample_ns[anchor["state_seq"]] - round(anchor["t_s"] * 1e9)
+    return t0_ns + round(max(r["t_s"] for r in rows) * 1e9)
+
+
+def _latch(la: Latch, t0_ns: int, after: bool, source: str) -> dict[str, Any]:
+    return {"node_id": la.node_id, "t_s": (la.t_ns - t0_ns) * 1e-9, "state": la.state.name,
+            "flags": flag_names(la.flags), "in_fault_s": (la.until_t_ns - la.t_ns) * 1e-9, "cleared": la.cleared,
+            "clear_policy": clear_policy(la.state, la.flags), "after_session": after, "source": source}

@@ -1,6 +1,7 @@
 """Every limb of a session in summary.json: `limbs` (one entry per limb: name, node id, bus, transmissions, tracking,
 and under its own `timing` the closed-loop latency), `limbs_total` (all limbs: summed transmissions, the worst
-tracking of any limb) and `timing.driver` (driver ticks and tick misses, summed over the buses' drivers).
+tracking of any limb), `timing.driver` (driver ticks and tick misses, summed over the buses' drivers) and, in the
+cia402 profile, `timing.sync` (SYNCs sent and SYNC periods missed, summed over the limbs' edges).
 
 A limb's share of the recording (`limb_view`): Zenoh messages whose key names the limb (`<prefix>/<limb>/...`), CAN
 messages and final edge stats of its node id, everything else shared. The limb list comes from the recording's
@@ -47,10 +48,15 @@ def limb_view(data: SessionData, name: str, node_id: int) -> SessionData:
     return replace(data, messages=msgs)
 
 
-def limb_entry(name: str, node_id: int, bus: str, summary: dict[str, Any]) -> dict[str, Any]:
-    """One `limbs` entry from that limb's summary."""
-    return {"limb": name, "node_id": node_id, "bus": bus, "transmissions": summary["transmissions"],
-            "tracking": summary["tracking"], "timing": {"latency_us": summary["timing"]["latency_us"]}}
+def limb_entry(name: str, node_id: int, bus: str, summary: dict[str, Any], *, counters: bool = False
+               ) -> dict[str, Any]:
+    """One `limbs` entry from that limb's summary; with `counters` (a session of several limbs) also the limb's own
+    edge counters and rejections, which the verdict judges per limb (the 1-limb layout has them at the top level)."""
+    out = {"limb": name, "node_id": node_id, "bus": bus, "transmissions": summary["transmissions"],
+           "tracking": summary["tracking"], "timing": {"latency_us": summary["timing"]["latency_us"]}}
+    if counters:
+        out.update(edge=summary["edge"], rejections=summary["rejections"])
+    return out
 
 
 def limbs_total(entries: list[dict[str, Any]]) -> dict[str, Any]:
@@ -78,3 +84,13 @@ def driver_block(data: SessionData) -> dict[str, Any] | None:
                         "miss_pct": float(floor["miss_pct"]), "lateness_us_p99": float(floor["lateness_us_p99"]),
                         "duration_s": float(floor["duration_s"])}
     return out
+
+
+def sync_block(per_limb: list[dict[str, Any]]) -> dict[str, int] | None:
+    """The cia402 profile's SYNCs over every limb's edge (each its bus's SYNC producer): `syncs` sent (`edge.
+    cia402_syncs`), periods `misses`ed (`timing.edge.cia402_sync_misses`, real time); None for other sessions."""
+    syncs = [s["edge"].get("cia402_syncs") for s in per_limb]
+    if any(not isinstance(n, int) for n in syncs):
+        return None
+    misses = sum(int(s["timing"]["edge"].get("cia402_sync_misses", 0)) for s in per_limb)
+    return {"syncs": sum(int(n) for n in syncs), "misses": misses}

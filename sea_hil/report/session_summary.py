@@ -12,28 +12,32 @@ latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIM
 the edge's other final `/stats` counters are under `edge`.
 
 Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb's (the 1-limb layout), `limbs` has
-every limb's transmissions, tracking and latency, `limbs_total` the sums and the worst tracking."""
+every limb's transmissions, tracking and latency (and, with several limbs, its own `edge` counters and `rejections`,
+which the verdict judges limb by limb), `limbs_total` the sums and the worst tracking."""
 from __future__ import annotations
 
-from collections.abc import Callable, Mapping
+from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from sea_hil.config.verdict import VerdictConfig
 from sea_hil.protocol.payload_fields import RejectReason
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT, ENGINE_SOURCE, META_SESSION
 from sea_hil.recorder.reader import SessionData
-from sea_hil.report.completeness import completeness_block
+from sea_hil.report.completeness import NodeCounters, completeness_block
 from sea_hil.report.drive_faults import drive_faults
-from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs
+from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs, sync_block
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 from sea_hil.report.verdict import verdict, verdict_config_of
 
 # edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
 # re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
-# extra commands on real-time setpoint arrival (`latency_*` go to timing.latency_us)
+# extra commands on real-time setpoint arrival, the cia402 SYNC producer's missed periods (`latency_*` go to
+# timing.latency_us)
 EDGE_TIMING_PREFIXES = ("latency_", "apply_latency_us_", "loop_us_", "can_")   # can_: the bus-timing model
 EDGE_TIMING_KEYS = frozenset({"loop_overruns", "lockstep_resends", "lockstep_startup_resends", "arrival_commands",
-                              "seq_duplicates", "stale_setpoints"})
+                              "seq_duplicates", "stale_setpoints", "cia402_sync_misses"})
 
 
 def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
@@ -158,19 +162,31 @@ def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
     return det, timing
 
 
-def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
-    """summary.json of a session recording, every limb (see the module docstring)."""
+def recorded(data: SessionData) -> bool:
+    """Is `data` a recorder's file (not the offline engine's in-memory session, `ENGINE_SESSION_META`)?"""
+    return data.metadata.get(META_SESSION, {}).get("source") != ENGINE_SOURCE
+
+
+def session_summary(data: SessionData, controller: str, node_counters: NodeCounters | None = None,
+                    *, verdict_cfg: VerdictConfig | None = None) -> dict[str, Any]:
+    """summary.json of a session recording, every limb (see the module docstring), judged once, here: a recorder's
+    file with its `completeness` block (the file against the nodes' own counters; `node_counters` stand in for final
+    records it lacks, issue 32), then the `verdict` under `verdict_cfg` (None: the `[verdict]` of the recording's
+    attached config)."""
     limbs = recorded_limbs(data)
     if len(limbs) == 1:
         per = [one_limb_summary(data, controller)]
     else:
         per = [one_limb_summary(limb_view(data, name, node_id), controller) for name, node_id, _ in limbs]
     summary = per[0]
-    entries = [limb_entry(*limb, s) for limb, s in zip(limbs, per, strict=True)]
+    entries = [limb_entry(*limb, s, counters=len(limbs) > 1) for limb, s in zip(limbs, per, strict=True)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
     driver = driver_block(data)
     if driver is not None:
         summary[TIMING_KEY]["driver"] = driver
+    sync = sync_block(per)
+    if sync is not None:
+        summary[TIMING_KEY]["sync"] = sync
     summary["drive_faults"] = drive_faults(data)
     rec = recording_block(data)
     if rec is not None:
@@ -178,18 +194,9 @@ def session_summary(data: SessionData, controller: str) -> dict[str, Any]:
     losses = link_losses(data, summary["edge"])
     if losses is not None:
         summary["link_losses"] = losses
-    cfg = verdict_config_of(data.attachments.get("config.toml"))
-    summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
-    return summary
-
-
-def with_completeness(summary: dict[str, Any], data: SessionData,
-                      node_counters: Mapping[str, Mapping[str, Any]] | None = None) -> dict[str, Any]:
-    """`summary` of a recorder's file (`run`, `report`) with its `completeness` block (the file against the nodes'
-    own counters; `node_counters` stand in for final records the file lacks, issue 32) and the verdict judged again
-    with it. Not for the offline engine's in-memory sessions: they are not recordings."""
-    summary["completeness"] = completeness_block(data, node_counters)
-    cfg = verdict_config_of(data.attachments.get("config.toml"))
+    if recorded(data):
+        summary["completeness"] = completeness_block(data, node_counters)
+    cfg = verdict_cfg if verdict_cfg is not None else verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT))
     summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
     return summary
 

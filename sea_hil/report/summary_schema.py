@@ -35,7 +35,7 @@ _NULLABLE_NUMBER = {"type": ["number", "null"]}
 DRIVE_FAULT = _object({"node_id": _COUNT, "t_s": _NULLABLE_NUMBER, "state": {"enum": ["FAULT", "ESTOP"]},
                        "flags": {"type": "array", "items": {"type": "string"}}, "in_fault_s": _NULLABLE_NUMBER,
                        "cleared": {"type": "boolean"}, "clear_policy": {"type": "string"},
-                       "after_session": {"type": "boolean"}}, required=("node_id", "t_s", "state", "flags",
+                       "after_session": {"type": "boolean"}, "source": {"enum": ["can", "edge"]}}, required=("node_id", "t_s", "state", "flags",
                                                                        "in_fault_s", "cleared", "clear_policy"))
 # sea_hil/report/verdict.py: a reason has its code, severity, message, figure and threshold, and may say more
 REASON = {"type": "object", "required": ["code", "severity", "message", "value", "threshold"],
@@ -53,13 +53,18 @@ TIMING = _object({
     "edge": {"type": "object", "additionalProperties": _NUMBER},             # wall-time-derived edge counters
     "driver": _object({"ticks": _COUNT, "tick_misses": _COUNT, "floor": FLOOR},   # `run`: summed over the buses'
                       required=("ticks", "tick_misses")),                    # drivers; floor: real time only
+    "sync": _object({"syncs": _COUNT, "misses": _COUNT}),                  # cia402: summed over the limbs' edges
     "can_bus": {"type": "object", "additionalProperties": CAN_BUS},          # [can] emulate_bitrate, per bus spec
     "rejections": {"type": "object", "additionalProperties": _COUNT},       # sessions: wall-time-derived classes
 }, required=())
 LATENCY = _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")})
 LIMB = _object({"limb": {"type": "string"}, "node_id": _COUNT, "bus": {"type": "string"},
                 "transmissions": TRANSMISSIONS, "tracking": TRACKING,
-                "timing": _object({"latency_us": LATENCY})})               # the limb's wall-time-derived part
+                "timing": _object({"latency_us": LATENCY}),                # the limb's wall-time-derived part
+                # several limbs: the limb's own deterministic edge counters and rejections (the verdict's per limb)
+                "edge": {"type": "object", "additionalProperties": _NUMBER},
+                "rejections": {"type": "object", "additionalProperties": _COUNT}},
+               required=("limb", "node_id", "bus", "transmissions", "tracking", "timing"))
 LIMBS_TOTAL = _object({"limbs": _COUNT, "buses": _COUNT, "transmissions": TRANSMISSIONS, "tracking": TRACKING})
 
 SUMMARY_SCHEMA: dict[str, Any] = {

@@ -3,8 +3,8 @@ figure and its threshold (docs/verdict.md).
 
 - `invalid`: a drive latched its safe state (a soft-limit fault, a watchdog trip, an e-stop: `drive_faults`); the
   limb stopped following the controller, whatever the tracking figures say.
-- `degraded`: a counter above its `[verdict]` threshold (`COUNTER_RULES`): driver tick misses beyond the host's own
-  floor, late samples, late or lost setpoints and states, envelope rejections, saturated inner steps, rejections,
+- `degraded`: a counter above its `[verdict]` threshold (`COUNTER_RULES`): driver tick misses (and the cia402
+  profile's SYNC misses) beyond the host's own floor, late samples, late or lost setpoints and states, envelope rejections, saturated inner steps, rejections,
   recording losses, a recording incomplete against the nodes' own counters (`completeness`, issue 32).
 
 Pure: summary (and thresholds) in, verdict out, so `sea-hil report` on the recording reproduces `run`'s. A counter
@@ -18,9 +18,13 @@ from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from pydantic import ValidationError
+
+from sea_hil.config.loader import validation_line
 from sea_hil.config.verdict import VerdictConfig
+from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import RejectReason
-from sea_hil.report.console import field
+from sea_hil.report.console import field, sync_periods
 
 OK, DEGRADED, INVALID = "ok", "degraded", "invalid"
 STRICT_EXIT = 3   # `--strict`: the exit status of a run whose verdict is not ok
@@ -103,50 +107,97 @@ def _fault_reasons(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
     return out
 
 
-def _tick_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
-    drv = field(summary, "driver")
-    if summary.get("lockstep", False) or not isinstance(drv, Mapping) or not drv.get("ticks"):
-        return []    # lockstep has no deadlines: simulated time waits for every node
-    pct = 100.0 * drv.get("tick_misses", 0) / drv["ticks"]
-    floor = drv.get("floor") or {}
+def _deadline_reason(code: str, what: str, misses: int, total: int, floor: Mapping[str, Any], max_pct: float,
+                     factor: float, names: tuple[str, str]) -> list[dict[str, Any]]:
+    """Real-time deadlines (`misses` of `total`) beyond `max_pct` % plus `factor` x the host's empty-loop floor: the
+    emulator's, not the host's (docs/verdict.md). `names`: the two `[verdict]` keys, for the message."""
+    pct = 100.0 * misses / total
     floor_pct = float(floor.get("miss_pct", 0.0))
-    limit = cfg.tick_miss_max_pct + cfg.tick_miss_floor_factor * floor_pct
+    limit = max_pct + factor * floor_pct
     if pct <= limit:
         return []
     where = (f"host's empty-loop floor {floor_pct:.3f} % over {floor.get('duration_s', 0):g} s at start-up"
              if floor else "host floor not measured")
-    return [_reason("tick_misses", DEGRADED, f"driver missed {drv.get('tick_misses', 0)} of {drv['ticks']} ticks "
-                                            f"({pct:.3f} %), above {limit:.3f} % = {cfg.tick_miss_max_pct:g} % + "
-                                            f"{cfg.tick_miss_floor_factor:g} x the {where}",
+    return [_reason(code, DEGRADED, f"{what} {misses} of {total} ({pct:.3f} %), above {limit:.3f} % = "
+                                    f"verdict.{names[0]} {max_pct:g} % + verdict.{names[1]} {factor:g} x the {where}",
                     round(pct, 4), round(limit, 4), floor_pct=floor_pct)]
 
 
+def _tick_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    drv = field(summary, "driver")
+    if summary.get("lockstep", False) or not isinstance(drv, Mapping) or not drv.get("ticks"):
+        return []    # lockstep has no deadlines: simulated time waits for every node
+    return _deadline_reason("tick_misses", "driver missed", int(drv.get("tick_misses", 0)), int(drv["ticks"]),
+                            drv.get("floor") or {}, cfg.tick_miss_max_pct, cfg.tick_miss_floor_factor,
+                            ("tick_miss_max_pct", "tick_miss_floor_factor"))
+
+
+def _sync_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    """The cia402 profile's SYNC misses, judged like the driver's tick misses (the SYNC period is the inner loop's:
+    a missed one is a sample the limb did not get), against the same host floor."""
+    periods = sync_periods(summary)
+    if summary.get("lockstep", False) or periods is None:
+        return []    # lockstep: one SYNC per answered sample, no deadline
+    drv = field(summary, "driver")
+    floor = (drv.get("floor") or {}) if isinstance(drv, Mapping) else {}
+    return _deadline_reason("sync_misses", "the edge's SYNC producer missed", periods[0], periods[1], floor,
+                            cfg.sync_miss_max_pct, cfg.sync_miss_floor_factor,
+                            ("sync_miss_max_pct", "sync_miss_floor_factor"))
+
+
+LIMB_SCOPED = ("edge", "rejections")   # blocks each limb has of its own (its edge's counters)
+
+
+def _limb_views(summary: Mapping[str, Any]) -> list[tuple[Mapping[str, Any], str | None]]:
+    """(summary as one limb sees it, the limb's name) per limb: with several limbs, each `limbs` entry's own `edge`
+    and `rejections` in place of the top-level ones (the first limb's); one limb: the summary itself, unnamed."""
+    limbs = summary.get("limbs") or []
+    if len(limbs) > 1 and all(isinstance(e.get("edge"), Mapping) for e in limbs):
+        return [({**summary, "edge": e["edge"], "rejections": e.get("rejections", {})}, str(e["limb"]))
+                for e in limbs]
+    return [(summary, None)]
+
+
 def _counter_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
+    """Every `COUNTER_RULES` counter above its threshold; the edge's counters of every limb (reasons name it)."""
     out, seen = [], set()
     lockstep = bool(summary.get("lockstep", False))
+    views = _limb_views(summary)
     for rule in COUNTER_RULES:
-        value = field(summary, *rule.path)
-        if not isinstance(value, (int, float)) or isinstance(value, bool) or (rule.realtime_only and lockstep):
+        if rule.realtime_only and lockstep:
             continue
-        if (rule.code, rule.path[-1]) in seen:
-            continue
-        seen.add((rule.code, rule.path[-1]))
-        threshold = getattr(cfg, rule.threshold)
-        name = ".".join(rule.path)
-        if rule.per is not None:
-            base = rule.per(summary)
-            if not base:
+        for view, limb in views if rule.path[0] in LIMB_SCOPED else [(summary, None)]:
+            value = field(view, *rule.path)
+            if not isinstance(value, (int, float)) or isinstance(value, bool) or (rule.code, rule.path[-1], limb) \
+                    in seen:
                 continue
-            pct = 100.0 * value / base
-            if pct > threshold:
-                out.append(_reason(rule.code, DEGRADED, f"{rule.what}: {value:g} of {base:g} ({pct:.3f} %, "
-                                                        f"{name}), above verdict.{rule.threshold} = {threshold:g} %",
-                                   round(pct, 4), threshold, counter=name, count=value))
-        elif value > threshold:
-            out.append(_reason(rule.code, DEGRADED, f"{rule.what}: {value:g} ({name}), above verdict."
-                                                    f"{rule.threshold} = {threshold:g}", value, threshold,
-                               counter=name))
+            seen.add((rule.code, rule.path[-1], limb))
+            reason = _counter_reason(rule, view, value, getattr(cfg, rule.threshold))
+            if reason is not None:
+                if limb is not None:
+                    reason = {**reason, "message": f"{limb}: {reason['message']}", "limb": limb}
+                out.append(reason)
     return out
+
+
+def _counter_reason(rule: CounterRule, summary: Mapping[str, Any], value: float, threshold: float
+                    ) -> dict[str, Any] | None:
+    """The reason `rule` gives for `value` (None: within its threshold)."""
+    name = ".".join(rule.path)
+    if rule.per is not None:
+        base = rule.per(summary)
+        if not base:
+            return None
+        pct = 100.0 * value / base
+        if pct <= threshold:
+            return None
+        return _reason(rule.code, DEGRADED, f"{rule.what}: {value:g} of {base:g} ({pct:.3f} %, {name}), above "
+                                            f"verdict.{rule.threshold} = {threshold:g} %", round(pct, 4), threshold,
+                       counter=name, count=value)
+    if value <= threshold:
+        return None
+    return _reason(rule.code, DEGRADED, f"{rule.what}: {value:g} ({name}), above verdict.{rule.threshold} = "
+                                        f"{threshold:g}", value, threshold, counter=name)
 
 
 # channels of summary.json `completeness` judged here; the CAN sequence gaps (`can_frames`) are reported, not judged:
@@ -163,7 +214,7 @@ def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> lis
         return []
     out = []
     for name, c in (comp.get("channels") or {}).items():
-        if name not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):
+        if name.split(".")[0] not in COMPLETENESS_JUDGED or not isinstance(c, Mapping):   # state.<limb>: per limb
             continue
         if c.get("status") == "incomplete" and (c.get("missing") or 0) > cfg.recording_losses_max:
             out.append(_reason("recording_incomplete", DEGRADED, f"recording of {name}: {c['missing']} of "
@@ -182,21 +233,30 @@ def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> lis
 def verdict(summary: Mapping[str, Any], cfg: VerdictConfig | None = None) -> dict[str, Any]:
     """The verdict of a summary (see the module docstring)."""
     cfg = cfg or VerdictConfig()
-    reasons = _fault_reasons(summary) + _tick_reason(summary, cfg) + _counter_reasons(summary, cfg) \
+    reasons = _fault_reasons(summary) + _tick_reason(summary, cfg) + _sync_reason(summary, cfg) \
+        + _counter_reasons(summary, cfg) \
         + _completeness_reasons(summary, cfg)
     status = INVALID if any(r["severity"] == INVALID for r in reasons) else DEGRADED if reasons else OK
     return {"status": status, "reasons": reasons}
 
 
 def verdict_config_of(toml_text: str | bytes | None) -> VerdictConfig:
-    """`[verdict]` of a recording's attached config.toml (the defaults when there is none)."""
+    """`[verdict]` of a recording's attached config.toml (the defaults when there is none). A table that does not
+    validate (a hand-edited or foreign file) is a `ConfigError` naming the key: judging under the defaults instead
+    would give a verdict the session's own thresholds did not (docs/verdict.md)."""
     if not toml_text:
         return VerdictConfig()
-    text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
     try:
-        return VerdictConfig.model_validate(tomllib.loads(text).get("verdict", {}))
-    except (tomllib.TOMLDecodeError, ValueError):
-        return VerdictConfig()
+        text = toml_text.decode() if isinstance(toml_text, bytes) else toml_text
+        table = tomllib.loads(text).get("verdict", {})
+    except (UnicodeDecodeError, tomllib.TOMLDecodeError) as err:
+        raise ConfigError(f"the recording's config.toml cannot be read, so neither can its [verdict] thresholds: "
+                          f"{err}") from err
+    try:
+        return VerdictConfig.model_validate(table)
+    except ValidationError as err:
+        raise ConfigError(f"the recording's config.toml has a bad [verdict] table: "
+                          f"{validation_line(err, 'verdict.')}") from err
 
 
 def strict_status(summary: Mapping[str, Any]) -> int:

@@ -9,10 +9,10 @@ from typing import Any
 import numpy as np
 
 from sea_hil.recorder.reader import SessionData, read_session
-from sea_hil.report.completeness import completeness_lines
+from sea_hil.report.completeness import NodeCounters, completeness_lines
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
-from sea_hil.report.session_summary import session_summary, tracking_arrays, with_completeness
+from sea_hil.report.session_summary import session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary
 from sea_hil.stats.can_bits import nominal_bits
 
@@ -196,12 +196,12 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     return "\n".join(lines)
 
 
-def run_report(path: Path, out: Path, node_counters: dict[str, dict[str, Any]] | None = None) -> dict[str, Any]:
-    """Figures, summary.json and report.md of a recording; `node_counters` (node kind -> its counters, from the
+def run_report(path: Path, out: Path, node_counters: NodeCounters | None = None) -> dict[str, Any]:
+    """Figures, summary.json and report.md of a recording; `node_counters` ((node kind, its counters) from the
     nodes' `--json` summaries) complete the completeness check where the file lacks a node's final record."""
     data = read_session(path)
     session = data.metadata.get("sea-hil.session", {})
-    summary = with_completeness(session_summary(data, session.get("controller", "et")), data, node_counters)
+    summary = session_summary(data, session.get("controller", "et"), node_counters)
     write_report_figures(data, out)
     write_summary(out / "summary.json", summary)
     (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")

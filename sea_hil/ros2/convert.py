@@ -22,19 +22,17 @@ from __future__ import annotations
 
 import heapq
 import math
-import tomllib
 from collections.abc import Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
 
-from sea_hil.config.loader import load_config
 from sea_hil.config.root import SeaHilConfig
-from sea_hil.errors import MalformedFrame, SeaHilError
+from sea_hil.errors import MalformedFrame
 from sea_hil.mechanics import LimbParams, limb_params, sea_geometry
 from sea_hil.protocol.can_assembly import unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import Heartbeat
-from sea_hil.recorder.meta import CONFIG_ATTACHMENT, META_FINAL
+from sea_hil.recorder.meta import META_FINAL
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.ros2.diagnostics import counter_status, hardware_id, heartbeat_status
 from sea_hil.ros2.timeline import Limbs, NodeClock, StateClock, limb_of_key
@@ -83,17 +81,6 @@ def _u(v: Any, bits: int = 32) -> int:
 
 def _s(v: Any) -> str:
     return v if isinstance(v, str) else ""
-
-
-def session_config(data: SessionData) -> SeaHilConfig | None:
-    """The recording's effective config (its `config.toml` attachment), or None when it has none or it is unusable."""
-    raw = data.attachments.get(CONFIG_ATTACHMENT)
-    if raw is None:
-        return None
-    try:
-        return load_config(overrides=tomllib.loads(raw.decode("utf-8")))
-    except (SeaHilError, ValueError):
-        return None
 
 
 @dataclass

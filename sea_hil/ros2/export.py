@@ -11,8 +11,9 @@ from pathlib import Path
 
 from sea_hil.errors import RecordingError
 from sea_hil.recorder.reader import SessionData, read_session
+from sea_hil.recorder.session_config import session_config
 from sea_hil.ros2.bag import BagSummary, write_bag
-from sea_hil.ros2.convert import Converter, session_config
+from sea_hil.ros2.convert import Converter
 
 SEA_HIL_MARK = "/can/raw"   # every sea-hil recording registers this channel (sea_hil.recorder.writer)
 # its encodings: JSON in recordings before the binary CAN channels, protobuf since (sea_hil.recorder.binary)

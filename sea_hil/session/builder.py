@@ -19,6 +19,7 @@ import can
 import zenoh
 from zenoh import Session as ZenohSession  # `zenoh` in the class body is the method
 
+from sea_hil.config.loader import config_to_toml
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.cia402_edge import Cia402EdgeNode
 from sea_hil.controller.edge import EdgeNode
@@ -116,7 +117,10 @@ class SessionBuilder:
                  **kw: Any) -> Any:
         if isinstance(bus, TimedBus):
             bus.listen_only = True   # the bus-timing model does not wait for a recorder (it never answers)
-        return self.add(RecorderNode(rec, session, self.cfg.zenoh.prefix, bus, **kw))
+        node = self.add(RecorderNode(rec, session, self.cfg.zenoh.prefix, bus, **kw))
+        if self.cfg.can.profile == "cia402":   # its in-process tap decodes CANopen (a recorder process: by config.toml)
+            node.tap.configure(config_to_toml(self.cfg))
+        return node
 
     # ---- lifecycle ------------------------------------------------------------------------------------------------
     def serve(self, node: Node, duration_s: float | None = None,

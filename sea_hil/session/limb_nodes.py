@@ -12,7 +12,6 @@ from typing import Any
 
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_mux import EdgeMux
-from sea_hil.errors import ConfigError
 from sea_hil.protocol.merged_bus import MergedBus, can_merge
 from sea_hil.recorder.writer import RecordSink
 from sea_hil.session.builder import SessionBuilder
@@ -52,16 +51,15 @@ def build_limb_nodes(b: SessionBuilder, session: Any, limbs: tuple[Limb, ...], i
     several buses (and `[timing] merge_buses`): one driver, one edge and one tap for all buses (`_merged`)."""
     nodes = LimbNodes(limbs)
     groups = buses_of(limbs)
-    if b.cfg.can.profile == "cia402" and len(limbs) != 1:
-        raise ConfigError("the cia402 profile in sea-hil run serves one limb so far ([can.cia402] node_ids: one "
-                          "(hip, knee) pair)")
     handles = {spec: (b.bus(spec), b.bus(spec), b.bus(spec)) for spec in groups}   # plant, edge, recorder tap
     if _merged(b, nodes, handles, session, inner, mode):
         return nodes
     for spec, group in groups.items():
         plant_bus, edge_bus, tap = handles[spec]
-        nodes.taps.append(None if b.cfg.can.profile == "cia402" else tap)   # CANopen frames: not the DBC's
-        nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group)))
+        nodes.taps.append(tap)   # cia402: the tap decodes CANopen (sea_hil.recorder.can_tap, the session's config)
+        # cia402 (one limb per bus, sea_hil.session.limbs): the drive of that limb's node pair
+        nodes.plants.append(b.plant(plant_bus, tuple(limb.node_id for limb in group),
+                                    cfg=limb_config(b.cfg, group[0]) if b.cfg.can.profile == "cia402" else None))
         edges = [b.edge(edge_bus, session, limb.node_id, inner=inner, cfg=limb_config(b.cfg, limb), mode=mode)
                  for limb in group]
         nodes.edges += edges
@@ -74,11 +72,12 @@ def _merged(b: SessionBuilder, nodes: LimbNodes, handles: dict[str, tuple[Any, A
     """Compose one `PlantNode` serving every limb of every bus, one `EdgeMux` serving every edge core and one
     recorder tap, each over a `MergedBus` of the buses' handles (`sea_hil.protocol.merged_bus`): the threads of the
     session no longer grow with the buses (docs/timing.md "Where the CPU goes"). Only in real time, with several
-    buses, distinct node ids and buses that can be merged; False (nothing built) otherwise. Lockstep keeps one node
+    buses, distinct node ids and buses that can be merged, not in the cia402 profile; False (nothing built) otherwise. Lockstep keeps one node
     per bus, so no lockstep result can change."""
     limbs = nodes.limbs
     ids = [limb.node_id for limb in limbs]
     if (b.lockstep or len(handles) < 2 or not b.cfg.timing.merge_buses or len(set(ids)) != len(ids)
+            or b.cfg.can.profile == "cia402"   # a SYNC producer per bus: frames of one bus name no limb
             or not all(can_merge([h[k] for h in handles.values()]) for k in range(3))):
         return False
     plant_bus, edge_bus, tap = (MergedBus({limb.node_id: handles[limb.bus][k] for limb in limbs}) for k in range(3))

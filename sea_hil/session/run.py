@@ -29,7 +29,7 @@ from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.reader import read_session
 from sea_hil.report.console import ProgressSample
 from sea_hil.report.limbs import META_FLOOR
-from sea_hil.report.session_summary import session_summary, with_completeness
+from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
 from sea_hil.runtime.processes import end_process, spawn_child, stop_on_signals
@@ -134,7 +134,7 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
         _host_nodes(b, opts, session, proc, limbs, t0, log, floor)
     wall_s = time.monotonic() - t0
     data = read_session(opts.out / "session.mcap")
-    summary = with_completeness(session_summary(data, opts.controller), data)   # every limb; the file checked
+    summary = session_summary(data, opts.controller)   # every limb; the file checked, judged
     summary["timing"]["wall_s"] = wall_s
     if b.timelines:   # [can] emulate_bitrate: queueing delay and latency per CAN id (simulated time in lockstep)
         summary["timing"]["can_bus"] = b.bus_timing()

@@ -1,7 +1,7 @@
 """Comparing event-triggered control with periodic sampling on the traffic-error plane (issue 16): periodic TT at
 several sample periods gives a curve of (total link messages, max tracking error); an ET point is judged against
 TT's error at the same number of messages, linearly interpolated between the two periods whose totals bracket it.
-Pure functions, no I/O (used by `sea-hil sweep`'s sweep.md and bench/study_et_acceptance.py)."""
+Pure functions, no I/O (used by `sea-hil sweep`'s sweep.md and bench/studies/study_et_acceptance.py)."""
 from __future__ import annotations
 
 import math

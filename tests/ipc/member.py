@@ -11,13 +11,10 @@ from __future__ import annotations
 
 import json
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
+import can
 
-import can  # noqa: E402
-
-from sea_hil.protocol.ipc_bus import SNDBUF_BYTES, IpcBus  # noqa: E402
+from sea_hil.protocol.ipc_bus import SNDBUF_BYTES, IpcBus
 
 
 def main(argv: list[str]) -> int:

@@ -33,22 +33,20 @@ from pathlib import Path
 
 import psutil
 
+from sea_hil.config.loader import load_config
+from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import LIMIT_FLAGS, DriverState, FeedbackAngle, Heartbeat
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.payloads import PayloadCounters
+from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session
+from sea_hil.recorder.reader import read_session
+from sea_hil.runtime.processes import end_process
+
 REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
-sys.path.insert(0, str(REPO / "tests"))
-
+sys.path.insert(0, str(REPO / "tests"))   # run as a script (tests/test_chaos.py): the tests' helpers
 from faults_helpers import wait_for  # noqa: E402
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.errors import MalformedFrame  # noqa: E402
-from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import LIMIT_FLAGS, DriverState, FeedbackAngle, Heartbeat  # noqa: E402  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
-from sea_hil.protocol.keys import Keys  # noqa: E402
-from sea_hil.protocol.payloads import PayloadCounters  # noqa: E402
-from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session  # noqa: E402
-from sea_hil.recorder.reader import read_session  # noqa: E402
-from sea_hil.runtime.processes import end_process  # noqa: E402
 
 NODE = 1
 FAULTS, WINDOW_S = 10, 60.0

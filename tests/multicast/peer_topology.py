@@ -23,14 +23,13 @@ import threading
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
+from sea_hil.protocol.zsession import free_tcp_port
+from sea_hil.recorder.reader import read_session
+from sea_hil.report.completeness import completeness_block
+from sea_hil.report.session_summary import session_summary
+from sea_hil.runtime.processes import end_process
 
-from sea_hil.protocol.zsession import free_tcp_port  # noqa: E402
-from sea_hil.recorder.reader import read_session  # noqa: E402
-from sea_hil.report.completeness import completeness_block  # noqa: E402
-from sea_hil.report.session_summary import session_summary  # noqa: E402
-from sea_hil.runtime.processes import end_process  # noqa: E402
+REPO = Path(__file__).resolve().parents[2]
 
 SESSION_TIMEOUT_S = 240.0
 STEP_TIMEOUT_S = 60.0

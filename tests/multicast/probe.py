@@ -12,13 +12,12 @@ import sys
 import time
 from pathlib import Path
 
-REPO = Path(__file__).resolve().parents[2]
-sys.path.insert(0, str(REPO))
+from sea_hil.errors import MalformedFrame
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import DriverState, FeedbackAngle, Heartbeat, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
 
-from sea_hil.errors import MalformedFrame  # noqa: E402
-from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import DriverState, FeedbackAngle, Heartbeat, VoltageCmd  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
+REPO = Path(__file__).resolve().parents[2]
 
 NODE = 1
 TIMEOUT_S = 30.0

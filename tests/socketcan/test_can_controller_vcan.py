@@ -12,11 +12,10 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1]))    # tests/: the shared example runner
-from can_example import CAN_EXAMPLE, run_on_virtual  # noqa: E402
+from can_example import CAN_EXAMPLE, run_on_virtual
 
-from sea_hil.config.loader import config_to_toml, load_config  # noqa: E402
-from sea_hil.runtime.processes import end_process  # noqa: E402
+from sea_hil.config.loader import config_to_toml, load_config
+from sea_hil.runtime.processes import end_process
 
 REPO = Path(__file__).resolve().parents[2]
 CFG = {"trajectory": {"period_s": 0.5, "lead_in_s": 0.2}}   # 0.7 s of driver time: the guest is slow

@@ -3,25 +3,21 @@ scenario and `trigger.edge_fallback`, the new ET's total link messages, max trac
 (`EdgeEvents.max_stale_ns`: the edge ran on a setpoint computed before the oldest state it still waited an answer
 to) for seeds 1-N, on the offline session engine (= the lockstep session; deterministic per seed).
 
-Scenarios as bench/study_et_acceptance.py: `nominal` and `robust` (`--mismatch`, default all=+10 %, and a 0.03 N m,
+Scenarios as bench/studies/study_et_acceptance.py: `nominal` and `robust` (`--mismatch`, default all=+10 %, and a 0.03 N m,
 0.5 Hz sine on both joints).
 
-Run: python bench/study_et_fallback.py [--seeds N] [--mismatch SPEC] [LINK_SPEC ...]
+Run: python -m bench.studies.study_et_fallback [--seeds N] [--mismatch SPEC] [LINK_SPEC ...]
      (default link: the issue's 20 ms, 5 ms jitter, GE 0.01/0.3/0.8 each way)
 """
 from __future__ import annotations
 
 import argparse
 import logging
-import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.config.shorthand import scenario_config  # noqa: E402
-from sea_hil.offline.session_engine import run_engine  # noqa: E402
-from sea_hil.protocol.link import parse_link_spec  # noqa: E402
-from sea_hil.report.session_summary import session_summary  # noqa: E402
+from sea_hil.config.shorthand import scenario_config
+from sea_hil.offline.session_engine import run_engine
+from sea_hil.protocol.link import parse_link_spec
+from sea_hil.report.session_summary import session_summary
 
 BURSTY = "delay=20ms,jitter=5ms,ge=0.01/0.3/0.8"
 
@@ -35,6 +31,7 @@ def point(spec: str, seed: int, fallback: str, disturbance: str | None, mismatch
     res = run_engine(scenario_config(None, ov, disturbance, mismatch), "et")
     s = session_summary(res.data, "et")
     t = s["transmissions"]
+    assert res.edge is not None, "the trigger at the edge runs the edge's event core"
     stale_ms = res.edge.max_stale_ns // 10**6
     return t["uplink_msgs"] + t["downlink_msgs"], max(s["tracking"]["max_abs_error_rad"]), stale_ms
 

@@ -2,7 +2,7 @@
 against one `advance` per limb. CPU time (thread_time, best of 7 repeats), so it is less load-sensitive than wall time;
 still, measure on a quiet machine for final figures.
 
-Run: python bench/bench_batched.py [--limbs 1,2,4,8]
+Run: python -m bench.studies.bench_batched [--limbs 1,2,4,8]
 Prints, per hot message: cantools strict `encode` / `decode` vs the plan's generated pack / unpack (us per frame);
 the codec's cost per limb-sample (feedback encode + decode, voltage encode + decode; classic and CAN FD); and the
 driver's integration of one period for N limbs: N `DriverCore.step` calls vs one `step_all` (us per limb-sample).
@@ -12,19 +12,20 @@ from __future__ import annotations
 import argparse
 import sys
 import time
-from collections.abc import Callable
-from pathlib import Path
+from collections.abc import Callable, Sequence
+from functools import partial
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
+import can
+from cantools.database.can.signal import Signal
 
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.mechanics import limb_params  # noqa: E402
-from sea_hil.plant_emulator.batch import prepare_batch, step_all  # noqa: E402
-from sea_hil.plant_emulator.driver import DriverCore  # noqa: E402
-from sea_hil.plant_emulator.integrator import prepare_advance  # noqa: E402
-from sea_hil.protocol.can_codec import SeaCodec, load_database  # noqa: E402
-from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
-from sea_hil.protocol.frame_plan import FramePlan  # noqa: E402
+from sea_hil.config.loader import load_config
+from sea_hil.mechanics import limb_params
+from sea_hil.plant_emulator.batch import prepare_batch, step_all
+from sea_hil.plant_emulator.driver import DriverCore
+from sea_hil.plant_emulator.integrator import prepare_advance
+from sea_hil.protocol.can_codec import SeaCodec, load_database
+from sea_hil.protocol.can_frames import Feedback, VoltageCmd
+from sea_hil.protocol.frame_plan import FramePlan
 
 HOT = ("VOLTAGE_CMD", "FEEDBACK_ANGLE", "FEEDBACK_JOINT1", "FEEDBACK_JOINT2", "VOLTAGE_CMD_FD", "FEEDBACK_FD",
        "HEARTBEAT")
@@ -40,19 +41,33 @@ def cpu_us(fn: Callable[[], object], n: int = 2000) -> float:
     return best
 
 
+def _mid(sig: Signal) -> float:
+    """A value inside the signal's range: the middle of a scaled signal, half the maximum of a raw one."""
+    lo, hi = sig.minimum, sig.maximum
+    assert lo is not None and hi is not None, f"{sig.name}: the DBC gives every hot signal a range"
+    return (lo + hi) / 2 if sig.conversion.scale != 1 else int(hi) // 2
+
+
+def _decode_all(codec: SeaCodec, msgs: Sequence[can.Message]) -> list[object]:
+    return [codec.decode(x) for x in msgs]
+
+
+def _step_each(cores: list[DriverCore]) -> list[object]:
+    return [d.step() for d in cores]
+
+
 def messages() -> None:
     db = load_database()
     for name in HOT:
         msg = db.get_message_by_name(name)
         plan = FramePlan.of(msg)
-        row = {s.name: (s.minimum + s.maximum) / 2 if s.conversion.scale != 1 else int(s.maximum) // 2
-               for s in msg.signals}
+        row = {s.name: _mid(s) for s in msg.signals}
         values = tuple(row[n] for n in plan.names)
         data = msg.encode(row, strict=True)
-        print(f"  {name:16s} encode cantools {cpu_us(lambda msg=msg, row=row: msg.encode(row, strict=True)):5.1f} / plan "
-              f"{cpu_us(lambda plan=plan, values=values: plan.pack_plain(values)):4.1f} us; decode cantools "
-              f"{cpu_us(lambda msg=msg, data=data: msg.decode(data, decode_choices=False, allow_excess=False)):5.1f} / plan "
-              f"{cpu_us(lambda plan=plan, data=data: plan.unpack_plain(data)):4.1f} us")
+        print(f"  {name:16s} encode cantools {cpu_us(partial(msg.encode, row, strict=True)):5.1f} / plan "
+              f"{cpu_us(partial(plan.pack_plain, values)):4.1f} us; decode cantools "
+              f"{cpu_us(partial(msg.decode, data, decode_choices=False, allow_excess=False)):5.1f} / plan "
+              f"{cpu_us(partial(plan.unpack_plain, data)):4.1f} us")
 
 
 def codec_per_limb_sample() -> None:
@@ -61,10 +76,10 @@ def codec_per_limb_sample() -> None:
     for fd in (False, True):
         c = SeaCodec([1], fd=fd)
         msgs, m = c.encode_feedback(fb, saturate=True), c.encode(v)
-        parts = {"feedback encode": cpu_us(lambda c=c: c.encode_feedback(fb, saturate=True)),
-                 "feedback decode": cpu_us(lambda c=c, msgs=msgs: [c.decode(x) for x in msgs]),
-                 "voltage encode": cpu_us(lambda c=c: c.encode(v, saturate=True)),
-                 "voltage decode": cpu_us(lambda c=c, m=m: c.decode(m))}
+        parts = {"feedback encode": cpu_us(partial(c.encode_feedback, fb, saturate=True)),
+                 "feedback decode": cpu_us(partial(_decode_all, c, msgs)),
+                 "voltage encode": cpu_us(partial(c.encode, v, saturate=True)),
+                 "voltage decode": cpu_us(partial(c.decode, m))}
         print(f"  {'CAN FD' if fd else 'classic':7s}: " + ", ".join(f"{k} {x:.1f}" for k, x in parts.items())
               + f" -> {sum(parts.values()):.1f} us CPU per limb-sample")
 
@@ -75,10 +90,11 @@ def step_per_limb_sample(limbs: list[int]) -> None:
     prepare_advance(p)
     prepare_batch(p)
     for n in limbs:
-        cores = [DriverCore.create(i + 1, p, 1e-3, 0.1, cfg.sim.substeps, tuple(cfg.plant.initial_theta_rad),
-                                   lambda t: (0.0, 0.0)) for i in range(n)]
-        alone = cpu_us(lambda cores=cores: [d.step() for d in cores], 500) / n
-        batched = cpu_us(lambda cores=cores: step_all(cores), 500) / n
+        hip, knee = cfg.plant.initial_theta_rad
+        cores = [DriverCore.create(i + 1, p, 1e-3, 0.1, cfg.sim.substeps, (hip, knee), lambda t: (0.0, 0.0))
+                 for i in range(n)]
+        alone = cpu_us(partial(_step_each, cores), 500) / n
+        batched = cpu_us(partial(step_all, cores), 500) / n
         print(f"  {n} limbs: {alone:5.1f} us per limb-sample one step per limb, {batched:5.1f} us batched "
               f"({alone / batched:.2f}x)")
 

@@ -1,4 +1,4 @@
-"""`python bench/soak_tracemalloc.py OUT.txt T1_S T2_S -- <sea-hil cli args>`: run the `sea-hil` command line in
+"""`python -m bench.studies.soak_tracemalloc OUT.txt T1_S T2_S -- <sea-hil cli args>`: run the `sea-hil` command line in
 this process; at T1_S after the start begin tracing (tracemalloc, 25 frames; not earlier, so the imports and the
 session's start-up run at full speed) and take a snapshot, at T2_S another, and write the allocations that grew most
 between them (snapshot diff by traceback, top 15), i.e. what was allocated after T1_S and is still alive at T2_S, to
@@ -12,8 +12,6 @@ import threading
 import time
 import tracemalloc
 from pathlib import Path
-
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
 
 
 def _diff(out: Path, t1_s: float, t2_s: float) -> None:

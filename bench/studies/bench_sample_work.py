@@ -1,7 +1,7 @@
 """CPU of one limb-sample's work on the driver's and the edge's CAN side, without threads or real time (issue 17).
 
-Run: python bench/bench_sample_work.py [--limbs 1] [--repeat 7] [--number 3000]
-     (A/B: run it with each checkout's interpreter, alternating: /other/.venv/bin/python bench/bench_sample_work.py)
+Run: python -m bench.studies.bench_sample_work [--limbs 1] [--repeat 7] [--number 3000]
+     (A/B: run it with each checkout's interpreter, alternating: /other/.venv/bin/python -m bench.studies.bench_sample_work)
 One `PlantNode` on a `virtual` bus with two more handles on the channel (the edge's and the recorder tap's), as in
 `sea-hil run`. Per part, thread CPU time (`time.thread_time`) per limb-sample, best of `--repeat` rounds of
 `--number` samples (the least disturbed round; on a loaded machine the spread is printed too):
@@ -19,18 +19,15 @@ import argparse
 import sys
 import time
 from collections.abc import Callable
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.config.loader import load_config  # noqa: E402
-from sea_hil.plant_emulator.node import PlantNode  # noqa: E402
-from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us  # noqa: E402
-from sea_hil.protocol.can_codec import SeaCodec  # noqa: E402
-from sea_hil.protocol.can_frames import Feedback, VoltageCmd  # noqa: E402
-from sea_hil.protocol.canbus import open_bus  # noqa: E402
-from sea_hil.recorder.can_tap import RawFrame  # noqa: E402
-from sea_hil.stats.histogram import LogHistogram  # noqa: E402
+from sea_hil.config.loader import load_config
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_assembly import FeedbackAssembler, unwrap_us
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import FEEDBACK_PARTS, Feedback, VoltageCmd
+from sea_hil.protocol.canbus import open_bus
+from sea_hil.recorder.can_tap import RawFrame
+from sea_hil.stats.histogram import LogHistogram
 
 
 def parts(limbs: int) -> dict[str, Callable[[], None]]:
@@ -58,7 +55,8 @@ def parts(limbs: int) -> dict[str, Callable[[], None]]:
     def edge() -> None:
         while (msg := edge_bus.recv(0)) is not None:
             frame = codec.decode(msg)
-            fb = frame if isinstance(frame, Feedback) else assembler.push(frame)
+            fb = (frame if isinstance(frame, Feedback)
+                  else assembler.push(frame) if isinstance(frame, FEEDBACK_PARTS) else None)
             if fb is not None:
                 state["t_us"] = unwrap_us(state["t_us"], fb.t_us)
                 loop.record(2.1e-4)

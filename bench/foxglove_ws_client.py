@@ -14,8 +14,9 @@ from dataclasses import dataclass, field
 from typing import Any
 
 import websockets
+from websockets.typing import Subprotocol
 
-SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
+SUBPROTOCOLS = [Subprotocol("foxglove.sdk.v1"), Subprotocol("foxglove.websocket.v1")]
 MESSAGE_DATA = 0x01
 _HEADER = struct.Struct("<BIQ")
 

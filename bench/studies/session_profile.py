@@ -1,6 +1,6 @@
 """Where the CPU of a real-time `sea-hil run --limbs N` session goes, per limb-sample (issue 17, batched nodes).
 
-Run: python bench/session_profile.py [--limbs 4] [--cycles 1] [--out DIR] [--json OUT] [-- EXTRA sea-hil run ARGS]
+Run: python -m bench.studies.session_profile [--limbs 4] [--cycles 1] [--out DIR] [--json OUT] [-- EXTRA sea-hil run ARGS]
 Runs the session as a child and samples its process tree with psutil every 0.2 s (the last CPU times seen of every
 process and of every thread of the session process); a `py-spy dump` every 3 s names the session process's Python
 threads (driver node `plant*`, edge mux / edges `edge*`, recorder tap, main thread). Threads

@@ -6,27 +6,24 @@ error against periodic TT's at the same total messages (interpolated between per
 
 Scenarios: `nominal` (exact nominal model, no disturbance) and `robust` (nominal model masses +10 %, spring
 constants -10 %, a 0.03 N m, 0.5 Hz sine disturbance on both joints: bounds ratio + 0.10, error x 2; `--mismatch`
-sets another nominal-model mismatch, e.g. `all=+10%` for the table in docs/session.md). The TT table holds TT at
+sets another nominal-model mismatch, e.g. `all=+10%` for the table in docs/studies/et-acceptance.md). The TT table holds TT at
 10-100 ms with and without prediction; the last line is TT with prediction at a plain 5 ms each way.
 
-Run: python bench/study_et_acceptance.py [--scenario nominal|robust|both] [--links NAME ...] [--mismatch SPEC]
+Run: python -m bench.studies.study_et_acceptance [--scenario nominal|robust|both] [--links NAME ...] [--mismatch SPEC]
 """
 from __future__ import annotations
 
 import argparse
 import logging
 import sys
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.config.shorthand import scenario_config  # noqa: E402
-from sea_hil.errors import SeaHilError  # noqa: E402
-from sea_hil.offline.session_engine import run_engine  # noqa: E402
-from sea_hil.protocol.link import parse_link_spec  # noqa: E402
-from sea_hil.report.session_summary import session_summary  # noqa: E402
-from sea_hil.sweep.frontier import OutsideBaseline, dominates  # noqa: E402
+from sea_hil.config.shorthand import scenario_config
+from sea_hil.errors import SeaHilError
+from sea_hil.offline.session_engine import run_engine
+from sea_hil.protocol.link import parse_link_spec
+from sea_hil.report.session_summary import session_summary
+from sea_hil.sweep.frontier import OutsideBaseline, dominates
 
 LINKS = {"ideal": "", "5 ms, 1 ms normal, 1 %": "delay=5ms,jitter=1ms,dist=normal,loss=1%",
          "10 ms, 2 ms normal, 2 %": "delay=10ms,jitter=2ms,dist=normal,loss=2%",

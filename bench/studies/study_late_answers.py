@@ -2,24 +2,21 @@
 slower than the tools' tables, both trigger placements, with the default 0.2 s and off (0). Deterministic (seed 1).
 Prints total link messages and the max tracking error per joint (docs/deviations.md section 16).
 
-Run: python bench/study_late_answers.py [LINK ...]   (default: delay=150ms and delay=60ms,jitter=80ms each way)
+Run: python -m bench.studies.study_late_answers [LINK ...]   (default: delay=150ms and delay=60ms,jitter=80ms each way)
 """
 from __future__ import annotations
 
 import logging
 import sys
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import (
-    EngineOptions,  # noqa: E402
-    run_engine,  # noqa: E402
+    EngineOptions,
+    run_engine,
 )
-from sea_hil.protocol.link import parse_link_spec  # noqa: E402
-from sea_hil.report.session_summary import session_summary  # noqa: E402
+from sea_hil.protocol.link import parse_link_spec
+from sea_hil.report.session_summary import session_summary
 
 LINKS = ("delay=150ms", "delay=60ms,jitter=80ms")
 PLACEMENTS: dict[str, dict[str, Any]] = {

@@ -4,12 +4,12 @@
 session at a time. Per run: total link messages of the measured cycle and their ratio to TT at 10 ms (2002 on
 these links: one state and one setpoint per 10 ms), max tracking error (summary.json), the driver's tick misses,
 and from the recording the state the controller answered first (its sample time = how long after the edge's first
-sample the controller was listening: the cause of the new scheme's old real-time failure, docs/et-over-links.md).
+sample the controller was listening: the cause of the new scheme's old real-time failure, docs/studies/et-over-links.md).
 
 Real-time figures depend on the machine's load: run it in a quiet window. Each run takes the session's wall time
 (about 13 s on an idle machine).
 
-Run: python bench/etlive_realtime.py [RUNS] [OUT_DIR]      (markdown rows to stdout)
+Run: python -m bench.studies.etlive_realtime [RUNS] [OUT_DIR]      (markdown rows to stdout)
 """
 from __future__ import annotations
 
@@ -18,9 +18,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.recorder.reader import read_session  # noqa: E402
+from sea_hil.recorder.reader import read_session
 
 LINK_5MS = "delay=5ms,jitter=1ms,dist=normal,loss=1%"
 LINKS = {"ideal": [], "5 ms, 1 ms normal, 1 %": ["--uplink", LINK_5MS, "--downlink", LINK_5MS]}

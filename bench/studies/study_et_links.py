@@ -1,24 +1,21 @@
 """Issue 16 design study on the offline engine: total link messages and max tracking error per method and link
-(the table of docs/et-over-links.md). Deterministic (seed 1).
+(the table of docs/studies/et-over-links.md). Deterministic (seed 1).
 
-Run: python bench/study_et_links.py [ideal|5ms|10ms|20ms ...]
+Run: python -m bench.studies.study_et_links [ideal|5ms|10ms|20ms ...]
 """
 from __future__ import annotations
 
 import sys
 import time
-from pathlib import Path
 from typing import Any
 
-sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # runnable from a source checkout
-
-from sea_hil.config.loader import load_config  # noqa: E402
+from sea_hil.config.loader import load_config
 from sea_hil.offline.session_engine import (
-    EngineOptions,  # noqa: E402
-    run_engine,  # noqa: E402
+    EngineOptions,
+    run_engine,
 )
-from sea_hil.protocol.link import parse_link_spec  # noqa: E402
-from sea_hil.report.session_summary import session_summary  # noqa: E402
+from sea_hil.protocol.link import parse_link_spec
+from sea_hil.report.session_summary import session_summary
 
 LINKS = {"ideal": "", "5ms": "delay=5ms,jitter=1ms,dist=normal,loss=1%",
          "10ms": "delay=10ms,jitter=2ms,dist=normal,loss=2%", "20ms": "delay=20ms,jitter=5ms,ge=0.01/0.3/0.8"}

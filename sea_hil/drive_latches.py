@@ -1,0 +1,80 @@
+"""Every latch of a drive's safe state, from its HEARTBEATs: one rule for the report, which reads the heartbeats back
+from a recording's CAN tap (sea_hil/report/drive_faults.py), and the edge, which sees them live and counts them in
+its `/stats` record (controller/edge_core.py), so a recording without a CAN tap still says that a drive faulted.
+
+A latch starts at the first heartbeat in FAULT or ESTOP after one that was not (or at the first heartbeat) and ends at
+the next heartbeat out of it (cleared) or stays open (still latched at the end); its flags are every error flag the
+drive reported during it, its state ESTOP if any heartbeat of it said so. Pure: time and heartbeat in.
+
+In a stats record (flat numbers, sea_hil/stats/schema.py): `drive_latches` (how many), and for the first
+`DETAILED` of them `drive_latch_<i>_t_ns`, `_until_t_ns` (the end, or the last heartbeat while still latched),
+`_state` (`DriverState` value), `_flags` (`ErrorFlags` bits), `_cleared` (0 / 1), i from 1; `drive_latch_origin_t_ns`
+(the time a latch's `t_s` counts from: the edge's first sample) when there is a latch.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+
+SAFE = (DriverState.FAULT, DriverState.ESTOP)
+DETAILED = 8            # latches a stats record details (a flapping watchdog: the count says how many more)
+COUNT_KEY, ORIGIN_KEY = "drive_latches", "drive_latch_origin_t_ns"
+
+
+@dataclass
+class Latch:
+    node_id: int
+    t_ns: int                    # the heartbeat that latched
+    state: DriverState
+    flags: ErrorFlags
+    until_t_ns: int              # the heartbeat that ended it, or the last one seen while latched
+    cleared: bool = False
+
+
+class LatchLog:
+    """Latches per drive from its heartbeats (see the module docstring); `latches` in the order they began."""
+
+    def __init__(self) -> None:
+        self.latches: list[Latch] = []
+        self._open: dict[int, Latch] = {}
+
+    def on_heartbeat(self, t_ns: int, hb: Heartbeat) -> None:
+        cur = self._open.get(hb.node_id)
+        if hb.state in SAFE:
+            if cur is None:
+                cur = self._open[hb.node_id] = Latch(hb.node_id, t_ns, hb.state, ErrorFlags(hb.flags), t_ns)
+                self.latches.append(cur)
+            else:
+                cur.flags |= hb.flags
+                cur.until_t_ns = t_ns
+                if hb.state is DriverState.ESTOP:
+                    cur.state = hb.state
+        elif cur is not None:
+            cur.until_t_ns, cur.cleared = t_ns, True
+            del self._open[hb.node_id]
+
+
+def latch_stats(latches: list[Latch], origin_t_ns: int) -> dict[str, int]:
+    """The stats record fields of `latches` (module docstring)."""
+    out = {COUNT_KEY: len(latches)}
+    if latches:
+        out[ORIGIN_KEY] = origin_t_ns
+    for i, la in enumerate(latches[:DETAILED], 1):
+        out.update({f"drive_latch_{i}_t_ns": la.t_ns, f"drive_latch_{i}_until_t_ns": la.until_t_ns,
+                    f"drive_latch_{i}_state": int(la.state), f"drive_latch_{i}_flags": int(la.flags),
+                    f"drive_latch_{i}_cleared": int(la.cleared)})
+    return out
+
+
+def latches_of_stats(stats: dict[str, Any]) -> tuple[list[Latch], int]:
+    """(the detailed latches, the origin time) of an edge's stats record (`latch_stats`); node id: the record's."""
+    node = int(stats.get("node_id", 1))
+    out = []
+    for i in range(1, min(int(stats.get(COUNT_KEY, 0)), DETAILED) + 1):
+        p = f"drive_latch_{i}_"
+        out.append(Latch(node, int(stats[p + "t_ns"]), DriverState(int(stats[p + "state"])),
+                         ErrorFlags(int(stats[p + "flags"])), int(stats[p + "until_t_ns"]),
+                         bool(stats[p + "cleared"])))
+    return out, int(stats.get(ORIGIN_KEY, 0))
