@@ -11,10 +11,11 @@ member is bound under a hidden name and renamed into place once it listens, so i
 connection is FIFO, so each sender's frames arrive in order; a member sees only frames sent after it joined.
 Flow control is the kernel's: a connection queues up to its send buffer (`SNDBUF_BYTES` asked; ~10,900 frames at
 the 8 MiB the kernel grants for 4 MiB when `net.core.wmem_max` allows, ~550 at the common 208 KiB cap), then the
-sender waits for the receiver to read, retrying as room comes (a slow reader slows the sender to its pace, nothing
-is lost). A member that takes no frame for `send_timeout_s` (stopped, hung) is marked stuck: the frame is dropped
-for it alone and counted (`frames_dropped`, logged), its later frames are dropped without waiting until it has read
-its queue down to a quarter; the others still get everything. A member that died is detected by its
+sender waits for the receiver to read, retrying as room comes, nothing lost. The waits for one member add up to at
+most `send_timeout_s` per episode of a full queue (until it has read its queue down to a quarter); a member that
+needs more (stopped, hung, too slow) is marked stuck: the frame is dropped for it alone and counted
+(`frames_dropped`, logged), its later frames are dropped without waiting until it has read its queue down to a
+quarter; the others still get everything. So a real-time sender is held back at most `send_timeout_s` an episode. A member that died is detected by its
 connection (EPIPE/ECONNRESET) or its socket file (ECONNREFUSED: the stale file is removed), never waited for.
 `recv` reads one packet at a time from the members' connections (round robin, nothing buffered in this process), so
 `fileno()` (an epoll descriptor over them) is readable exactly while a frame is pending: select-based readers
@@ -72,21 +73,22 @@ def channel_dir(channel: str, base: str | os.PathLike[str] | None = None) -> Pat
 class _Peer:
     """One other member as seen by a sender: the connection to its socket and whether it is stuck."""
 
-    __slots__ = ("name", "sock", "stuck", "dropped")
+    __slots__ = ("name", "sock", "stuck", "dropped", "waited_s")
 
     def __init__(self, name: str, sock: socket.socket) -> None:
         self.name = name
         self.sock = sock
         self.stuck = False
         self.dropped = 0
+        self.waited_s = 0.0   # waited for it in the current episode of a full queue (0: none)
 
 
 class IpcBus(can.BusABC):
     """The `ipc` bus (module docstring). python-can entry point `ipc` (`can.Bus(interface="ipc", channel=NAME)`),
-    sea-hil spec `ipc:NAME`. `send(msg, timeout)`: `timeout` bounds the wait for each full member (None:
+    sea-hil spec `ipc:NAME`. `send(msg, timeout)`: `timeout` bounds the waits for a full member in one episode (None:
     `send_timeout_s`, not forever: a stopped member must not stop the bus); it raises only for an invalid frame or a
     closed bus. Counters: `frames_sent`, `frames_received`, `frames_dropped` (for stuck members), `frames_malformed`,
-    `members_lost` (members that died or left), `send_waits` (sends that waited for a full member)."""
+    `members_lost` (members that died or left), `send_waits` (episodes of waiting for a full member)."""
 
     def __init__(self, channel: Any = "sea-hil", can_filters: can.typechecking.CanFilters | None = None,
                  receive_own_messages: bool = False, fd: bool = False, directory: str | None = None,
@@ -105,7 +107,7 @@ class IpcBus(can.BusABC):
         self._can_protocol = can.CanProtocol.CAN_FD if fd else can.CanProtocol.CAN_20
         self.frames_sent = self.frames_received = self.frames_dropped = self.frames_malformed = 0
         self.members_lost = 0
-        self.send_waits = 0   # times a send found a member's queue full and waited for it (flow control at work)
+        self.send_waits = 0   # episodes of a member's full queue the senders waited in (flow control at work)
         self._peers: dict[str, _Peer] = {}
         self._send_lock = threading.Lock()
         self._seen_mtime_ns: int | None = None
@@ -229,41 +231,48 @@ class IpcBus(can.BusABC):
             self.frames_sent += 1
 
     def _deliver(self, peer: _Peer, packet: bytes, wait_s: float) -> None:
-        """Send `packet` to one member: at once when its queue has room; else retry (each time the kernel may have
-        room: `_writable`, at most every `RETRY_S`) until `wait_s` has passed, so the sender keeps the pace of a
-        slow reader and loses nothing; past it the member is stuck. A stuck member gets frames again only once its
-        queue is down to a quarter (the kernel's writable mark): a reader that stops again costs one more wait, not
-        one per frame."""
-        if peer.stuck and not _writable(peer.sock, 0.0):
-            self._drop(peer)
-            return
-        deadline = None
+        """Send `packet` to one member: at once when its queue has room; else retry as room comes (`_writable`, at
+        most every `RETRY_S`), so a reader that catches up holds the sender back no longer than it must. The waits
+        of one episode of a full queue (until the queue is down to a quarter, the kernel's writable mark) add up to
+        at most `wait_s`: past it the member is stuck, and gets frames again only once down to a quarter. So a
+        real-time sender is held back at most `wait_s` per episode, however slowly a member reads."""
+        if peer.stuck or peer.waited_s:
+            if not _writable(peer.sock, 0.0):
+                if peer.stuck:
+                    self._drop(peer)
+                    return
+            elif peer.stuck:
+                peer.stuck, peer.waited_s = False, 0.0
+                log.warning("%s: member %s reads again (%d frames dropped for it)", self.channel_info, peer.name,
+                            peer.dropped)
+            else:
+                peer.waited_s = 0.0   # caught up: the episode is over
+        t0 = None
         while True:
             try:
                 peer.sock.send(packet)
                 break
             except BlockingIOError:
                 now = time.monotonic()
-                if deadline is None:
-                    deadline = now + wait_s
-                    self.send_waits += 1
-                if now >= deadline:
-                    peer.stuck = True
-                    log.warning("%s: member %s has read nothing for %.3g s: dropping frames for it until it reads",
-                                self.channel_info, peer.name, wait_s)
+                if t0 is None:
+                    t0 = now
+                    self.send_waits += peer.waited_s == 0.0
+                spent_s = peer.waited_s + (now - t0)
+                if spent_s >= wait_s:
+                    peer.stuck, peer.waited_s = True, 0.0
+                    log.warning("%s: member %s kept its queue full for %.3g s of waiting: dropping frames for it "
+                                "until it catches up", self.channel_info, peer.name, wait_s)
                     self._drop(peer)
                     return
-                _writable(peer.sock, min(RETRY_S, deadline - now))
+                _writable(peer.sock, min(RETRY_S, wait_s - spent_s))
             except OSError as err:
                 if err.errno in _GONE:   # it died or left: look at its file on the next send
                     self._forget(peer.name, f"gone ({err})")
                     self._scan_settled = False
                     return
                 raise can.CanOperationError(f"send on {self.channel_info} to {peer.name} failed: {err}") from err
-        if peer.stuck:
-            peer.stuck = False
-            log.warning("%s: member %s reads again (%d frames dropped for it)", self.channel_info, peer.name,
-                        peer.dropped)
+        if t0 is not None:
+            peer.waited_s += max(time.monotonic() - t0, 1e-9)
 
     def _drop(self, peer: _Peer) -> None:
         peer.dropped += 1
