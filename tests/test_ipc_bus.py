@@ -10,6 +10,7 @@ import signal
 import socket
 import subprocess
 import sys
+import threading
 from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
@@ -198,6 +199,34 @@ def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counte
     assert f"{a.frames_dropped} frame(s) sent were dropped for stuck members (stuck.sock: {a.frames_dropped})" \
         in caplog.text
     stuck.close()
+
+
+def test_a_slow_member_holds_the_sender_back_at_most_the_timeout_an_episode(make_bus: MakeBus, bus_dir: str) -> None:
+    """A member that reads one frame every 2 ms while the sender is faster: the sender waits for it, but its waits
+    add up to `send_timeout_s` at most in one episode of the full queue; then it drops for the slow member (counted)
+    instead of keeping its pace."""
+    a = make_bus(send_timeout_s=0.05, sndbuf_bytes=16384)
+    slow = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)
+    slow.bind(str(channel_dir(CH, bus_dir) / "slow.sock"))
+    slow.listen(1)
+    done = threading.Event()
+
+    def read_slowly() -> None:
+        conn, _ = slow.accept()
+        with conn:
+            while not done.wait(0.002):      # the slow reader's pace, not a synchronisation
+                conn.recv(100)
+
+    reader = threading.Thread(target=read_slowly, daemon=True)
+    reader.start()
+    try:
+        for i in range(2000):
+            a.send(frame(i))
+    finally:
+        done.set()
+        reader.join(timeout=30)
+        slow.close()
+    assert a.frames_dropped > 0 and a.send_waits >= 1
 
 
 def _recv_or_none(conn: socket.socket) -> bytes | None:
