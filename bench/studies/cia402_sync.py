@@ -4,7 +4,7 @@ their TPDOs) and the master's (`Cia402EdgeNode`'s CANopen part: `Cia402Master.re
 `measurement`, `command`), each frame crossing as a python-can `Message` the way the shells hand them over. The
 edge core's inner loop and Zenoh side are the sea profile's and not counted here.
 
-    .venv/bin/python bench/bench_cia402_sync.py [--syncs 5000] [--profile]
+    .venv/bin/python -m bench.studies.cia402_sync [--syncs 5000] [--profile]
 
 prints CPU us per SYNC (process time, best of 3 rounds) for each side and, with `--profile`, cProfile's top
 functions by own time. The frames on the bus are hashed (sha256 over id and data): the figure a change must keep
