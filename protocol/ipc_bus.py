@@ -11,9 +11,10 @@ member is bound under a hidden name and renamed into place once it listens, so i
 connection is FIFO, so each sender's frames arrive in order; a member sees only frames sent after it joined.
 Flow control is the kernel's: a connection queues up to its send buffer (`SNDBUF_BYTES` asked; ~10,900 frames at
 the 8 MiB the kernel grants for 4 MiB when `net.core.wmem_max` allows, ~550 at the common 208 KiB cap), then the
-sender waits for the receiver to read. A member that does not read for `send_timeout_s` (stopped, hung) is marked
-stuck: the frame is dropped for it alone and counted (`frames_dropped`, logged), its later frames are dropped
-without waiting until it reads again; the others still get everything. A member that died is detected by its
+sender waits for the receiver to read, retrying as room comes (a slow reader slows the sender to its pace, nothing
+is lost). A member that takes no frame for `send_timeout_s` (stopped, hung) is marked stuck: the frame is dropped
+for it alone and counted (`frames_dropped`, logged), its later frames are dropped without waiting until it has read
+its queue down to a quarter; the others still get everything. A member that died is detected by its
 connection (EPIPE/ECONNRESET) or its socket file (ECONNREFUSED: the stale file is removed), never waited for.
 `recv` reads one packet at a time from the members' connections (round robin, nothing buffered in this process), so
 `fileno()` (an epoll descriptor over them) is readable exactly while a frame is pending: select-based readers
@@ -48,6 +49,8 @@ log = logging.getLogger("sea_hil.ipc_bus")
 SNDBUF_BYTES = 4 << 20            # asked per connection (the kernel doubles it, capped by net.core.wmem_max)
 SO_SNDBUFFORCE = 32               # Linux <asm-generic/socket.h>: past wmem_max, needs CAP_NET_ADMIN
 SEND_TIMEOUT_S = 1.0              # how long a sender waits for a member whose queue is full before dropping for it
+RETRY_S = 0.001                   # a waiting sender tries again this often (the kernel's POLLOUT comes only once the
+                                  # queue is down to a quarter: a slow reader frees room long before)
 SCAN_SETTLE_NS = 100_000_000      # a directory listing made this soon after its mtime may miss a change in the
                                   # same coarse filesystem tick (a few ms): list again on the next send
 SUN_PATH_MAX = 107                # sockaddr_un.sun_path (108) minus the NUL
@@ -226,25 +229,31 @@ class IpcBus(can.BusABC):
             self.frames_sent += 1
 
     def _deliver(self, peer: _Peer, packet: bytes, wait_s: float) -> None:
+        """Send `packet` to one member: at once when its queue has room; else retry (each time the kernel may have
+        room: `_writable`, at most every `RETRY_S`) until `wait_s` has passed, so the sender keeps the pace of a
+        slow reader and loses nothing; past it the member is stuck. A stuck member gets frames again only once its
+        queue is down to a quarter (the kernel's writable mark): a reader that stops again costs one more wait, not
+        one per frame."""
+        if peer.stuck and not _writable(peer.sock, 0.0):
+            self._drop(peer)
+            return
         deadline = None
         while True:
             try:
                 peer.sock.send(packet)
                 break
             except BlockingIOError:
-                if peer.stuck:
-                    self._drop(peer)
-                    return
                 now = time.monotonic()
                 if deadline is None:
                     deadline = now + wait_s
                     self.send_waits += 1
-                if now >= deadline or not _writable(peer.sock, deadline - now):
+                if now >= deadline:
                     peer.stuck = True
                     log.warning("%s: member %s has read nothing for %.3g s: dropping frames for it until it reads",
                                 self.channel_info, peer.name, wait_s)
                     self._drop(peer)
                     return
+                _writable(peer.sock, min(RETRY_S, deadline - now))
             except OSError as err:
                 if err.errno in _GONE:   # it died or left: look at its file on the next send
                     self._forget(peer.name, f"gone ({err})")
@@ -341,6 +350,10 @@ class IpcBus(can.BusABC):
         if self._is_shutdown:
             return
         super().shutdown()
+        if self.frames_dropped:
+            log.warning("%s: %d frame(s) sent were dropped for stuck members (%s)", self.channel_info,
+                        self.frames_dropped, ", ".join(f"{p.name}: {p.dropped}" for p in self._peers.values()
+                                                       if p.dropped) or "members since gone")
         try:
             self._path.unlink()
         except FileNotFoundError:
@@ -362,7 +375,8 @@ class IpcBus(can.BusABC):
 
 
 def _writable(sock: socket.socket, wait_s: float) -> bool:
-    """Wait up to `wait_s` for room in `sock`'s send queue (the kernel says so once it is a quarter full)."""
+    """Wait up to `wait_s` for `sock`'s send queue to be down to a quarter of its buffer (the kernel's POLLOUT; a
+    closed peer also ends the wait)."""
     poller = select.poll()
     poller.register(sock, select.POLLOUT)
     return bool(poller.poll(max(0, math.ceil(wait_s * 1000))))

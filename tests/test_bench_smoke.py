@@ -56,6 +56,13 @@ def test_driver_timing_quick_with_edge(tmp_path):
     assert row["ticks"] > 0 and row["edge_samples"] > 0 and row["edge_commands"] > 0
 
 
+def test_ipc_bus_quick(tmp_path):
+    recs = _run_script("bench_ipc_bus", tmp_path, "--quick", "--runs", "1")
+    assert [r["figure"] for r in recs] == ["ipc-t", "ipc-l", "ipc-s"]
+    assert all(d["lost"] == 0 and d["disordered"] == 0 and d["received"] == 2000 for d in recs[0]["details"])
+    assert recs[0]["goal_met"] and recs[2]["goal_met"] and recs[1]["median"] > 0
+
+
 def test_timer_floor_quick(tmp_path):
     (rec,) = _run_script("bench_timer_floor", tmp_path, "--quick")
     assert rec["figure"] == "4f" and rec["details"][0]["deadlines"] == 1000 and rec["p99"] >= 0

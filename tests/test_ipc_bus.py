@@ -17,12 +17,14 @@ from typing import Any
 import can
 import pytest
 
+from sea_hil.config.loader import load_config
 from sea_hil.config.wire_names import parse_can_spec
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.protocol.ipc_bus import IpcBus, channel_dir
 from sea_hil.protocol.ipc_wire import HEADER, MAGIC, decode_frame, encode_frame
 from sea_hil.runtime.processes import end_process
+from sea_hil.session.limbs import bus_specs
 
 MEMBER = Path(__file__).resolve().parent / "ipc" / "member.py"
 CH = "bus"
@@ -171,7 +173,8 @@ def test_shutdown_removes_the_member_and_the_last_one_the_directory(make_bus: Ma
         b.send(frame(2))
 
 
-def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counted(make_bus: MakeBus, bus_dir: str) -> None:
+def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counted(
+        make_bus: MakeBus, bus_dir: str, caplog: pytest.LogCaptureFixture) -> None:
     a, b = make_bus(send_timeout_s=0.05, sndbuf_bytes=16384), make_bus()
     stuck = socket.socket(socket.AF_UNIX, socket.SOCK_SEQPACKET)   # listens, never accepts nor reads
     stuck.bind(str(channel_dir(CH, bus_dir) / "stuck.sock"))
@@ -182,7 +185,26 @@ def test_a_stuck_member_costs_one_timeout_then_its_frames_are_dropped_and_counte
         got.append(int.from_bytes(b.recv(1.0).data, "little"))    # b reads as it goes: never full
     assert a.member_count == 2 and a.send_waits == 1 and 0 < a.frames_dropped < 500
     assert got == list(range(500)) and b.recv(0) is None
+    conn, _ = stuck.accept()           # it catches up: reads everything queued for it
+    conn.setblocking(False)
+    queued = [decode_frame(p, CH) for p in iter(lambda: _recv_or_none(conn), None)]
+    assert [int.from_bytes(m.data, "little") for m in queued] == list(range(len(queued)))   # a prefix, in order
+    assert len(queued) + a.frames_dropped == 500
+    a.send(frame(500))                 # then gets frames again
+    assert int.from_bytes(decode_frame(conn.recv(100), CH).data, "little") == 500
+    assert "reads again" in caplog.text
+    conn.close()
+    a.shutdown()
+    assert f"{a.frames_dropped} frame(s) sent were dropped for stuck members (stuck.sock: {a.frames_dropped})" \
+        in caplog.text
     stuck.close()
+
+
+def _recv_or_none(conn: socket.socket) -> bytes | None:
+    try:
+        return conn.recv(100)
+    except BlockingIOError:
+        return None
 
 
 def test_dead_members_are_detected_not_waited_for(make_bus: MakeBus, bus_dir: str) -> None:
@@ -236,6 +258,8 @@ def test_fifty_thousand_frames_from_two_processes_to_a_slow_receiver_lose_nothin
 
 def test_spec_and_python_can_entry_point(bus_dir: str) -> None:
     assert parse_can_spec("ipc:sea-hil") == ("ipc", "sea-hil")
+    assert load_config(overrides={"can": {"interface": "ipc:sea-hil"}}).can.interface == "ipc:sea-hil"
+    assert bus_specs("ipc:limb", 2) == ["ipc:limb0", "ipc:limb1"]
     for bad in ("ipc:", "ipc:.hidden", "ipc:a/b", "ipc:" + "x" * 41):
         with pytest.raises(ConfigError, match="ipc channel"):
             parse_can_spec(bad)

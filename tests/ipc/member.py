@@ -4,8 +4,8 @@ Usage: python tests/ipc/member.py DIRECTORY CHANNEL send COUNT SENDER_ID [SNDBUF
        python tests/ipc/member.py DIRECTORY CHANNEL idle
 `send`: COUNT frames, data = SENDER_ID (1 byte) + index (4 bytes, little endian), id 0x100 + SENDER_ID, as fast as
 the bus takes them, reading (and discarding) what the other members send, as every member must (one that never
-reads is a stuck member to the others); then one JSON line: the bus's counters. `idle`: joins, prints "joined" and waits on stdin (the
-dead- and stuck-member tests kill or stop it).
+reads is a stuck member to the others); then one JSON line: the bus's counters. `idle`: joins, prints "joined" and
+waits on stdin (the dead-member test kills it).
 """
 from __future__ import annotations
 
