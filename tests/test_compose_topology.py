@@ -22,12 +22,12 @@ from typing import Any
 
 import jsonschema
 import pytest
+from summary_compare import deterministic, minus_one_figures
 from test_udp_multicast import require_netns
 
 from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.report.node_summary import NODE_SUMMARY_SCHEMA
-from sea_hil.report.summary import deterministic as summary_deterministic
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.session.run import RunOptions, run_session
 
@@ -50,26 +50,6 @@ enabled = false
 [safety.setpoint]
 enabled = false
 """
-# wall-clock fields are under `timing` (sea_hil.report.summary.deterministic drops them); the compose recorder has
-# no CAN bus, so it records no voltage commands and knows no limb's bus (a deployment fact, not a result)
-NOT_COMPARED = ("max_abs_voltage_v",)
-CAN_COMPLETENESS = ("can_command", "can_frames")
-
-
-def deterministic(summary: dict[str, Any], *, can: bool = True) -> dict[str, Any]:
-    """Every deterministic field but each limb's bus (the topologies run on udp_multicast, `run` on its virtual bus);
-    without `can` also what only a recorder on the CAN bus has."""
-    out = dict(summary_deterministic(summary))
-    out["limbs"] = [{k: v for k, v in limb.items() if k != "bus"} for limb in out.get("limbs", [])]
-    if not can:
-        out = {k: v for k, v in out.items() if k not in NOT_COMPARED}
-        comp = dict(out["completeness"])
-        comp["channels"] = {k: v for k, v in comp["channels"].items() if k not in CAN_COMPLETENESS}
-        comp.pop("can_frames_lost")
-        out["completeness"] = comp
-    return out
-
-
 @pytest.fixture(scope="module")
 def short_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
     config = tmp_path_factory.mktemp("topology") / "compose.toml"
@@ -141,6 +121,7 @@ def test_readme_peer_to_peer_topology_records_every_channel(short_config: Path, 
         edge["counters"]["downlink_applied"] > 100
     assert channels["can_command"]["recorded"] == edge["counters"]["commands_sent"] > 1000
     assert all(v >= 0 for v in summary["timing"]["latency_us"].values()), summary["timing"]
+    assert minus_one_figures(summary) == []
     assert ctrl["finished"] and "latency_us" in edge
     assert deterministic(summary) == deterministic(lockstep_run)
     # the late recorder: only the edge's final statistics reached it
