@@ -8,6 +8,7 @@ from test_session_summary import _session
 
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_block
+from sea_hil.report.console import end_of_run_rows
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.writer import report_markdown
 
@@ -76,3 +77,24 @@ def test_a_cut_off_recording_checked_against_the_nodes_own_summaries() -> None:
     assert block["incomplete"] == ["state", "downlink"] and block["unverified"] == []
     assert (block["channels"]["state"]["missing"], block["channels"]["downlink"]["missing"]) == (175 - 59, 1)
     assert block["counters_from_node_summaries"] == ["controller", "edge"] and not block["complete"]
+
+
+def test_a_recorder_cut_off_in_the_lead_in_writes_not_recorded_for_the_cycle() -> None:
+    """Cut off before the measured cycle (issue 32, seen with a recorder SIGKILLed 10 states into a real session):
+    the file holds only lead-in tracking records (t < 0), so the cycle's tracking and inter-event figures are not
+    measurements; report.md and the end-of-run table say "not recorded" instead of 0.0000."""
+    data = _session(20, 60, range(1, 61), {30})          # the lead-in is seqs 20..69: no record at t >= 0
+    summary = {**session_summary(data, "et"), "completeness": completeness_block(data)}
+    assert summary["duration_s"] == 0.0 and summary["lead_in"]["uplink_msgs"] > 0
+    md = report_markdown(summary, data)
+    for figure in ("max abs tracking error hip / knee [rad]", "rms tracking error hip / knee [rad]",
+                   "inter-event min / median / max [s]"):
+        assert f"| {figure} | not recorded |" in md, md
+    rows = dict(end_of_run_rows(summary, command="report"))
+    assert rows["error hip max / RMS"] == rows["error knee max / RMS"] == "not recorded", rows
+    # a cycle in the file: its figures are shown
+    whole = _session(20, 170, PUBLISHED, EVENTS)
+    rows = dict(end_of_run_rows({**session_summary(whole, "et"), "completeness": completeness_block(whole)}))
+    assert rows["error hip max / RMS"].endswith(" rad"), rows
+    assert "| max abs tracking error hip / knee [rad] | not recorded |" not in report_markdown(
+        session_summary(whole, "et"), whole)
