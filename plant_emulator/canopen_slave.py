@@ -79,6 +79,15 @@ class _Tpdo:
     timer_due_ns: int | None = None
 
 
+class _TpdoComm(NamedTuple):
+    """TPDO n's communication parameters (0x1800 + n), cached between writes to the communication objects."""
+    valid: bool
+    ttype: int
+    cob_id: int
+    inhibit_ns: int
+    timer_ms: int
+
+
 @dataclass
 class SlaveCounters:
     rejected_frames: int = 0
@@ -107,8 +116,10 @@ class CanopenSlave:
     _pdo_length_error: bool = False
     # caches of the communication objects, dropped on every write to 0x1000-0x1FFF and at boot (1 kHz paths)
     _maps: dict[tuple[int, int], tuple[list[Entry], struct.Struct]] = field(default_factory=dict)
+    _tpdo_keys: dict[int, tuple[tuple[int, int], ...]] = field(default_factory=dict)
     _rpdo_ids: dict[int, int] | None = None
     _sync_id: int | None = None
+    _tpdo_comm: list[_TpdoComm] | None = None
 
     def __post_init__(self) -> None:
         self._entries = entries_by_key(self.objects)
@@ -169,7 +180,7 @@ class CanopenSlave:
         return can_id in (NMT_ID, self.sync_id, 0x600 + self.node_id) or self._rpdo_number(can_id) is not None
 
     def _drop_caches(self) -> None:
-        self._maps, self._rpdo_ids, self._sync_id = {}, None, None
+        self._maps, self._rpdo_ids, self._sync_id, self._tpdo_comm, self._tpdo_keys = {}, None, None, None, {}
 
     @property
     def sync_id(self) -> int:
@@ -233,9 +244,9 @@ class CanopenSlave:
             period = int(self.values[(0x1017, 0)]) * 1_000_000
             self._heartbeat_due_ns += period * max(1, (t_ns - self._heartbeat_due_ns) // period + 1)
         if self.nmt == OPERATIONAL:
-            for n in range(4):
-                if int(self.values[(0x1800 + n, 2)]) >= 254:
-                    out += self._tpdo_event(n, t_ns)
+            for n, comm in enumerate(self._tpdos()):
+                if comm.valid and comm.ttype >= 254:
+                    out += self._tpdo_event(n, comm, t_ns)
         return out
 
     def next_deadline_ns(self) -> int | None:
@@ -243,9 +254,6 @@ class CanopenSlave:
         return min(due) if due else None
 
     # ---- PDO ------------------------------------------------------------------------------------------------------
-    def _mapping(self, base: int, n: int) -> list[Entry]:
-        return self._packed(base, n)[0]
-
     def _packed(self, base: int, n: int) -> tuple[list[Entry], struct.Struct]:
         """The mapped entries of PDO n and one struct packing them all (cached)."""
         hit = self._maps.get((base, n))
@@ -258,8 +266,16 @@ class CanopenSlave:
             hit = self._maps[(base, n)] = (out, struct.Struct("<" + "".join(FORMATS[e.data_type][1] for e in out)))
         return hit
 
+    def _tpdos(self) -> list[_TpdoComm]:
+        if self._tpdo_comm is None:
+            v = self.values
+            self._tpdo_comm = [_TpdoComm(not int(v[(0x1800 + n, 1)]) & PDO_INVALID, int(v[(0x1800 + n, 2)]),
+                                         int(v[(0x1800 + n, 1)]) & 0x7FF, int(v[(0x1800 + n, 3)]) * 100_000,
+                                         int(v[(0x1800 + n, 5)])) for n in range(4)]
+        return self._tpdo_comm
+
     def _on_rpdo(self, n: int, data: bytes, t_ns: int) -> list[Frame]:
-        size = sum(e.size for e in self._mapping(0x1600, n))
+        size = self._packed(0x1600, n)[1].size
         if len(data) < size:   # CiA 301: not processed; one EMCY per episode, every frame counted
             self.counters.rejected_frames += 1
             if not self._pdo_length_error:
@@ -275,40 +291,35 @@ class CanopenSlave:
         return []
 
     def _apply_rpdo(self, n: int, data: bytes, t_ns: int) -> None:
-        pos = 0
-        for e in self._mapping(0x1600, n):
-            value = e.decode(data[pos:pos + e.size])
-            pos += e.size
+        entries, packer = self._packed(0x1600, n)
+        for e, value in zip(entries, packer.unpack(data), strict=True):
             if self.app.check_write(e.index, e.subindex, value) == 0:   # out of range in a PDO: the app saturates
                 self.values[(e.index, e.subindex)] = value
                 self.app.on_write(e.index, e.subindex, value, t_ns)
 
     def tpdo_data(self, n: int) -> bytes:
+        """TPDO n's data now: its mapped values packed (the getter of the mapped keys cached with the mapping)."""
         entries, packer = self._packed(0x1A00, n)
-        values = self.values
-        return packer.pack(*[values[(e.index, e.subindex)] for e in entries])
+        keys = self._tpdo_keys.get(n)
+        if keys is None:
+            keys = self._tpdo_keys[n] = tuple((e.index, e.subindex) for e in entries)
+        return packer.pack(*map(self.values.__getitem__, keys))
 
-    def _tpdo_frame(self, n: int, data: bytes, t_ns: int) -> Frame:
+    def _tpdo_frame(self, n: int, comm: _TpdoComm, data: bytes, t_ns: int) -> Frame:
         tp = self._tpdo[n]
         tp.last_data, tp.last_sent_ns = data, t_ns
         self.counters.pdo_sent += 1
         self.counters.tpdo_sent[n] += 1
-        return Frame(int(self.values[(0x1800 + n, 1)]) & 0x7FF, data)
+        return Frame(comm.cob_id, data)
 
-    def _tpdo_valid(self, n: int) -> bool:
-        return not int(self.values[(0x1800 + n, 1)]) & PDO_INVALID
-
-    def _tpdo_event(self, n: int, t_ns: int) -> list[Frame]:
-        if not self._tpdo_valid(n):
-            return []
+    def _tpdo_event(self, n: int, comm: _TpdoComm, t_ns: int) -> list[Frame]:
+        """Event-driven TPDO n (valid, type 254/255): sent on a change outside its inhibit time, or at its timer."""
         tp, data = self._tpdo[n], self.tpdo_data(n)
-        timer_ms = int(self.values[(0x1800 + n, 5)])
         timer_due = tp.timer_due_ns is not None and t_ns >= tp.timer_due_ns
-        inhibit_ns = int(self.values[(0x1800 + n, 3)]) * 100_000
-        inhibited = tp.last_sent_ns is not None and t_ns - tp.last_sent_ns < inhibit_ns
+        inhibited = tp.last_sent_ns is not None and t_ns - tp.last_sent_ns < comm.inhibit_ns
         if (data != tp.last_data and not inhibited) or timer_due:
-            tp.timer_due_ns = t_ns + timer_ms * 1_000_000 if timer_ms else None
-            return [self._tpdo_frame(n, data, t_ns)]
+            tp.timer_due_ns = t_ns + comm.timer_ms * 1_000_000 if comm.timer_ms else None
+            return [self._tpdo_frame(n, comm, data, t_ns)]
         return []
 
     def _on_sync(self, f: Frame, t_ns: int) -> list[Frame]:
@@ -322,15 +333,15 @@ class CanopenSlave:
             self._apply_rpdo(n, data, t_ns)
         self._rpdo_pending = {}
         out = []
-        for n in range(4):
-            ttype = int(self.values[(0x1800 + n, 2)])
-            if not self._tpdo_valid(n) or ttype > 240:
+        for n, comm in enumerate(self._tpdos()):
+            ttype = comm.ttype
+            if not comm.valid or ttype > 240:
                 continue
             tp = self._tpdo[n]
             tp.syncs += 1
             data = self.tpdo_data(n)
             if (ttype == 0 and data != tp.last_data) or (ttype > 0 and tp.syncs % ttype == 0):
-                out.append(self._tpdo_frame(n, data, t_ns))
+                out.append(self._tpdo_frame(n, comm, data, t_ns))
         return out
 
     # ---- SDO (the transfer protocol `handle_request` below, object access here) --------------------------------------

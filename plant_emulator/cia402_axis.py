@@ -15,7 +15,6 @@ instant) until the next sample, then FAULT; fault reset = controlword bit 7 risi
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass, field
 from enum import IntEnum
 
@@ -45,12 +44,17 @@ STATUS = {State.NOT_READY: 0x0000, State.SWITCH_ON_DISABLED: 0x0040, State.READY
 REMOTE, WARNING, FOLLOWS = 0x0200, 0x0080, 0x1000
 
 
+_HIGHEST = {bits: (1 << (bits - 1)) - 1 for bits in (8, 16, 32)}
+
+
 def _clip(v: float, bits: int) -> int:
-    """Round to a signed integer of `bits`, saturating (a non-finite value reads as 0)."""
-    if not math.isfinite(v):
+    """Round to a signed integer of `bits`, saturating (a non-finite value reads as 0: `round` refuses it)."""
+    try:
+        r = round(v)
+    except (OverflowError, ValueError):
         return 0
-    hi = (1 << (bits - 1)) - 1
-    return max(-hi - 1, min(hi, round(v)))
+    hi = _HIGHEST[bits]
+    return -hi - 1 if r < -hi - 1 else hi if r > hi else r
 
 
 @dataclass

@@ -28,6 +28,7 @@ class Cia402Limb:
     driver: DriverCore
     axes: tuple[Cia402Axis, Cia402Axis]
     t0_ns: int | None = None
+    collected_ns: int | None = None     # the time of the last `_collect`: everything due by then is out
 
     @classmethod
     def create(cls, cfg: SeaHilConfig, node_ids: tuple[int, int]) -> Cia402Limb:
@@ -90,8 +91,19 @@ class Cia402Limb:
             out += self._collect(t_sample)
         return out
 
+    def due(self, t_ns: int) -> list[Frame]:
+        """Everything due by `t_ns` with no frame received: new samples, then the time-driven output (heartbeats,
+        event TPDOs and timers). Nothing to do when the last `_collect` was at `t_ns` (each `receive` and sample
+        ends with one; a second at the same instant with no input in between sends nothing: the 1 kHz path's I/O
+        shell calls this after every frame)."""
+        out = self.advance(t_ns)
+        if self.collected_ns != t_ns:
+            out += self._collect(t_ns)
+        return out
+
     def _collect(self, t_ns: int) -> list[Frame]:
         """Apply the axes' voltages from `t_ns`; their pending EMCYs and the nodes' time-driven output."""
+        self.collected_ns = t_ns
         u = (self.axes[0].voltage_v, self.axes[1].voltage_v)
         if u != self.driver.voltage_v:
             self.driver.handle(VoltageCmd(self.driver.node_id, u, 0), t_ns)

@@ -100,7 +100,7 @@ class Cia402PlantNode(Node):
         t = self.now_ns()
         for limb in self.limbs:
             before = limb.driver.seq
-            self._send(limb, limb.advance(t) + limb._collect(t))
+            self._send(limb, limb.due(t))
             self.stats.overruns += max(0, limb.driver.seq - before - 1) if not self.lockstep else 0
         self.stats.ticks = self.limbs[0].driver.seq
 

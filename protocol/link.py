@@ -145,6 +145,12 @@ def link_pair(cfg: LinkConfig) -> tuple[LinkEmulator, LinkEmulator]:
     return (LinkEmulator(cfg.uplink, f"{cfg.seed}/uplink"), LinkEmulator(cfg.downlink, f"{cfg.seed}/downlink"))
 
 
+def release_sample_ns(deliver_ns: int, period_ns: int) -> int:
+    """The sample (on a clock stepped every `period_ns`) at which a message delivered at `deliver_ns` is released:
+    the first sample at or after its delivery (lockstep and the offline engine stamp a released state with it)."""
+    return -(-deliver_ns // period_ns) * period_ns
+
+
 class DelayQueue(Generic[T]):
     """Items held until their delivery time; ties leave in insertion order."""
 

@@ -15,6 +15,7 @@ from sea_hil.commands.report import node_counters_of
 from sea_hil.errors import ConfigError
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_block
+from sea_hil.report.console import end_of_run_rows
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.writer import report_markdown
 
@@ -177,3 +178,24 @@ def test_two_node_summaries_of_one_node_are_refused(tmp_path: Path, capsys: pyte
     block = completeness_block(data, node_counters_of([_node_file(tmp_path, "e1.json", "edge", node_id=1,
                                                                   uplink_msgs=len(PUBLISHED)), two]))
     assert block["counters_from_node_summaries"] == ["edge (limb1)", "edge (limb2)"] and block["unverified"] == []
+
+
+def test_a_recorder_cut_off_in_the_lead_in_writes_not_recorded_for_the_cycle() -> None:
+    """Cut off before the measured cycle (issue 32, seen with a recorder SIGKILLed 10 states into a real session):
+    the file holds only lead-in tracking records (t < 0), so the cycle's tracking and inter-event figures are not
+    measurements; report.md and the end-of-run table say "not recorded" instead of 0.0000."""
+    data = _session(20, 60, range(1, 61), {30})          # the lead-in is seqs 20..69: no record at t >= 0
+    summary = {**session_summary(data, "et"), "completeness": completeness_block(data)}
+    assert summary["duration_s"] == 0.0 and summary["lead_in"]["uplink_msgs"] > 0
+    md = report_markdown(summary, data)
+    for figure in ("max abs tracking error hip / knee [rad]", "rms tracking error hip / knee [rad]",
+                   "inter-event min / median / max [s]"):
+        assert f"| {figure} | not recorded |" in md, md
+    rows = dict(end_of_run_rows(summary, command="report"))
+    assert rows["error hip max / RMS"] == rows["error knee max / RMS"] == "not recorded", rows
+    # a cycle in the file: its figures are shown
+    whole = _session(20, 170, PUBLISHED, EVENTS)
+    rows = dict(end_of_run_rows({**session_summary(whole, "et"), "completeness": completeness_block(whole)}))
+    assert rows["error hip max / RMS"].endswith(" rad"), rows
+    assert "| max abs tracking error hip / knee [rad] | not recorded |" not in report_markdown(
+        session_summary(whole, "et"), whole)

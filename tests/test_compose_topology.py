@@ -9,12 +9,15 @@ comes from the recorded CAN frames: the compose recorder has no CAN bus (its con
 network), so it records the Zenoh side only.
 
 The README's peer-to-peer topology (issue 32, tests/multicast/peer_topology.py: no router, the edge listens) is
-compared the same way, CAN side included, and checked for a complete recording and every node's own result.
+compared the same way, CAN side included, and checked for a complete recording and every node's own result; with
+its recorder SIGKILLed mid-session (tests/multicast/cutoff_topology.py), the torn file and the nodes' `--json`
+results must give a verdict naming each incomplete channel with its missing count.
 """
 from __future__ import annotations
 
 import json
 import shlex
+import signal
 import subprocess
 import sys
 import uuid
@@ -23,17 +26,19 @@ from typing import Any
 
 import jsonschema
 import pytest
+from summary_compare import deterministic, minus_one_figures
 from test_udp_multicast import require_netns
 
 from sea_hil.cli import main
 from sea_hil.config.loader import load_config
+from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.report.node_summary import NODE_SUMMARY_SCHEMA
-from sea_hil.report.summary import deterministic as summary_deterministic
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
 from sea_hil.session.run import RunOptions, run_session
 
 TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "topology.py"
 PEER_TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "peer_topology.py"
+CUTOFF_TOPOLOGY = Path(__file__).resolve().parent / "multicast" / "cutoff_topology.py"
 REPO = Path(__file__).resolve().parents[1]
 # configs/session.toml (the compose services' shared config: client mode) plus a short session: a 1 s gait after a
 # 0.25 s lead-in; the drive limits and the setpoint envelope are derived for the default 10 s gait
@@ -49,26 +54,6 @@ enabled = false
 [safety.setpoint]
 enabled = false
 """
-# wall-clock fields are under `timing` (sea_hil.report.summary.deterministic drops them); the compose recorder has
-# no CAN bus, so it records no voltage commands and knows no limb's bus (a deployment fact, not a result)
-NOT_COMPARED = ("max_abs_voltage_v",)
-CAN_COMPLETENESS = ("can_command", "can_frames")
-
-
-def deterministic(summary: dict[str, Any], *, can: bool = True) -> dict[str, Any]:
-    """Every deterministic field but each limb's bus (the topologies run on an ipc bus, `run` on its virtual bus);
-    without `can` also what only a recorder on the CAN bus has."""
-    out = dict(summary_deterministic(summary))
-    out["limbs"] = [{k: v for k, v in limb.items() if k != "bus"} for limb in out.get("limbs", [])]
-    if not can:
-        out = {k: v for k, v in out.items() if k not in NOT_COMPARED}
-        comp = dict(out["completeness"])
-        comp["channels"] = {k: v for k, v in comp["channels"].items() if k not in CAN_COMPLETENESS}
-        comp.pop("can_frames_lost")
-        out["completeness"] = comp
-    return out
-
-
 @pytest.fixture(scope="module")
 def short_config(tmp_path_factory: pytest.TempPathFactory) -> Path:
     config = tmp_path_factory.mktemp("topology") / "compose.toml"
@@ -142,6 +127,7 @@ def test_readme_peer_to_peer_topology_records_every_channel(short_config: Path, 
         edge["counters"]["downlink_applied"] > 100
     assert channels["can_command"]["recorded"] == edge["counters"]["commands_sent"] > 1000
     assert all(v >= 0 for v in summary["timing"]["latency_us"].values()), summary["timing"]
+    assert minus_one_figures(summary) == []
     assert ctrl["finished"] and "latency_us" in edge
     assert deterministic(summary) == deterministic(lockstep_run)
     # the late recorder: only the edge's final statistics reached it
@@ -156,3 +142,64 @@ def test_readme_peer_to_peer_topology_records_every_channel(short_config: Path, 
     checked = json.loads((tmp_path / "late" / "summary.json").read_text())["completeness"]
     assert checked["incomplete"] == ["state", "downlink"] and checked["unverified"] == [], checked
     assert checked["channels"]["downlink"]["missing"] == ctrl["counters"]["setpoints_sent"]
+
+
+def _held(data: SessionData) -> dict[str, int]:
+    """What a recording holds per completeness channel, counted here from its messages (unique key and seq)."""
+    def unique(*topics: str) -> int:
+        return len({(t, m.payload.get("key"), m.payload.get("seq")) for t in topics for m in data.messages.get(t, [])})
+    commands = sum(m.payload.get("kind") == "voltage" for m in data.messages.get("/can/command", []))
+    return {"state": unique("/zenoh/state"), "downlink": unique("/zenoh/setpoint", "/zenoh/voltage"),
+            "can_command": commands}
+
+
+@pytest.mark.slow
+def test_recorder_cut_off_mid_session_names_each_incomplete_channel(tmp_path: Path) -> None:
+    """Issue 32: the README's peer-to-peer session whose recorder is SIGKILLed while the controller still runs. The
+    torn file (complete chunks only, no final statistics of anyone) with the edge's and the controller's `--json`
+    results (`sea-hil report --node-summary`) gives a verdict that names every channel as incomplete with its
+    missing count: the node's counter minus what the file holds."""
+    require_netns("recorder cut-off")
+    config = tmp_path / "cut.toml"    # the peer test's config; the recorder closes a chunk every 0.1 s
+    config.write_text(SHORT + "\n[record]\nflush_period_s = 0.1\n", encoding="utf-8")
+    out = tmp_path / "cut"
+    out.mkdir()
+    report = _in_netns(CUTOFF_TOPOLOGY, config, out)
+    assert report["codes"] == {"recorder": -signal.SIGKILL, "controller": 0, "edge": 0, "plant": 0}, report
+    assert report["cut_mid_session"], "the controller had finished before the recorder was killed"
+    results = {}
+    for name in ("edge", "controller"):
+        results[name] = json.loads(report["stdout"][name])
+        jsonschema.validate(results[name], NODE_SUMMARY_SCHEMA)
+        (tmp_path / f"{name}.json").write_text(report["stdout"][name], encoding="utf-8")
+    edge, ctrl = results["edge"]["counters"], results["controller"]["counters"]
+    data = read_session(out / "session.mcap")
+    assert not data.complete and "sea-hil.final" not in data.metadata
+    held = _held(data)
+    sent = {"state": edge["uplink_msgs"] - edge.get("uplink_pending", 0), "downlink": ctrl["setpoints_sent"],
+            "can_command": edge["commands_sent"] + edge.get("arrival_commands", 0)}
+    assert all(0 < held[ch] < sent[ch] for ch in sent), (held, sent)
+
+    # the file alone: nothing to check against (no final statistics in it), and the verdict says so
+    assert main(["report", str(out / "session.mcap"), "--out", str(tmp_path / "alone"), "--json"]) == 0
+    alone = json.loads((tmp_path / "alone" / "summary.json").read_text())
+    assert alone["completeness"]["unverified"] == list(sent) and not alone["completeness"]["complete"]
+    assert sorted(r["channel"] for r in alone["verdict"]["reasons"] if r["code"] == "recording_unverified") == \
+        sorted(sent)
+
+    # with the nodes' own results: each channel incomplete, by the node's count less the file's
+    assert main(["report", str(out / "session.mcap"), "--out", str(tmp_path / "checked"), "--json",
+                 "--node-summary", str(tmp_path / "edge.json"),
+                 "--node-summary", str(tmp_path / "controller.json")]) == 0
+    summary = json.loads((tmp_path / "checked" / "summary.json").read_text())
+    jsonschema.validate(summary, SUMMARY_SCHEMA)
+    comp = summary["completeness"]
+    assert comp["incomplete"] == list(sent) and comp["unverified"] == [] and not comp["complete"], comp
+    assert comp["counters_from_node_summaries"] == ["controller", "edge"], comp
+    for ch in sent:
+        c = comp["channels"][ch]
+        assert (c["expected"], c["recorded"], c["missing"]) == (sent[ch], held[ch], sent[ch] - held[ch]), (ch, c)
+    missing = {r["channel"]: r["value"] for r in summary["verdict"]["reasons"] if r["code"] == "recording_incomplete"}
+    assert missing == {ch: sent[ch] - held[ch] for ch in sent}, summary["verdict"]
+    assert summary["verdict"]["status"] == "degraded"
+    print(f"\nrecorder SIGKILLed mid-session: held {held} of {sent}")

@@ -57,8 +57,10 @@ CASES: dict[str, tuple[str, str | None, dict[str, Any], bool]] = {
     "fallback-silent-downlink-tt": ("tt", "delay=5ms", {**FALLBACK, "link": {"downlink": parse_link_spec(
         "delay=5ms,ge=0.02/0.05/1.0")}}, False),
     "edge-check-sample-et": ("et", "delay=4ms", {"trigger": {"placement": "edge", "edge_check": "sample"}}, False),
+    # jitter that reorders: states released after a newer one are recorded and counted, not answered
+    "reorder-et": ("et", "delay=10ms,jitter=8ms,reorder=on", {}, False),
 }
-CHEAP = ("off-start-default-et", "off-start-paper-tt-lossy", "fault-mid-session-et", "fallback-bursty-et")
+CHEAP = ("off-start-default-et", "off-start-paper-tt-lossy", "fault-mid-session-et", "fallback-bursty-et", "reorder-et")
 SELECTED = sorted(CASES) if os.environ.get("SEA_HIL_FULL_MATRIX") else CHEAP
 
 

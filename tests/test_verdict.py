@@ -311,7 +311,7 @@ def test_cia402_sync_misses_are_judged_like_tick_misses_against_the_host_floor()
     assert "cia402_sync_misses" in s["timing"]["edge"] and "cia402_syncs" in s["edge"]
     r = {x["code"]: x for x in verdict(s)["reasons"]}["sync_misses"]
     assert r["value"] == pytest.approx(1.0) and r["threshold"] == pytest.approx(0.7) and r["floor_pct"] == 0.2
-    assert "100 of 10000" in r["message"] and "sync_miss_floor_factor" in r["message"]
+    assert "100 of 10000 SYNC periods" in r["message"] and "sync_miss_floor_factor" in r["message"]
     assert verdict(_cia402_realtime(100, 0.4))["status"] == "ok"                    # 1 % <= 0.1 + 3 x 0.4
     assert verdict(s, VerdictConfig(sync_miss_max_pct=1.0))["status"] == "ok"
     assert verdict({**s, "lockstep": True})["status"] == "ok"

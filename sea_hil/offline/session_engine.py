@@ -40,6 +40,7 @@ from sea_hil.plant_emulator.disturbance import DisturbanceTable
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat
 from sea_hil.protocol.keys import Keys
+from sea_hil.protocol.link import release_sample_ns
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType, SetpointPayload, StatePayload, decode
 from sea_hil.recorder.meta import ENGINE_SESSION_META, META_SESSION
 from sea_hil.recorder.reader import RecordedMessage, SessionData
@@ -182,7 +183,7 @@ class _Session:
         self.released: list[bytes] = []        # state payloads the uplink emulator has released (to the controller)
         self.edge = EdgeCore(cfg, self.NODE_ID, mode=mode, state_sink=self.released.append,
                              record_sink=lambda record: self.rec.tracking(record, self.now),
-                             stamp=lambda at_ns: -(-at_ns // period) * period,   # `LockstepEdgeSync.state_stamp`
+                             stamp=lambda at_ns: release_sample_ns(at_ns, period),   # as `LockstepEdgeSync`
                              restart_possible=lambda timed_out: False, epoch=0, wall_ns=lambda: self.now)
         self.controller = ControllerCore(cfg, mode, cycles=cycles)
         # the edge core's trigger checks every 1 kHz sample (`trigger.edge_check = "sample"`; never TT: EdgeEvents)
@@ -253,15 +254,18 @@ class _Session:
         return Heartbeat(self.NODE_ID, DriverState.FAULT, ErrorFlags(bits), 0, 0, 0)
 
     def _controller(self, now: int) -> bool:
-        """The controller's core answers the states released by `now` (a state released after a newer one is
-        ignored, as the live controller's sequence check does); False when it has finished its cycles."""
+        """The controller's core answers the states released by `now`. Every released state is on the uplink key (the
+        recorder sees it); one released after a newer one is ignored, as the live controller's sequence check does,
+        and counted (`uplink_out_of_order`, as `LockstepEdgeSync` counts it); False when it has finished its
+        cycles."""
         released, self.released[:] = list(self.released), []
         for data in released:
             p = decode(data)
+            self.rec.state(p, now)   # type: ignore[arg-type]
             if p.seq <= self.newest:
+                self.edge.counters.uplink_out_of_order += 1
                 continue
             self.newest = p.seq
-            self.rec.state(p, now)   # type: ignore[arg-type]
             ans = self.controller.on_state(p, _stamp, lambda: now)   # type: ignore[arg-type]
             if ans is None:
                 return False

@@ -17,7 +17,7 @@ from rich.console import Console
 from rich.progress import BarColumn, Progress, TextColumn, TimeElapsedColumn
 from rich.table import Table
 
-from sea_hil.report.completeness import completeness_lines
+from sea_hil.report.completeness import NOT_RECORDED, completeness_lines
 
 JOINTS = ("hip", "knee")
 _MISSING = object()
@@ -209,10 +209,13 @@ def end_of_run_rows(summary: Mapping[str, Any], files: Sequence[Path] = (), *, c
                                         (f" (+ {lead:.2f} s lead-in)" if lead else ""))]
     rows += _messages(summary, tt_msgs)
     tracking = summary.get("tracking", {})
+    # a recording (it has a completeness block) with nothing of the measured cycle (duration 0: a recorder cut off
+    # in the lead-in, or never routed the controller's records): its tracking zeros are not measurements
+    untracked = "completeness" in summary and not summary.get("duration_s")
     for j, name in enumerate(JOINTS):
         mx, rms = tracking.get("max_abs_error_rad", [None] * 2)[j], tracking.get("rms_error_rad", [None] * 2)[j]
         if mx is not None:
-            rows.append((f"error {name} max / RMS", f"{mx:.4f} / {rms:.4f} rad"))
+            rows.append((f"error {name} max / RMS", NOT_RECORDED if untracked else f"{mx:.4f} / {rms:.4f} rad"))
     lat = field(summary, "latency_us", default=None)
     if isinstance(lat, Mapping) and lat.get("p50", -1) >= 0:
         rows.append(("latency p50 / p99", f"{lat['p50'] / 1000:.2f} / {lat.get('p99', 0) / 1000:.2f} ms"))

@@ -108,7 +108,7 @@ def _fault_reasons(summary: Mapping[str, Any]) -> list[dict[str, Any]]:
 
 
 def _deadline_reason(code: str, what: str, misses: int, total: int, floor: Mapping[str, Any], max_pct: float,
-                     factor: float, names: tuple[str, str]) -> list[dict[str, Any]]:
+                     factor: float, names: tuple[str, str], unit: str) -> list[dict[str, Any]]:
     """Real-time deadlines (`misses` of `total`) beyond `max_pct` % plus `factor` x the host's empty-loop floor: the
     emulator's, not the host's (docs/verdict.md). `names`: the two `[verdict]` keys, for the message."""
     pct = 100.0 * misses / total
@@ -118,7 +118,7 @@ def _deadline_reason(code: str, what: str, misses: int, total: int, floor: Mappi
         return []
     where = (f"host's empty-loop floor {floor_pct:.3f} % over {floor.get('duration_s', 0):g} s at start-up"
              if floor else "host floor not measured")
-    return [_reason(code, DEGRADED, f"{what} {misses} of {total} ({pct:.3f} %), above {limit:.3f} % = "
+    return [_reason(code, DEGRADED, f"{what} {misses} of {total} {unit} ({pct:.3f} %), above {limit:.3f} % = "
                                     f"verdict.{names[0]} {max_pct:g} % + verdict.{names[1]} {factor:g} x the {where}",
                     round(pct, 4), round(limit, 4), floor_pct=floor_pct)]
 
@@ -129,7 +129,7 @@ def _tick_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[st
         return []    # lockstep has no deadlines: simulated time waits for every node
     return _deadline_reason("tick_misses", "driver missed", int(drv.get("tick_misses", 0)), int(drv["ticks"]),
                             drv.get("floor") or {}, cfg.tick_miss_max_pct, cfg.tick_miss_floor_factor,
-                            ("tick_miss_max_pct", "tick_miss_floor_factor"))
+                            ("tick_miss_max_pct", "tick_miss_floor_factor"), "ticks")
 
 
 def _sync_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:
@@ -142,7 +142,7 @@ def _sync_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[st
     floor = (drv.get("floor") or {}) if isinstance(drv, Mapping) else {}
     return _deadline_reason("sync_misses", "the edge's SYNC producer missed", periods[0], periods[1], floor,
                             cfg.sync_miss_max_pct, cfg.sync_miss_floor_factor,
-                            ("sync_miss_max_pct", "sync_miss_floor_factor"))
+                            ("sync_miss_max_pct", "sync_miss_floor_factor"), "SYNC periods")
 
 
 LIMB_SCOPED = ("edge", "rejections")   # blocks each limb has of its own (its edge's counters)

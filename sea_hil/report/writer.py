@@ -167,7 +167,9 @@ def report_markdown(summary: dict[str, Any], data: SessionData) -> str:
     tx = summary["transmissions"]
     lat = summary["timing"]["latency_us"]
     comp = summary.get("completeness") or {}
-    tracked = bool(data.messages.get("/tracking"))   # the controller's records of the tracking (none: no figure)
+    # the controller's records of the measured cycle's tracking (none: no figure; a recorder cut off in the lead-in
+    # holds only records at t < 0, and the cycle's figures would be zeros that measure nothing)
+    tracked = any(m.payload.get("t_s", -1.0) >= 0 for m in data.messages.get("/tracking", []))
     lines = ["# sea-hil session report", "", *_verdict_lines(summary),
              f"controller: **{summary['controller']}**, duration {summary['duration_s']:.2f} s, "
              f"file complete: {data.complete}, messages: {data.message_count}", "",

@@ -24,7 +24,7 @@ from typing import Any
 import zenoh
 
 from sea_hil.protocol.can_frames import VoltageCmd
-from sea_hil.protocol.link import DelayQueue
+from sea_hil.protocol.link import DelayQueue, release_sample_ns
 from sea_hil.protocol.payloads import AckPayload, encode
 from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zsession import publisher
@@ -164,8 +164,7 @@ class LockstepEdgeSync:
     def state_stamp(self, at_ns: int) -> int:
         """A state's header t_ns on the simulated clock: the sample at which the uplink emulator releases it (the
         first sample at or after its delivery time), i.e. when the controller receives it."""
-        period = self.edge.core.period_ns
-        return -(-at_ns // period) * period
+        return release_sample_ns(at_ns, self.edge.core.period_ns)
 
     def gate(self, fresh: bool) -> tuple[bool, bool]:
         return True, False

@@ -8,6 +8,7 @@ to keep guest time small; the slice keeps the real gait's dynamics (only the dur
 """
 from __future__ import annotations
 
+import json
 import signal
 import subprocess
 import sys
@@ -22,6 +23,7 @@ REPO = Path(__file__).resolve().parents[2]
 SAMPLE_STEP_S = 0.005        # CSV resolution of the gait slice (spline-interpolated by the controller)
 STOP_TIMEOUT_S = 30.0
 CONNECT_TIMEOUT_S = 60.0
+RUN_TIMEOUT_S = 400.0
 
 
 def sea_hil_cmd(*args: str, netns: str | None = None) -> list[str]:
@@ -87,6 +89,13 @@ class NodeGroup:
     def output(self, name: str) -> str:
         """What node ``name`` printed so far."""
         return (self.log_dir / f"{name}.log").read_text(errors="replace")
+
+    def result(self, name: str) -> dict[str, Any]:
+        """Node ``name``'s own result: the last JSON line it printed (``--json``; its log lines are not JSON)."""
+        lines = [ln for ln in self.output(name).splitlines() if ln.startswith("{")]
+        if not lines:
+            raise AssertionError(f"{name} printed no --json result:\n{self.output(name)[-3000:]}")
+        return dict(json.loads(lines[-1]))
 
     def outputs(self) -> str:
         """Every node's output, for assertion messages."""
@@ -171,12 +180,13 @@ class NodeSession:
 
 @dataclass(frozen=True)
 class NodeSessionResult:
-    """What one node session left: its summary (also written to ``out/summary.json``), the recording, and the
-    plant's closing report line (ticks, overruns)."""
+    """What one node session left: its summary (also written to ``out/summary.json``), the recording, the plant's
+    closing report line (ticks, overruns) and the edge's and the controller's own results (``--json``)."""
 
     summary: dict[str, Any]
     data: Any   # sea_hil.recorder.writer.SessionData
     plant_report: str
+    nodes: dict[str, dict[str, Any]]
 
 
 def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
@@ -185,7 +195,7 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
     cfg, mcap = str(s.config), out / "session.mcap"
     with NodeGroup(out) as nodes:
         edge = nodes.start("edge", sea_hil_cmd("edge", "--can", s.can, "--lockstep", "--listen", s.endpoint,
-                                               "--config", cfg, netns=s.bus_netns))
+                                               "--config", cfg, "--json", netns=s.bus_netns))
         nodes.start("plant", sea_hil_cmd("plant", "--can", s.can, "--lockstep", "--config", cfg, netns=s.bus_netns))
         try:
             wait_for_sockets(s.port, "listening", 1, s.bus_netns, edge)   # a Zenoh client does not retry
@@ -199,7 +209,8 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
             raise AssertionError(f"{err}\n{nodes.outputs()}") from None
         ctl = nodes.start("controller", sea_hil_cmd("controller", "--controller", s.controller, "--cycles", "1",
                                                     "--lockstep", "--connect", s.endpoint, "--config", cfg,
-                                                    "--timeout", str(s.timeout_s), netns=s.controller_netns))
+                                                    "--timeout", str(s.timeout_s), "--json",
+                                                    netns=s.controller_netns))
         try:
             status = ctl.wait(timeout=s.timeout_s + STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
@@ -208,12 +219,25 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
         for name in ("edge", "plant", "record"):
             assert nodes.stop(name) == 0, f"{name} did not exit cleanly:\n{nodes.outputs()}"
         plant_lines = nodes.output("plant").strip().splitlines()
+        results = {name: nodes.result(name) for name in ("edge", "controller")}
     from sea_hil.recorder.reader import read_session
-    from sea_hil.report.completeness import completeness_block
     from sea_hil.report.session_summary import session_summary
     from sea_hil.report.summary import write_summary
     data = read_session(mcap)
+    # as `sea-hil run` and `report` summarise a recording: the file against the nodes' own counters (issue 32), and
+    # the verdict judged with it
     summary = session_summary(data, s.controller)
-    summary["completeness"] = completeness_block(data)   # the file against the nodes' own counters (issue 32)
+    summary.update(lockstep=True, inner="edge")
     write_summary(out / "summary.json", summary)
-    return NodeSessionResult(summary, data, plant_lines[-1] if plant_lines else "")
+    return NodeSessionResult(summary, data, plant_lines[-1] if plant_lines else "", results)
+
+
+def lockstep_run_summary(config: Path, out: Path, controller: str = "et") -> dict[str, Any]:
+    """summary.json of ``sea-hil run --lockstep`` on ``config`` (plant, edge and recorder on the embedded virtual
+    bus): what a lockstep node session's summary must equal in every deterministic field."""
+    cmd = sea_hil_cmd("run", "--lockstep", "--quiet", "--controller", controller, "--cycles", "1", "--config",
+                      str(config), "--out", str(out))
+    result = subprocess.run(cmd, stdin=subprocess.DEVNULL, capture_output=True, text=True, timeout=RUN_TIMEOUT_S,
+                            check=False)
+    assert result.returncode == 0, result.stderr[-3000:]
+    return dict(json.loads((out / "summary.json").read_text()))

@@ -7,6 +7,11 @@ session's result does not depend on the delay; only its latency figures do: the 
 published -> setpoint for that state applied) must be >= 2 D for every setpoint, and the one-way figure (edge's
 state send -> controller's setpoint send, one CLOCK_MONOTONIC across namespaces) >= D. Without netem both are a
 few ms in the guest, so the bounds fail if the delay is not on the path. Addresses are TEST-NET-1 (RFC 5737).
+
+Issue 32's third topology: the recording's per-channel counts equal the nodes' own counters (their final records
+in the file, and their `--json` results), no figure is -1, and the summary equals `sea-hil run --lockstep`'s on the
+same config in every deterministic field (tests/summary_compare.py): lockstep waits for every message, so the real
+delay changes only wall-clock figures.
 """
 from __future__ import annotations
 
@@ -15,7 +20,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from netns_helpers import CLIENT_ADDR, SERVER_ADDR, run
-from session_nodes import NodeSession, run_node_session, write_client_config, write_gait_slice_config
+from session_nodes import (
+    NodeSession,
+    lockstep_run_summary,
+    run_node_session,
+    write_client_config,
+    write_gait_slice_config,
+)
+from summary_compare import deterministic, minus_one_figures
 
 DELAY_MS = 25
 DURATION_S = 1.0
@@ -39,7 +51,8 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     from sea_hil.protocol.zsession import free_tcp_port
     from sea_hil.report.writer import state_to_setpoint_latency_us
     bus_ns, ctl_ns = delayed_namespaces
-    session = NodeSession(config=write_gait_slice_config(tmp_path, DURATION_S),
+    config = write_gait_slice_config(tmp_path, DURATION_S)
+    session = NodeSession(config=config,
                           client_config=write_client_config(tmp_path), can="socketcan:vcan0",
                           listen_host=EDGE_ADDR, port=free_tcp_port(), bus_netns=bus_ns, controller_netns=ctl_ns)
     result = run_node_session(session, tmp_path)
@@ -50,8 +63,16 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     tx = summary["transmissions"]
     assert 0 < tx["downlink_msgs"] < summary["edge"]["uplink_msgs"], (tx, summary["edge"])
     assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
-    # the recorder (a client of the edge) holds every message the far-side controller sent (issue 32)
-    assert summary["completeness"]["complete"], summary["completeness"]
+    # the recorder (a client of the edge) holds every message the far-side controller sent (issue 32), counted
+    # against the nodes' own results too
+    comp = summary["completeness"]
+    assert comp["complete"] and comp["can_frames_lost"] == 0, comp
+    edge, ctrl = result.nodes["edge"]["counters"], result.nodes["controller"]["counters"]
+    channels = comp["channels"]
+    assert channels["state"]["recorded"] == edge["uplink_msgs"] - edge.get("uplink_pending", 0) > 0, (channels, edge)
+    assert channels["downlink"]["recorded"] == ctrl["setpoints_sent"] == edge["downlink_applied"] > 0, (channels, ctrl)
+    assert channels["can_command"]["recorded"] == edge["commands_sent"] + edge.get("arrival_commands", 0) > 0, channels
+    assert minus_one_figures(summary) == []
 
     # closed loop (edge): every setpoint crossed the veth twice
     latency_us = summary["timing"]["latency_us"]
@@ -63,3 +84,7 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
           f"{one_way_us.min():.0f} median {float(np.median(one_way_us)):.0f} (n={len(one_way_us)})")
     assert len(one_way_us) >= tx["downlink_msgs"], one_way_us   # a re-answered duplicate state counts twice
     assert one_way_us.min() >= DELAY_MS * US_PER_MS, one_way_us
+
+    # the same session in one `sea-hil run --lockstep` on the virtual bus: every deterministic field equal
+    reference = lockstep_run_summary(config, tmp_path / "run")
+    assert deterministic(summary) == deterministic(reference)
