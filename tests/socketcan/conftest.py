@@ -10,7 +10,8 @@ host without CAN support run them through User Mode Linux: ``scripts/with-vcan -
 - ``start_candump(*args)`` -> a running ``candump -L`` (:class:`CanDump`), ended at teardown;
 - ``netns(prefix)`` -> name of a fresh network namespace, deleted at teardown (root only);
 - ``require_netem`` -> skips unless a netem qdisc can be added in a fresh namespace;
-- ``veth_namespaces`` -> (server, client) namespaces joined by a veth pair (``netns_helpers.veth_pair``).
+- ``veth_namespaces`` -> (server, client) namespaces joined by a veth pair (``netns_helpers.veth_pair``);
+- ``gait_slice`` -> the lockstep node sessions' config and its ``sea-hil run --lockstep`` summary, made once.
 """
 from __future__ import annotations
 
@@ -24,6 +25,7 @@ from pathlib import Path
 import can
 import pytest
 from netns_helpers import run, veth_pair
+from session_nodes import SLICE_S, GaitSlice, lockstep_run_summary, write_gait_slice_config
 from socketcan_helpers import PROCESS_TIMEOUT_S, CanDump, interface_is_up
 
 HERE = Path(__file__).resolve().parent
@@ -137,3 +139,12 @@ def veth_namespaces(require_netem: None, netns: Callable[[str], str]) -> tuple[s
     """(server namespace, client namespace) joined by veth ``v0``/``v1`` with addresses and links up."""
     del require_netem
     return veth_pair(netns)
+
+
+@pytest.fixture(scope="session")
+def gait_slice(tmp_path_factory: pytest.TempPathFactory) -> GaitSlice:
+    """The config the lockstep node sessions share and the summary `sea-hil run --lockstep` writes for it: each
+    session's summary must equal it in every deterministic field; one reference run serves them all."""
+    directory = tmp_path_factory.mktemp("gait-slice")
+    config = write_gait_slice_config(directory, SLICE_S)
+    return GaitSlice(config, SLICE_S, lockstep_run_summary(config, directory / "run"))

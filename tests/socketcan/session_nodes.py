@@ -24,6 +24,7 @@ SAMPLE_STEP_S = 0.005        # CSV resolution of the gait slice (spline-interpol
 STOP_TIMEOUT_S = 30.0
 CONNECT_TIMEOUT_S = 60.0
 RUN_TIMEOUT_S = 400.0
+SLICE_S = 1.0                # the lockstep node sessions' gait slice (tests/socketcan/conftest.py: gait_slice)
 
 
 def sea_hil_cmd(*args: str, netns: str | None = None) -> list[str]:
@@ -241,3 +242,13 @@ def lockstep_run_summary(config: Path, out: Path, controller: str = "et") -> dic
                             check=False)
     assert result.returncode == 0, result.stderr[-3000:]
     return dict(json.loads((out / "summary.json").read_text()))
+
+
+@dataclass(frozen=True)
+class GaitSlice:
+    """The lockstep node sessions' shared config (a ``duration_s`` slice of the gait, paper scheme) and the summary
+    ``sea-hil run --lockstep`` writes for it (``reference``): run once per guest session (≈ 60 s in the guest)."""
+
+    config: Path
+    duration_s: float
+    reference: dict[str, Any]

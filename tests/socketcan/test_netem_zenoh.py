@@ -20,17 +20,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 from netns_helpers import CLIENT_ADDR, SERVER_ADDR, run
-from session_nodes import (
-    NodeSession,
-    lockstep_run_summary,
-    run_node_session,
-    write_client_config,
-    write_gait_slice_config,
-)
+from session_nodes import GaitSlice, NodeSession, run_node_session, write_client_config
 from summary_compare import deterministic, minus_one_figures
 
 DELAY_MS = 25
-DURATION_S = 1.0
 EDGE_ADDR, CONTROLLER_ADDR = SERVER_ADDR, CLIENT_ADDR
 US_PER_MS = 1000
 
@@ -47,11 +40,12 @@ def delayed_namespaces(veth_namespaces: tuple[str, str]) -> tuple[str, str]:
     return bus_ns, ctl_ns
 
 
-def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces: tuple[str, str]) -> None:
+def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces: tuple[str, str],
+                                             gait_slice: GaitSlice) -> None:
     from sea_hil.protocol.zsession import free_tcp_port
     from sea_hil.report.writer import state_to_setpoint_latency_us
     bus_ns, ctl_ns = delayed_namespaces
-    config = write_gait_slice_config(tmp_path, DURATION_S)
+    config = gait_slice.config
     session = NodeSession(config=config,
                           client_config=write_client_config(tmp_path), can="socketcan:vcan0",
                           listen_host=EDGE_ADDR, port=free_tcp_port(), bus_netns=bus_ns, controller_netns=ctl_ns)
@@ -59,7 +53,7 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     summary = result.summary
 
     # the session completed across the delayed link
-    assert summary["duration_s"] == pytest.approx(DURATION_S, abs=0.01)
+    assert summary["duration_s"] == pytest.approx(gait_slice.duration_s, abs=0.01)
     tx = summary["transmissions"]
     assert 0 < tx["downlink_msgs"] < summary["edge"]["uplink_msgs"], (tx, summary["edge"])
     assert summary["timing"]["latency_samples"] == tx["downlink_msgs"], summary
@@ -86,5 +80,4 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     assert one_way_us.min() >= DELAY_MS * US_PER_MS, one_way_us
 
     # the same session in one `sea-hil run --lockstep` on the virtual bus: every deterministic field equal
-    reference = lockstep_run_summary(config, tmp_path / "run")
-    assert deterministic(summary) == deterministic(reference)
+    assert deterministic(summary) == deterministic(gait_slice.reference)

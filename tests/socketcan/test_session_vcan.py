@@ -14,17 +14,10 @@ from collections.abc import Callable
 from pathlib import Path
 
 import pytest
-from session_nodes import (
-    NodeSession,
-    lockstep_run_summary,
-    run_node_session,
-    write_client_config,
-    write_gait_slice_config,
-)
+from session_nodes import GaitSlice, NodeSession, run_node_session, write_client_config
 from socketcan_helpers import CanDump
 from summary_compare import deterministic
 
-DURATION_S = 1.0
 STATE_PERIOD_S = 0.01           # default controller.sample_period_s
 
 
@@ -35,10 +28,10 @@ def voltage_cmd_id(node_id: int) -> int:
     return int(SeaCodec().encode(VoltageCmd(node_id, (0.0, 0.0), 0)).arbitration_id)
 
 
-def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_channel: str,
+def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_channel: str, gait_slice: GaitSlice,
                                                            start_candump: Callable[..., CanDump]) -> None:
     from sea_hil.protocol.zsession import free_tcp_port
-    config = write_gait_slice_config(tmp_path, DURATION_S)
+    config = gait_slice.config
     cmd_id = voltage_cmd_id(1)
     dump = start_candump("-n", "5", filters=f"{cmd_id:03X}:7FF")
     out = tmp_path / "vcan"
@@ -49,8 +42,8 @@ def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_
     summary, data = result.summary, result.data
 
     # the session completed the slice, and ET transmitted less than it received
-    samples = int(round(DURATION_S / STATE_PERIOD_S))
-    assert summary["duration_s"] == pytest.approx(DURATION_S, abs=STATE_PERIOD_S)
+    samples = int(round(gait_slice.duration_s / STATE_PERIOD_S))
+    assert summary["duration_s"] == pytest.approx(gait_slice.duration_s, abs=STATE_PERIOD_S)
     tx = summary["transmissions"]
     published = summary["edge"]["uplink_msgs"]      # the edge's own count (the recorder may join a state late)
     assert samples <= published <= samples + 2, summary["edge"]
@@ -67,7 +60,7 @@ def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_
     # frames really crossed vcan0. The lockstep plant (its own process) advances a sample only on the edge's
     # VOLTAGE_CMD answering it: every tick is a command that crossed vcan0.
     fb_samples = summary["edge"]["feedback_samples"]
-    assert fb_samples >= DURATION_S * 1000, summary["edge"]
+    assert fb_samples >= gait_slice.duration_s * 1000, summary["edge"]
     assert result.plant_report.startswith("ticks "), result.plant_report
     assert int(result.plant_report.split()[1]) >= fb_samples - 1, result.plant_report
     # can-utils' candump saw the edge's commands on vcan0
@@ -88,5 +81,4 @@ def test_multiprocess_session_on_vcan0_matches_virtual_bus(tmp_path: Path, vcan_
 
     # lockstep is deterministic: the single-process run on the virtual bus has the same summary in every
     # deterministic field (tracking, setpoints, events, the edge's counters, completeness, verdict)
-    reference = lockstep_run_summary(config, tmp_path / "virtual")
-    assert deterministic(summary) == deterministic(reference)
+    assert deterministic(summary) == deterministic(gait_slice.reference)
