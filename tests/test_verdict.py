@@ -1,4 +1,4 @@
-"""A verdict on every run (issue 29 parts 1, 2 and 5, sea_hil/report/verdict.py): real sessions driven into each
+"""A verdict on every run (issue 29 parts 1, 2 and 5, sea_hil/verdict/rules.py): real sessions driven into each
 state the verdict judges -- a drive fault (the issue's start pose, forced past the input check), a watchdog trip and
 driver tick misses (real time: a downlink outage from a link trace, and a driver stalled at the clock level), late
 setpoints, envelope rejections (lockstep) -- each gives its reason with its figure and threshold, `--strict` exits 3,
@@ -17,13 +17,18 @@ from test_completeness import two_limbs
 from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.config.verdict import VerdictConfig
+from sea_hil.live.verdict import SUMMARY_ONLY
+from sea_hil.live.view import LiveView
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT
 from sea_hil.recorder.reader import read_session
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.report.console import end_of_run_rows
-from sea_hil.report.session_summary import session_summary, split_edge_stats
+from sea_hil.report.limbs import META_FLOOR
+from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
-from sea_hil.report.verdict import COUNTER_RULES, verdict
 from sea_hil.session.run import RunOptions, run_session
+from sea_hil.verdict.edge_blocks import split_edge_stats
+from sea_hil.verdict.rules import COUNTER_RULES, verdict, verdict_config_of
 
 pytestmark = pytest.mark.slow
 # a 2 s gait: the drive's soft limits (derived for the 10 s gait) are off unless a test needs them
@@ -48,6 +53,30 @@ def _session(tmp: Path, name: str, overrides: dict[str, Any], lockstep: bool = T
 
 def _codes(s: dict[str, Any]) -> dict[str, dict[str, Any]]:
     return {r["code"]: r for r in s["verdict"]["reasons"]}
+
+
+def _live_final(mcap: Path, lockstep: bool) -> dict[str, Any]:
+    """The live view's final `/live/verdict` of a recording replayed through it in log-time order (what the recorder
+    child feeds it), under the recording's own `[verdict]` and host floor."""
+    data = read_session(mcap)
+    floor = {k: float(v) for k, v in data.metadata.get(META_FLOOR, {}).items()} or None
+    view = LiveView(bitrate_bps=1_000_000, verdict=verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT)),
+                    lockstep=lockstep, floor=floor)
+    msgs = sorted(((m.log_time_ns, i, topic, m.payload) for topic, ms in data.messages.items()
+                   for i, m in enumerate(ms)), key=lambda x: (x[0], x[1]))
+    for t_ns, _, topic, payload in msgs:
+        view.feed(topic, t_ns, payload)
+    (final,) = [m.message for m in view.finish() if m.topic == "/live/verdict"]
+    return final
+
+
+def _assert_live_agrees(s: dict[str, Any], mcap: Path) -> None:
+    """The live view's final verdict: summary.json's, but for the reasons only summary.json judges."""
+    live = _live_final(mcap, s["lockstep"])
+    reasons = [r for r in s["verdict"]["reasons"] if r["code"] not in SUMMARY_ONLY]
+    assert live["final"] and live["codes"] == [r["code"] for r in reasons]
+    assert live["reasons"] == [r["message"] for r in reasons]
+    assert live["status"] == s["verdict"]["status"] or {r["code"] for r in s["verdict"]["reasons"]} & set(SUMMARY_ONLY)
 
 
 # ---- the issue's case: forced past the input check, the drive faults, the verdict says so -------------------------
@@ -79,6 +108,7 @@ def test_forced_start_pose_is_invalid_with_the_fault_time_and_flags(forced: tupl
     assert table.index("verdict") < table.index("mode")   # the verdict first, then every reason
     assert "INVALID" in table and "drive_fault" in table and "POSITION_LIMIT" in table
     assert "warnings" in table and "warnings                   │ none" not in table
+    _assert_live_agrees({**s, "lockstep": True}, out / "session.mcap")   # the live view judges it so too
 
 
 def test_the_latch_is_explained_once_in_the_recording(forced: tuple[Path, int, str]) -> None:
@@ -146,6 +176,7 @@ def test_envelope_rejections_degrade(tmp_path: Path) -> None:
     r = _codes(s)["envelope_rejections"]
     assert r["value"] == s["edge"]["setpoints_out_of_envelope"] > 0
     assert "safety.setpoint" in r["message"]
+    _assert_live_agrees(s, tmp_path / "envelope" / "session.mcap")
 
 
 def test_a_clean_lockstep_session_is_ok(tmp_path: Path) -> None:
@@ -215,6 +246,10 @@ def test_setpoints_lost_beyond_the_link_model_degrade(realtime: dict[str, Any]) 
     r = _codes(s)["lost_setpoints"]
     assert r["value"] == s["edge"]["seq_lost"] > 0 and r["threshold"] == 0
     assert s["edge"]["downlink_dropped"] > 0   # the model's own drops (the outage) are not in seq_lost
+
+
+def test_the_live_view_judges_the_real_time_session_as_summary_json(realtime: dict[str, Any]) -> None:
+    _assert_live_agrees(realtime["summary"], realtime["out"] / "session.mcap")
 
 
 def test_late_samples_degrade(realtime: dict[str, Any]) -> None:
