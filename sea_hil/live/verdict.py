@@ -9,8 +9,8 @@ counters are judged at the end, the latches as they happen; late, lost and stale
 envelope rejections, saturated steps, every rejection class, the cia402 SYNC misses against the host floor the
 parent measured), each limb's edge on its own, under the session's `[verdict]` thresholds and lockstep flag (the
 parent's `LiveSpec`). What only summary.json judges: the recording (the recorder's own losses, its completeness
-against the nodes' counters) and the driver's tick misses (the recorder's final metadata). Pure: messages in,
-verdict out.
+against the nodes' counters), the driver's tick misses (the recorder's final metadata) and a cia402 session's drive
+latches (its statusword TPDOs: the view decodes no CANopen). Pure: messages in, verdict out.
 """
 from __future__ import annotations
 
