@@ -257,3 +257,13 @@ def test_without_heartbeats_the_edges_latch_count_judges():
     assert r["code"] == "estop" and r["t_s"] == pytest.approx(0.6)
     v.feed("/stats", 4, _edge_stats(**{**latch, "drive_latch_1_t_ns": 2_100 * MS}))   # after the last sample
     assert v.verdict.judge()["status"] == "ok"
+
+
+def test_a_stats_record_the_verdict_cannot_read_is_shown_counted_and_not_judged():
+    v = LiveView(bitrate_bps=1_000_000)
+    v.feed("/stats", 0, _edge_stats(seq_lost=2))
+    out = v.feed("/stats", MS, _edge_stats(seq_lost=0, drive_latches=1))   # a latch count without its details
+    out += v.feed("/stats", MS, {"node": "controller", "final": False, "t_ns": 0, "state_seq_lost": "many"})
+    assert [m.topic for m in out] == ["/live/node_stats"] * 2 and v.ignored == 2
+    assert [r["code"] for r in v.verdict.judge()["reasons"]] == ["lost_setpoints"]   # the last readable record
+    assert [m.topic for m in v.finish()] == ["/live/link", "/live/bus", "/live/verdict", "/live/events"]

@@ -76,10 +76,16 @@ class LiveVerdict:
             self._sample_ns.clear()
 
     def on_stats(self, payload: Mapping[str, Any]) -> None:
+        """A node's stats record; one the verdict cannot read (a latch count without its details, a non-numeric
+        counter it needs) raises KeyError, TypeError or ValueError here, before it is kept, so every later verdict
+        still judges (`LiveView` counts it in `ignored`)."""
         node = payload.get("node", "edge")
         if node == "edge":
-            self._edges[int(payload.get("node_id", 1))] = dict(payload)
+            record = dict(payload)
+            latches_of_stats(record)   # KeyError / ValueError / TypeError on a malformed latch block
+            self._edges[int(record.get("node_id", 1))] = record
         elif node == "controller":
+            uplink_losses(dict(payload), {})   # ValueError / TypeError on a non-numeric state_seq_lost
             self._controller = dict(payload)
 
     # -- the verdict ---------------------------------------------------------------------------------------------

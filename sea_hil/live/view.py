@@ -142,7 +142,10 @@ class LiveView:
         return [LiveMessage("/live/driver", t_ns, msg), *(LiveMessage("/live/events", t_ns, m) for m in logs)]
 
     def _stats(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
-        self.verdict.on_stats(p)
+        try:
+            self.verdict.on_stats(p)
+        except (KeyError, TypeError, ValueError):   # a record the verdict cannot read: shown, counted, not judged
+            self.ignored += 1
         flat = {k: v for k, v in p.items() if isinstance(v, (int, float, bool))}
         return [LiveMessage("/live/node_stats", t_ns, flat)]
 
