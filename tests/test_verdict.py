@@ -23,7 +23,7 @@ from sea_hil.live.verdict import SUMMARY_ONLY
 from sea_hil.live.view import LiveView
 from sea_hil.protocol.can_frames import EStop
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT
-from sea_hil.recorder.reader import read_session
+from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.report.console import end_of_run_rows
 from sea_hil.report.limbs import META_FLOOR
@@ -58,13 +58,13 @@ def _codes(s: dict[str, Any]) -> dict[str, dict[str, Any]]:
     return {r["code"]: r for r in s["verdict"]["reasons"]}
 
 
-def _live_final(mcap: Path, lockstep: bool) -> dict[str, Any]:
+def _live_final(data: SessionData, lockstep: bool) -> dict[str, Any]:
     """The live view's final `/live/verdict` of a recording replayed through it in log-time order (what the recorder
-    child feeds it), under the recording's own `[verdict]` and host floor."""
-    data = read_session(mcap)
+    child feeds it), under the recording's own `[verdict]`, host floor and limbs (what `sea-hil run` hands it)."""
     floor = {k: float(v) for k, v in data.metadata.get(META_FLOOR, {}).items()} or None
+    limbs = {int(v.split()[0]): name for name, v in data.metadata.get("sea-hil.limbs", {}).items()}
     view = LiveView(bitrate_bps=1_000_000, verdict=verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT)),
-                    lockstep=lockstep, floor=floor)
+                    lockstep=lockstep, floor=floor, limbs=limbs)
     msgs = sorted(((m.log_time_ns, i, topic, m.payload) for topic, ms in data.messages.items()
                    for i, m in enumerate(ms)), key=lambda x: (x[0], x[1]))
     for t_ns, _, topic, payload in msgs:
@@ -73,9 +73,9 @@ def _live_final(mcap: Path, lockstep: bool) -> dict[str, Any]:
     return final
 
 
-def _assert_live_agrees(s: dict[str, Any], mcap: Path) -> None:
+def _assert_live_agrees(s: dict[str, Any], mcap: Path | SessionData) -> None:
     """The live view's final verdict: summary.json's, but for the reasons only summary.json judges."""
-    live = _live_final(mcap, s["lockstep"])
+    live = _live_final(read_session(mcap) if isinstance(mcap, Path) else mcap, s.get("lockstep", True))
     reasons = [r for r in s["verdict"]["reasons"] if r["code"] not in SUMMARY_ONLY]
     assert live["final"] and live["codes"] == [r["code"] for r in reasons]
     assert live["reasons"] == [r["message"] for r in reasons]
@@ -368,6 +368,7 @@ def test_every_limbs_edge_counters_are_judged() -> None:
     assert reasons[("lost_setpoints", "limb2")]["message"].startswith("limb2: ")
     one = session_summary(two_limbs(edge1={"seq_lost": 1}), "et")   # limb1's own counter: named too
     assert [(r["code"], r.get("limb")) for r in one["verdict"]["reasons"]] == [("lost_setpoints", "limb1")]
+    _assert_live_agrees(s, two_limbs(edge2={"seq_lost": 3, "setpoints_out_of_envelope": 2}))   # live: the same
 
 
 @pytest.mark.parametrize("table,key", [("late_setpoints_max = -1", "verdict.late_setpoints_max"),

@@ -33,8 +33,11 @@ class LiveVerdict:
     """The running verdict (see the module docstring). One owner (not thread-safe)."""
 
     def __init__(self, cfg: VerdictConfig | None = None, *, lockstep: bool = False,
-                 floor: Mapping[str, float] | None = None) -> None:
+                 floor: Mapping[str, float] | None = None, limbs: Mapping[int, str] | None = None) -> None:
+        """`limbs`: node id -> limb name, in the session's limb order (summary.json's `sea-hil.limbs`), so reasons
+        name and order the limbs as summary.json does; an edge not in it is named by its stats key, else node id."""
         self.cfg = cfg or VerdictConfig()
+        self.limbs = dict(limbs or {})
         self.lockstep = lockstep
         self.floor = dict(floor) if floor else None
         self.latches = LatchLog()
@@ -107,7 +110,8 @@ class LiveVerdict:
 
     def summary(self) -> dict[str, Any]:
         """The summary.json blocks the live view can fill (the rest absent: the rules give no reason for them)."""
-        edges = [self._edges[n] for n in sorted(self._edges)]
+        order = [n for n in self.limbs if n in self._edges] + sorted(n for n in self._edges if n not in self.limbs)
+        edges = [self._edges[n] for n in order]
         first = edges[0] if edges else {}
         det, timing = split_edge_stats(first)
         rejected, rejected_timing = rejections_blocks(first)
@@ -117,12 +121,19 @@ class LiveVerdict:
         if self.floor is not None:
             out["timing"]["driver"] = {"floor": self.floor}
         if len(edges) > 1:
-            out["limbs"] = [{"limb": _limb_name(e), "edge": split_edge_stats(e)[0],
+            out["limbs"] = [{"limb": self._limb_name(e), "edge": split_edge_stats(e)[0],
                              "rejections": rejections_blocks(e)[0]} for e in edges]
         losses = uplink_losses(self._controller, first)
         if losses is not None:
             out["link_losses"] = losses
         return out
+
+    def _limb_name(self, stats: Mapping[str, Any]) -> str:
+        node_id = int(stats.get("node_id", 1))
+        if node_id in self.limbs:
+            return self.limbs[node_id]
+        key = stats.get("key")   # `<prefix>/<limb>/stats` (a record the recorder took from Zenoh)
+        return key.split("/")[-2] if isinstance(key, str) and key.count("/") >= 2 else f"node {node_id}"
 
     def judge(self) -> dict[str, Any]:
         """summary.json's `verdict` of what has been seen so far."""
@@ -137,11 +148,3 @@ class LiveVerdict:
         msg = {"status": v["status"], "codes": [str(r["code"]) for r in reasons],
                "reasons": [str(r["message"]) for r in reasons], "final": final}
         return msg, _LEVEL[v["status"]] if changed else None
-
-
-def _limb_name(stats: Mapping[str, Any]) -> str:
-    """A limb's name from its stats key (`<prefix>/<limb>/stats`), else its node id."""
-    key = stats.get("key")
-    if isinstance(key, str) and key.count("/") >= 2:
-        return key.split("/")[-2]
-    return f"node {stats.get('node_id', 1)}"

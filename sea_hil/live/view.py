@@ -43,7 +43,7 @@ class LiveView:
 
     def __init__(self, *, bitrate_bps: int, period_s: float = 0.1, window_s: float = 1.0,
                  verdict: VerdictConfig | None = None, lockstep: bool = False,
-                 floor: dict[str, float] | None = None) -> None:
+                 floor: dict[str, float] | None = None, limbs: dict[int, str] | None = None) -> None:
         self.period_ns = int(period_s * NS_PER_S)
         self.window_s = window_s
         self.up = StreamStats("state", "up", window_s=window_s)
@@ -57,7 +57,7 @@ class LiveView:
         self._codec = SeaCodec(fd=None)
         self._heartbeat_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
         self._driver = DriverWatch()
-        self.verdict = LiveVerdict(verdict, lockstep=lockstep, floor=floor)
+        self.verdict = LiveVerdict(verdict, lockstep=lockstep, floor=floor, limbs=limbs)
         self._now_ns: int | None = None
         self._next_stats_ns: int | None = None
 

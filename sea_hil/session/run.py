@@ -172,7 +172,8 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     time_base: TimeBase = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
                           live=LiveSpec(live=cfg.live, bitrate_bps=cfg.can.bitrate_bps, verdict=cfg.verdict,
-                                        lockstep=opts.lockstep, floor=_floor_figures(floor))
+                                        lockstep=opts.lockstep, floor=_floor_figures(floor),
+                                        limbs={limb.node_id: limb.name for limb in nodes.limbs})
                           if cfg.live.enabled else None)
     b.callback(rec.close)   # idempotent: closes the file if building the nodes failed
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
