@@ -16,6 +16,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any
 
+from sea_hil.fault_explain import clear_policy, flag_names
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
 
 SAFE = (DriverState.FAULT, DriverState.ESTOP)
@@ -78,3 +79,11 @@ def latches_of_stats(stats: dict[str, Any]) -> tuple[list[Latch], int]:
                          ErrorFlags(int(stats[p + "flags"])), int(stats[p + "until_t_ns"]),
                          bool(stats[p + "cleared"])))
     return out, int(stats.get(ORIGIN_KEY, 0))
+
+
+def latch_entry(la: Latch, t0_ns: int, after: bool, source: str) -> dict[str, Any]:
+    """summary.json's `drive_faults` entry of a latch (docs/session.md): `t_s` since `t0_ns`, `after_session`
+    `after`, `source` "can" (heartbeats) or "edge" (its stats record); the live view's running verdict too."""
+    return {"node_id": la.node_id, "t_s": (la.t_ns - t0_ns) * 1e-9, "state": la.state.name,
+            "flags": flag_names(la.flags), "in_fault_s": (la.until_t_ns - la.t_ns) * 1e-9, "cleared": la.cleared,
+            "clear_policy": clear_policy(la.state, la.flags), "after_session": after, "source": source}

@@ -6,7 +6,8 @@ import json
 from pathlib import Path
 
 from sea_hil.cli import main
-from sea_hil.report.console import ProgressSample, SessionProgress, end_of_run_rows, field, print_end_of_run
+from sea_hil.report.console import ProgressSample, SessionProgress, end_of_run_rows, print_end_of_run
+from sea_hil.verdict.summary_fields import field
 
 RUN = {"controller": "et", "lockstep": False, "inner": "edge", "duration_s": 10.0,
        "lead_in": {"duration_s": 0.5}, "transmissions": {"uplink_msgs": 1001, "downlink_msgs": 250,

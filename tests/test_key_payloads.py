@@ -32,8 +32,8 @@ from sea_hil.protocol.payloads import (
 )
 from sea_hil.recorder.zenoh_tap import ZenohTap
 from sea_hil.report.console import end_of_run_rows
-from sea_hil.report.session_summary import REJECTION_CLASSES, TIMING_REJECTION_CLASSES, rejections_blocks
 from sea_hil.session.builder import SessionBuilder
+from sea_hil.verdict.edge_blocks import REJECTION_CLASSES, TIMING_REJECTION_CLASSES, rejections_blocks
 
 MS = 1_000_000
 TH = (0.05, 0.28)

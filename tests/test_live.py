@@ -15,9 +15,11 @@ import pytest
 
 from bench.foxglove_ws_client import receive
 from sea_hil.live.channels import CHANNELS, END_MESSAGE, LOG_LEVELS
+from sea_hil.live.verdict import SUMMARY_ONLY
 from sea_hil.protocol.can_codec import load_database
 from sea_hil.protocol.can_frames import CMD_MASK
 from sea_hil.recorder.reader import read_session
+from sea_hil.report.session_summary import session_summary
 from sea_hil.runtime.processes import end_process
 
 pytestmark = pytest.mark.slow
@@ -176,3 +178,19 @@ def test_controller_serves_the_edges_traffic_through_its_record_child(tmp_path):
     assert link["up_msgs"] >= len(got.messages["/live/tracking"])   # the edge's states, forwarded by the controller
     assert link["down_msgs"] == len(got.messages["/live/setpoint"]) > 0
     assert "/live/driver" not in got.messages   # no CAN bus in the controller's view
+
+
+def test_the_final_verdict_is_summary_jsons(watched):
+    """The running verdict's last message (`final`) says what summary.json says of the same session (the reasons
+    summary.json alone judges, from the recording itself, aside: sea_hil/live/verdict.py)."""
+    got, rec = watched
+    verdicts = [m for _, m in got.messages["/live/verdict"]]
+    assert verdicts and verdicts[-1]["final"] and not any(m["final"] for m in verdicts[:-1])
+    judged = session_summary(rec, "et")["verdict"]
+    reasons = [r for r in judged["reasons"] if r["code"] not in SUMMARY_ONLY]
+    assert verdicts[-1]["status"] == judged["status"]
+    assert verdicts[-1]["codes"] == [r["code"] for r in reasons]
+    assert verdicts[-1]["reasons"] == [r["message"] for r in reasons]
+    changes = [m for _, m in got.messages["/live/events"] if m["name"] == "verdict"]
+    statuses = [m["status"] for m in verdicts]
+    assert len(changes) == sum(a != b for a, b in zip(["ok", *statuses], statuses, strict=False))

@@ -12,12 +12,14 @@ import pytest
 
 from sea_hil.config.live import LiveConfig
 from sea_hil.config.loader import load_config
+from sea_hil.config.verdict import VerdictConfig
 from sea_hil.live import layout
 from sea_hil.live.channels import CHANNELS, LOG_LEVELS
 from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.live.view import LiveView
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+from sea_hil.verdict.rules import verdict
 
 REPO = Path(__file__).resolve().parent.parent
 MS = 1_000_000
@@ -68,7 +70,7 @@ def test_driver_state_changes_and_faults_are_logged():
                                         (DriverState.FAULT, ErrorFlags.WATCHDOG | ErrorFlags.OVERRUN)]):
         out = v.feed("/can/raw", i * 100 * MS, _heartbeat(state, flags, i))
         assert [m.topic for m in out][0] == "/live/driver"
-        logs += [m.message for m in out if m.topic == "/live/events"]
+        logs += [m.message for m in out if m.topic == "/live/events" and m.message["name"] != "verdict"]
     assert [(m["level"], m["message"]) for m in logs] == [
         (LOG_LEVELS["INFO"], "state INIT"), (LOG_LEVELS["INFO"], "state RUNNING (was INIT)"),
         (LOG_LEVELS["ERROR"], "state FAULT (was RUNNING)"),
@@ -183,3 +185,85 @@ def test_close_sends_the_end_line_and_waits_for_the_clients_to_leave():
     assert last["message"] == END_MESSAGE and last["name"] == "sea-hil"
     closer.join(timeout=60)
     assert not closer.is_alive()   # returned once the client had gone, not after linger_s
+
+
+# ---- the running verdict (sea_hil/live/verdict.py): summary.json's rules on what the view has seen ----------------
+def _verdicts(out) -> list[dict]:
+    return [m.message for m in out if m.topic == "/live/verdict"]
+
+
+def _edge_stats(**counters) -> dict:
+    return {"node": "edge", "node_id": 1, "final": False, "t_ns": 0, "key": "sea/limb1/stats", **counters}
+
+
+def test_a_latch_turns_the_verdict_invalid_once_a_later_sample_is_measured():
+    """The heartbeat's latch counts (as in summary.json) once a measured sample follows it: a latch after the last
+    measured sample is the designed safe state at the end of a session, not judged."""
+    v = LiveView(bitrate_bps=1_000_000, period_s=0.1)
+    out = v.feed("/can/raw", 0, _heartbeat(DriverState.RUNNING))
+    out += v.feed("/tracking", 50 * MS, {"t_s": 0.0, "state_seq": 1})
+    out += v.feed("/can/raw", 100 * MS, _heartbeat(DriverState.FAULT, ErrorFlags.POSITION_LIMIT, 1))
+    out += v.feed("/can/raw", 150 * MS, {"can_id": 35, "dlc": 8, "data_hex": "00" * 8, "is_extended": False})
+    assert [m["status"] for m in _verdicts(out)] == ["ok"]   # at 150 ms: the latch is after the last sample
+    assert v.verdict.summary()["drive_faults"][0]["after_session"] is True
+    out = v.feed("/tracking", 200 * MS, {"t_s": 0.15, "state_seq": 2})
+    out += v.feed("/can/raw", 260 * MS, {"can_id": 35, "dlc": 8, "data_hex": "00" * 8, "is_extended": False})
+    (msg,) = _verdicts(out)
+    assert msg["status"] == "invalid" and msg["codes"] == ["drive_fault"] and msg["final"] is False
+    assert "drive 1 latched FAULT POSITION_LIMIT at 0.100 s" in msg["reasons"][0]
+    logs = [m.message for m in out if m.topic == "/live/events" and m.message["name"] == "verdict"]
+    assert [(m["level"], m["message"][:16]) for m in logs] == [(LOG_LEVELS["ERROR"], "verdict invalid:")]
+    (final,) = _verdicts(v.finish())
+    assert final["final"] is True and final["status"] == "invalid"
+    assert [m for m in v.finish() if m.topic == "/live/events"] == []   # no change: no second line
+
+
+def test_the_edges_latest_counters_are_judged_under_the_sessions_thresholds():
+    cfg = VerdictConfig(envelope_rejections_max=2)
+    v = LiveView(bitrate_bps=1_000_000, verdict=cfg, lockstep=True)
+    v.feed("/stats", 0, _edge_stats(setpoints_out_of_envelope=2, stale_setpoints=50))
+    assert v.verdict.judge()["status"] == "ok"   # 2 is within 2; stale setpoints: real time only
+    v.feed("/stats", MS, _edge_stats(setpoints_out_of_envelope=3, stale_setpoints=50, uplink_dropped=4))
+    v.feed("/stats", 2 * MS, {"node": "controller", "final": False, "t_ns": 0, "state_seq_lost": 9})
+    got = v.verdict.judge()
+    assert [r["code"] for r in got["reasons"]] == ["lost_states", "envelope_rejections"]
+    assert [r["value"] for r in got["reasons"]] == [5, 3]   # 9 gaps - 4 of the model's own
+    assert got == verdict(v.verdict.summary(), cfg)
+    realtime = LiveView(bitrate_bps=1_000_000, lockstep=False)
+    realtime.feed("/stats", 0, _edge_stats(stale_setpoints=50))
+    assert [r["code"] for r in realtime.verdict.judge()["reasons"]] == ["stale_setpoints"]
+
+
+def test_each_limbs_edge_is_judged_on_its_own():
+    v = LiveView(bitrate_bps=1_000_000)
+    v.feed("/stats", 0, _edge_stats(seq_lost=0))
+    v.feed("/stats", 0, {**_edge_stats(seq_lost=3), "node_id": 2, "key": "sea/limb2/stats"})
+    (r,) = v.verdict.judge()["reasons"]
+    assert r["code"] == "lost_setpoints" and r["limb"] == "limb2" and r["message"].startswith("limb2: ")
+
+
+def test_without_heartbeats_the_edges_latch_count_judges():
+    """No heartbeat seen (a node's own live view on a `virtual:` bus, a cia402 bus): the latches the edge counted in
+    its /stats record, as summary.json's `drive_faults` takes them from a recording without a CAN tap."""
+    v = LiveView(bitrate_bps=1_000_000)
+    v.feed("/zenoh/state", 0, {"seq": 5, "sample_t_ns": 1_000 * MS, "payload_bytes": 96})
+    v.feed("/tracking", 1, {"t_s": 0.0, "state_seq": 5})
+    v.feed("/tracking", 2, {"t_s": 1.0, "state_seq": 6})
+    latch = {"drive_latches": 1, "drive_latch_origin_t_ns": 900 * MS, "drive_latch_1_t_ns": 1_500 * MS,
+             "drive_latch_1_until_t_ns": 1_600 * MS, "drive_latch_1_state": int(DriverState.ESTOP),
+             "drive_latch_1_flags": int(ErrorFlags.ESTOP), "drive_latch_1_cleared": 0}
+    v.feed("/stats", 3, _edge_stats(**latch))
+    (r,) = v.verdict.judge()["reasons"]
+    assert r["code"] == "estop" and r["t_s"] == pytest.approx(0.6)
+    v.feed("/stats", 4, _edge_stats(**{**latch, "drive_latch_1_t_ns": 2_100 * MS}))   # after the last sample
+    assert v.verdict.judge()["status"] == "ok"
+
+
+def test_a_stats_record_the_verdict_cannot_read_is_shown_counted_and_not_judged():
+    v = LiveView(bitrate_bps=1_000_000)
+    v.feed("/stats", 0, _edge_stats(seq_lost=2))
+    out = v.feed("/stats", MS, _edge_stats(seq_lost=0, drive_latches=1))   # a latch count without its details
+    out += v.feed("/stats", MS, {"node": "controller", "final": False, "t_ns": 0, "state_seq_lost": "many"})
+    assert [m.topic for m in out] == ["/live/node_stats"] * 2 and v.ignored == 2
+    assert [r["code"] for r in v.verdict.judge()["reasons"]] == ["lost_setpoints"]   # the last readable record
+    assert [m.topic for m in v.finish()] == ["/live/link", "/live/bus", "/live/verdict", "/live/events"]

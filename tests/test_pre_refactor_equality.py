@@ -30,9 +30,9 @@ import pytest
 from sea_hil.cli import main
 from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.protocol.payloads import PAYLOAD_SIZE, MsgType
-from sea_hil.report.session_summary import rejections_blocks
 from sea_hil.report.summary import deterministic
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
+from sea_hil.verdict.edge_blocks import rejections_blocks
 
 pytestmark = pytest.mark.slow
 FIXTURES = Path(__file__).resolve().parent / "fixtures" / "pre_refactor"

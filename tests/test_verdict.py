@@ -1,8 +1,10 @@
-"""A verdict on every run (issue 29 parts 1, 2 and 5, sea_hil/report/verdict.py): real sessions driven into each
-state the verdict judges -- a drive fault (the issue's start pose, forced past the input check), a watchdog trip and
-driver tick misses (real time: a downlink outage from a link trace, and a driver stalled at the clock level), late
-setpoints, envelope rejections (lockstep) -- each gives its reason with its figure and threshold, `--strict` exits 3,
-the end-of-run table and `sea-hil report` show it, and a clean session is `ok`."""
+"""A verdict on every run (issue 29 parts 1, 2 and 5, sea_hil/verdict/rules.py): real sessions driven into each
+state the verdict judges -- a drive fault (the issue's start pose, forced past the input check), an e-stop, late
+setpoints, envelope rejections (lockstep), a watchdog trip, driver tick misses, setpoints and states lost outside
+the link model (real time: a downlink outage from a link trace, a driver stalled at the clock level, a lossy
+transport between edge and controller) -- each gives its reason with its figure and threshold, `--strict` exits 3,
+the end-of-run table and `sea-hil report` show it, the live view's final verdict agrees, and a clean session is
+`ok`."""
 from __future__ import annotations
 
 import json
@@ -17,13 +19,19 @@ from test_completeness import two_limbs
 from sea_hil.cli import main
 from sea_hil.config.loader import load_config
 from sea_hil.config.verdict import VerdictConfig
-from sea_hil.recorder.reader import read_session
+from sea_hil.live.verdict import SUMMARY_ONLY
+from sea_hil.live.view import LiveView
+from sea_hil.protocol.can_frames import EStop
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT
+from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.report.console import end_of_run_rows
-from sea_hil.report.session_summary import session_summary, split_edge_stats
+from sea_hil.report.limbs import META_FLOOR
+from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary_schema import SUMMARY_SCHEMA
-from sea_hil.report.verdict import COUNTER_RULES, verdict
 from sea_hil.session.run import RunOptions, run_session
+from sea_hil.verdict.edge_blocks import split_edge_stats
+from sea_hil.verdict.rules import COUNTER_RULES, verdict, verdict_config_of
 
 pytestmark = pytest.mark.slow
 # a 2 s gait: the drive's soft limits (derived for the 10 s gait) are off unless a test needs them
@@ -48,6 +56,30 @@ def _session(tmp: Path, name: str, overrides: dict[str, Any], lockstep: bool = T
 
 def _codes(s: dict[str, Any]) -> dict[str, dict[str, Any]]:
     return {r["code"]: r for r in s["verdict"]["reasons"]}
+
+
+def _live_final(data: SessionData, lockstep: bool) -> dict[str, Any]:
+    """The live view's final `/live/verdict` of a recording replayed through it in log-time order (what the recorder
+    child feeds it), under the recording's own `[verdict]`, host floor and limbs (what `sea-hil run` hands it)."""
+    floor = {k: float(v) for k, v in data.metadata.get(META_FLOOR, {}).items()} or None
+    limbs = {int(v.split()[0]): name for name, v in data.metadata.get("sea-hil.limbs", {}).items()}
+    view = LiveView(bitrate_bps=1_000_000, verdict=verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT)),
+                    lockstep=lockstep, floor=floor, limbs=limbs)
+    msgs = sorted(((m.log_time_ns, i, topic, m.payload) for topic, ms in data.messages.items()
+                   for i, m in enumerate(ms)), key=lambda x: (x[0], x[1]))
+    for t_ns, _, topic, payload in msgs:
+        view.feed(topic, t_ns, payload)
+    (final,) = [m.message for m in view.finish() if m.topic == "/live/verdict"]
+    return final
+
+
+def _assert_live_agrees(s: dict[str, Any], mcap: Path | SessionData) -> None:
+    """The live view's final verdict: summary.json's, but for the reasons only summary.json judges."""
+    live = _live_final(read_session(mcap) if isinstance(mcap, Path) else mcap, s.get("lockstep", True))
+    reasons = [r for r in s["verdict"]["reasons"] if r["code"] not in SUMMARY_ONLY]
+    assert live["final"] and live["codes"] == [r["code"] for r in reasons]
+    assert live["reasons"] == [r["message"] for r in reasons]
+    assert live["status"] == s["verdict"]["status"] or {r["code"] for r in s["verdict"]["reasons"]} & set(SUMMARY_ONLY)
 
 
 # ---- the issue's case: forced past the input check, the drive faults, the verdict says so -------------------------
@@ -79,6 +111,7 @@ def test_forced_start_pose_is_invalid_with_the_fault_time_and_flags(forced: tupl
     assert table.index("verdict") < table.index("mode")   # the verdict first, then every reason
     assert "INVALID" in table and "drive_fault" in table and "POSITION_LIMIT" in table
     assert "warnings" in table and "warnings                   │ none" not in table
+    _assert_live_agrees({**s, "lockstep": True}, out / "session.mcap")   # the live view judges it so too
 
 
 def test_the_latch_is_explained_once_in_the_recording(forced: tuple[Path, int, str]) -> None:
@@ -146,6 +179,41 @@ def test_envelope_rejections_degrade(tmp_path: Path) -> None:
     r = _codes(s)["envelope_rejections"]
     assert r["value"] == s["edge"]["setpoints_out_of_envelope"] > 0
     assert "safety.setpoint" in r["message"]
+    _assert_live_agrees(s, tmp_path / "envelope" / "session.mcap")
+
+
+def _estop_at(frames: int) -> Any:
+    """A session hook: the drive receives an e-stop frame (its DBC `ESTOP`, encoded by the plant's own codec) after
+    its `frames`-th received frame, through its receive path, as if pressed on the bus."""
+    def hook(plant: Any, edge: Any, proc: Any) -> None:
+        on_message, seen = plant._on_message, [0]
+        estop = plant.codec.encode(EStop(next(iter(plant.drivers))))
+
+        def pressed(msg: Any, now_ns: int) -> None:
+            on_message(msg, now_ns)
+            seen[0] += 1
+            if seen[0] == frames:
+                on_message(estop, now_ns)
+        plant._on_message = pressed
+    return hook
+
+
+def test_an_estop_is_invalid(tmp_path: Path) -> None:
+    """An e-stop (lockstep): the drive latches ESTOP to the end of the session, the verdict is invalid with the
+    latch's time (the heartbeat after the frame: 100 ms resolution) and who clears it, the table shows it."""
+    cfg = load_config(overrides=SHORT)
+    s = run_session(cfg, RunOptions(controller="et", out=tmp_path / "estop", lockstep=True, progress=False,
+                                    figures=False, on_nodes=_estop_at(300)))
+    jsonschema.validate(s, SUMMARY_SCHEMA)
+    assert s["verdict"]["status"] == "invalid"
+    r = _codes(s)["estop"]
+    assert r["severity"] == "invalid" and r["state"] == "ESTOP" and "ESTOP" in r["flags"] and not r["cleared"]
+    assert 0 < r["t_s"] < 1.0 and r["in_fault_s"] > s["duration_s"] - 1.0   # latched to the end
+    assert "latched ESTOP" in r["message"] and "needs the user" in r["message"]
+    rows = end_of_run_rows(s)
+    assert rows[0][0] == "verdict" and rows[0][1].startswith("INVALID")
+    assert ("  invalid: estop", r["message"]) in rows
+    _assert_live_agrees(s, tmp_path / "estop" / "session.mcap")
 
 
 def test_a_clean_lockstep_session_is_ok(tmp_path: Path) -> None:
@@ -180,9 +248,23 @@ def realtime(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Any]:
     return {"summary": s, "out": tmp / "out"}
 
 
+STATES_DROPPED: list[int] = [0]   # states `_lossy_transport` lost after the uplink model released them
+
+
 def _lossy_transport(plant: Any, edge: Any, proc: Any) -> None:
-    """The transport between controller and edge loses every 25th setpoint payload before the edge sees it (below
-    the link model, which runs inside the edge): what a lossy Zenoh path would do."""
+    """The transport between controller and edge loses every 25th setpoint payload before the edge sees it and every
+    40th state after the uplink model released it (both outside the link model, which runs inside the edge): what a
+    lossy Zenoh path would do."""
+    sink = edge.core.publisher.uplink._pub   # what the uplink emulator releases goes to its `put` (the publisher)
+    put, states = sink.put, [0]
+
+    def lossy_up(data: bytes) -> Any:
+        states[0] += 1
+        if states[0] % 40 == 0:
+            STATES_DROPPED[0] += 1
+            return None
+        return put(data)
+    sink.put = lossy_up
     submit, calls = edge.core.intake.submit, [0]
 
     def lossy(data: bytes, *args: Any) -> bool:
@@ -215,6 +297,25 @@ def test_setpoints_lost_beyond_the_link_model_degrade(realtime: dict[str, Any]) 
     r = _codes(s)["lost_setpoints"]
     assert r["value"] == s["edge"]["seq_lost"] > 0 and r["threshold"] == 0
     assert s["edge"]["downlink_dropped"] > 0   # the model's own drops (the outage) are not in seq_lost
+
+
+def test_states_lost_beyond_the_uplink_model_degrade(realtime: dict[str, Any]) -> None:
+    """Every 40th state lost between the edge and the controller, after the uplink model (`_lossy_transport`): the
+    controller's stream-seq gaps beyond the model's own drops (`link_losses.uplink_beyond_model`) degrade the run; the
+    table lists the reason and the count."""
+    s = realtime["summary"]
+    r = _codes(s)["lost_states"]
+    beyond = s["link_losses"]["uplink_beyond_model"]
+    # the controller counts gaps between the first and the last state it received: not the drops before or after
+    assert r["value"] == beyond > 0 and r["threshold"] == 0 and beyond <= STATES_DROPPED[0]
+    assert "beyond the uplink model" in r["message"]
+    rows = dict(end_of_run_rows(s))
+    assert rows["  degraded: lost_states"] == r["message"]
+    assert f"states lost beyond the uplink model: {beyond}" in rows["warnings"]
+
+
+def test_the_live_view_judges_the_real_time_session_as_summary_json(realtime: dict[str, Any]) -> None:
+    _assert_live_agrees(realtime["summary"], realtime["out"] / "session.mcap")
 
 
 def test_late_samples_degrade(realtime: dict[str, Any]) -> None:
@@ -267,6 +368,7 @@ def test_every_limbs_edge_counters_are_judged() -> None:
     assert reasons[("lost_setpoints", "limb2")]["message"].startswith("limb2: ")
     one = session_summary(two_limbs(edge1={"seq_lost": 1}), "et")   # limb1's own counter: named too
     assert [(r["code"], r.get("limb")) for r in one["verdict"]["reasons"]] == [("lost_setpoints", "limb1")]
+    _assert_live_agrees(s, two_limbs(edge2={"seq_lost": 3, "setpoints_out_of_envelope": 2}))   # live: the same
 
 
 @pytest.mark.parametrize("table,key", [("late_setpoints_max = -1", "verdict.late_setpoints_max"),

@@ -14,6 +14,7 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError
 from sea_hil.live.child import live_child_overrides
 from sea_hil.live.cli import add_live_args, live_overrides
+from sea_hil.live.feed import LiveSpec
 from sea_hil.live.link import await_live
 from sea_hil.recorder.clock import TIME_BASES
 from sea_hil.recorder.process import RecorderProcess
@@ -61,7 +62,8 @@ def _main(args: argparse.Namespace) -> int:
         if cfg.live.enabled:   # --foxglove: write and serve from a recorder process on idle CPU time
             rec: RecorderProcess | SessionRecorder
             rec = process = RecorderProcess(out, cfg.record, idle=True, time_base=args.time_base,
-                                            live=(cfg.live, cfg.can.bitrate_bps))
+                                            live=LiveSpec(live=cfg.live, bitrate_bps=cfg.can.bitrate_bps,
+                                                          verdict=cfg.verdict, lockstep=args.time_base == "sample"))
             b.callback(process.close)      # idempotent: closes the file if waiting for the live view failed
             assert process.live is not None   # a live config was passed
             await_live(process.live, cfg.live, lambda s: print(s, file=sys.stderr, flush=True))

@@ -17,8 +17,8 @@ from sea_hil.commands.common import (
 from sea_hil.errors import ConfigError
 from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.report.console import SessionProgress, files_in, print_end_of_run
-from sea_hil.report.verdict import strict_status
 from sea_hil.session.run import RunOptions, print_summary, run_session
+from sea_hil.verdict.rules import strict_status
 
 
 def register(sub: argparse._SubParsersAction) -> None:

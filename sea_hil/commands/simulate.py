@@ -9,7 +9,7 @@ from sea_hil.commands.common import add_config_args, add_period_arg, add_scenari
 from sea_hil.errors import ConfigError
 from sea_hil.offline.simulate import run_compare, run_simulation
 from sea_hil.report.console import files_in, print_end_of_run
-from sea_hil.report.verdict import strict_status
+from sea_hil.verdict.rules import strict_status
 
 
 def register(sub: argparse._SubParsersAction) -> None:

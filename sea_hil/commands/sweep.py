@@ -16,7 +16,6 @@ from sea_hil.commands.common import add_scenario_args, check_period_ms
 from sea_hil.config.shorthand import scenario_config
 from sea_hil.errors import ConfigError
 from sea_hil.input_check import enforce
-from sea_hil.report.verdict import STRICT_EXIT
 from sea_hil.sweep.grid import DIRECTIONS, LinkCondition, expand_grid, parse_axis, seed_axis
 from sea_hil.sweep.methods import (
     COMPENSATIONS,
@@ -29,6 +28,7 @@ from sea_hil.sweep.methods import (
 )
 from sea_hil.sweep.output import write_outputs
 from sea_hil.sweep.runner import SweepOptions, build_configs, run_sweep
+from sea_hil.verdict.rules import STRICT_EXIT
 
 LINK_AXIS_DEFAULTS = {"delay-ms": "0,10", "jitter-ms": "0", "loss": "0"}
 

@@ -1,4 +1,4 @@
-"""`[verdict]`: when a finished session counts as `ok`, `degraded` or `invalid` (sea_hil/report/verdict.py,
+"""`[verdict]`: when a finished session counts as `ok`, `degraded` or `invalid` (sea_hil/verdict/rules.py,
 docs/verdict.md), and whether the inputs are checked before anything moves (sea_hil/input_check.py).
 
 A drive fault (a soft-limit or watchdog latch) or an e-stop makes a run `invalid` whatever is set here: the limb did

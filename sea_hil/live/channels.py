@@ -70,6 +70,12 @@ CHANNELS: dict[str, tuple[str, dict[str, Any]]] = {
         "sea_hil.live.Driver", "Driver state from each HEARTBEAT frame.",
         {"node_id": _INT, "state": _INT, "state_name": _STR, **_FLAGS, "rejected_frames": _INT, "overruns": _INT,
          "seq": _INT})),
+    "/live/verdict": ("sea_hil.live.Verdict", _obj(
+        "sea_hil.live.Verdict", "The session's running verdict: summary.json's rules on what the live view has seen "
+        "(drive latches, the nodes' latest /stats counters; not the recording's completeness or tick misses); final: "
+        "the last message, at the end of the stream.",
+        {"status": {"enum": ["ok", "degraded", "invalid"]}, "codes": {"type": "array", "items": _STR},
+         "reasons": {"type": "array", "items": _STR}, "final": _BOOL})),
     "/live/node_stats": ("sea_hil.live.NodeStats", {
         "$schema": "https://json-schema.org/draft/2020-12/schema", "title": "sea_hil.live.NodeStats",
         "description": "A node's own statistics as published on its Zenoh stats key (the recording's /stats).",

@@ -3,7 +3,8 @@
 The recorder process calls `feed(topic, log_time_ns, payload)` for every message it has written (the same values),
 then `close()`. A message the view cannot digest is counted in `errors` and logged; the recording never suffers.
 `LiveSpec` is what the parent hands its recorder child on the command line: the live config, the CAN bitrate
-(bus load) and the file descriptor the child reports on (`sea_hil.live.link`).
+(bus load), what the running verdict needs (the session's `[verdict]` thresholds, whether it runs in lockstep, the
+host floor measured at start-up, the limbs' names) and the file descriptor the child reports on (`sea_hil.live.link`).
 """
 from __future__ import annotations
 
@@ -16,6 +17,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict
 
 from sea_hil.config.live import LiveConfig
+from sea_hil.config.verdict import VerdictConfig
 from sea_hil.errors import SeaHilError
 from sea_hil.live.server import LiveServer, Notify
 from sea_hil.live.view import LiveView
@@ -27,6 +29,10 @@ class LiveSpec(BaseModel):
     model_config = ConfigDict(frozen=True, extra="forbid")
     live: LiveConfig
     bitrate_bps: int
+    verdict: VerdictConfig
+    lockstep: bool
+    floor: dict[str, float] | None = None   # real time: the host's empty-loop floor (sea_hil/runtime/timer_floor.py)
+    limbs: dict[int, str] = {}              # node id -> limb name, in the session's order (`sea-hil.limbs`)
     notify_fd: int | None = None
 
 
@@ -48,7 +54,9 @@ def fd_notifier(fd: int | None) -> Notify:
 class LiveFeed:
     def __init__(self, spec: LiveSpec, notify: Notify | None = None) -> None:
         self.spec = spec
-        self.view = LiveView(bitrate_bps=spec.bitrate_bps, period_s=spec.live.period_s, window_s=spec.live.window_s)
+        self.view = LiveView(bitrate_bps=spec.bitrate_bps, period_s=spec.live.period_s, window_s=spec.live.window_s,
+                             verdict=spec.verdict, lockstep=spec.lockstep, floor=spec.floor,
+                             limbs=spec.limbs)
         self.server = LiveServer(spec.live, notify or fd_notifier(spec.notify_fd))
         self.errors = 0
 

@@ -3,8 +3,8 @@
 Foxglove's layout file format (File > Import layout, or Layouts > Import from file): `configById` (one entry per
 panel, `Type!id`), `layout` (the mosaic tree), `globalVariables`, `userNodes`, `playbackConfig`. Three tabs:
 Tracking (hip and knee angles against their references, tracking errors, setpoints), Events (the event/fault log,
-trigger reasons and driver state over time, the last driver heartbeat and node statistics) and Link (latency,
-bandwidth, message rates, CAN bus load). Regenerate with `python -m sea_hil.live.layout docs/foxglove/sea-hil-layout.json`;
+trigger reasons, driver state and the verdict over time, the running verdict, the last driver heartbeat and node
+statistics) and Link (latency, bandwidth, message rates, CAN bus load). Regenerate with `python -m sea_hil.live.layout docs/foxglove/sea-hil-layout.json`;
 tests/test_live_view.py checks that the file is this output and that every path names a live field.
 """
 from __future__ import annotations
@@ -49,7 +49,10 @@ def build() -> dict[str, Any]:
                                     "paths": [{"value": "/live/setpoint.reason", "timestampMethod": "receiveTime",
                                                "label": "trigger reason"},
                                               {"value": "/live/driver.state_name", "timestampMethod": "receiveTime",
-                                               "label": "driver state"}]},
+                                               "label": "driver state"},
+                                              {"value": "/live/verdict.status", "timestampMethod": "receiveTime",
+                                               "label": "verdict"}]},
+        "RawMessages!verdict": _raw("Verdict (running; final at the end)", "/live/verdict"),
         "RawMessages!driver": _raw("Driver heartbeat", "/live/driver"),
         "RawMessages!stats": _raw("Node statistics", "/live/node_stats"),
         "Plot!latency": _plot("State -> setpoint round trip at the recorder (us)", [
@@ -65,7 +68,8 @@ def build() -> dict[str, Any]:
         ("Tracking", _split(_split("Plot!hip", "Plot!knee", "column"),
                             _split("Plot!error", "Plot!setpoint", "column"))),
         ("Events", _split("Log!events", _split("StateTransitions!states",
-                                                _split("RawMessages!driver", "RawMessages!stats"), "column", 40))),
+                                                _split("RawMessages!verdict", _split("RawMessages!driver", "RawMessages!stats")),
+                                                "column", 40))),
         ("Link", _split(_split("Plot!latency", "Plot!bus", "column"), _split("Plot!bandwidth", "Plot!rates",
                                                                              "column"))),
     ]

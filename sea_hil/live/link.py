@@ -20,12 +20,13 @@ from sea_hil.live.feed import LiveSpec
 STARTUP_TIMEOUT_S = 60.0   # interpreter + SDK import + bind, on a loaded machine
 
 
-def live_child_argv(live: tuple[LiveConfig, int] | None) -> tuple[list[str], LiveLink | None]:
-    """(extra argv of the recorder child, the parent's link) for `live` = (live config, CAN bitrate), or ([], None)."""
+def live_child_argv(live: LiveSpec | None) -> tuple[list[str], LiveLink | None]:
+    """(extra argv of the recorder child, the parent's link) for `live` (its `notify_fd` set to the link's), or
+    ([], None)."""
     if live is None:
         return [], None
     link = LiveLink.open()
-    return [LiveSpec(live=live[0], bitrate_bps=live[1], notify_fd=link.write_fd).model_dump_json()], link
+    return [live.model_copy(update={"notify_fd": link.write_fd}).model_dump_json()], link
 
 
 class LiveLink:

@@ -3,16 +3,20 @@
 `LiveView.feed(topic, log_time_ns, payload)` takes exactly what the recorder writes to MCAP (`/tracking`,
 `/zenoh/state`, `/zenoh/setpoint`, `/zenoh/voltage`, `/can/raw`, `/stats`; other topics are ignored) and returns the
 `LiveMessage`s to publish (`sea_hil.live.channels`). A live message's log time is the log time of the recorded
-message it comes from, so live values and times match the recording. Link and bus statistics are emitted every
-`period_s` of log time (and once more by `finish`).
+message it comes from, so live values and times match the recording. Link and bus statistics and the running
+verdict (`sea_hil.live.verdict`, under the session's `[verdict]` thresholds and lockstep flag) are emitted every
+`period_s` of log time (and once more by `finish`, the verdict then `final`), with a `/live/events` line whenever
+the verdict's status changes.
 """
 from __future__ import annotations
 
 from typing import Any, NamedTuple
 
+from sea_hil.config.verdict import VerdictConfig
 from sea_hil.errors import MalformedFrame
 from sea_hil.fault_explain import LATCH_WORD
-from sea_hil.live.events import DriverWatch, event_log
+from sea_hil.live.events import DriverWatch, event_log, log_message
+from sea_hil.live.verdict import LiveVerdict
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
 from sea_hil.protocol.payloads import TriggerReason
@@ -37,7 +41,9 @@ def _sub(a: Any, b: Any) -> float | None:
 class LiveView:
     """Derives the live channels from the recorded stream. One owner (not thread-safe)."""
 
-    def __init__(self, *, bitrate_bps: int, period_s: float = 0.1, window_s: float = 1.0) -> None:
+    def __init__(self, *, bitrate_bps: int, period_s: float = 0.1, window_s: float = 1.0,
+                 verdict: VerdictConfig | None = None, lockstep: bool = False,
+                 floor: dict[str, float] | None = None, limbs: dict[int, str] | None = None) -> None:
         self.period_ns = int(period_s * NS_PER_S)
         self.window_s = window_s
         self.up = StreamStats("state", "up", window_s=window_s)
@@ -51,6 +57,7 @@ class LiveView:
         self._codec = SeaCodec(fd=None)
         self._heartbeat_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
         self._driver = DriverWatch()
+        self.verdict = LiveVerdict(verdict, lockstep=lockstep, floor=floor, limbs=limbs)
         self._now_ns: int | None = None
         self._next_stats_ns: int | None = None
 
@@ -70,11 +77,12 @@ class LiveView:
         return out
 
     def finish(self) -> list[LiveMessage]:
-        """The last statistics (at the end of the stream)."""
-        return self.statistics() if self._now_ns is not None else []
+        """The last statistics and the final verdict (at the end of the stream)."""
+        return self.statistics(final=True) if self._now_ns is not None else []
 
     # -- per topic -----------------------------------------------------------------------------------------------
     def _tracking(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        self.verdict.on_tracking(t_ns, p)
         th1, th2, d1, d2 = (p.get(k) for k in ("theta1_rad", "theta2_rad", "theta1_d_rad", "theta2_d_rad"))
         msg = {"t_s": p.get("t_s"), "state_seq": int(p.get("state_seq", -1)), "theta1_rad": th1, "theta2_rad": th2,
                "theta1_d_rad": d1, "theta2_d_rad": d2, "e1_rad": _sub(d1, th1), "e2_rad": _sub(d2, th2),
@@ -83,6 +91,7 @@ class LiveView:
 
     def _state(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
         self.up.add(t_ns, int(p.get("payload_bytes", 0)))
+        self.verdict.on_state(p)
         seq = p.get("seq")
         if isinstance(seq, int):
             self._state_rx[seq] = t_ns
@@ -107,6 +116,7 @@ class LiveView:
         return []
 
     def _can(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        self.verdict.on_can(t_ns)
         can_id, dlc, ext = p.get("can_id"), p.get("dlc"), bool(p.get("is_extended", False))
         if not isinstance(can_id, int) or not isinstance(dlc, int):
             self.ignored += 1
@@ -127,10 +137,15 @@ class LiveView:
             return []
         if not isinstance(hb, Heartbeat):
             return []
+        self.verdict.on_heartbeat(t_ns, hb)
         msg, logs = self._driver.on_heartbeat(t_ns, hb)
         return [LiveMessage("/live/driver", t_ns, msg), *(LiveMessage("/live/events", t_ns, m) for m in logs)]
 
     def _stats(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
+        try:
+            self.verdict.on_stats(p)
+        except (KeyError, TypeError, ValueError):   # a record the verdict cannot read: shown, counted, not judged
+            self.ignored += 1
         flat = {k: v for k, v in p.items() if isinstance(v, (int, float, bool))}
         return [LiveMessage("/live/node_stats", t_ns, flat)]
 
@@ -149,8 +164,9 @@ class LiveView:
             self.rtt_last_s = (t_ns - sent) / NS_PER_S
             self.rtt.record(self.rtt_last_s)
 
-    def statistics(self) -> list[LiveMessage]:
-        """`/live/link` and `/live/bus` at the latest log time seen."""
+    def statistics(self, final: bool = False) -> list[LiveMessage]:
+        """`/live/link`, `/live/bus` and `/live/verdict` (`final`: the last) at the latest log time seen, and a
+        `/live/events` line when the verdict's status has changed."""
         now = self._now_ns
         if now is None:
             return []
@@ -167,4 +183,14 @@ class LiveView:
         b = self.bus
         bus = {"frames": b.frames, "frames_per_s": self._frame_rate.rates(now)[0], "load_pct": b.window_load_pct(now),
                "load_pct_session": b.session_load_pct(now), "bitrate_bps": b.bitrate_bps, "window_s": self.window_s}
-        return [LiveMessage("/live/link", now, link), LiveMessage("/live/bus", now, bus)]
+        verdict, level = self.verdict.message(final)
+        out = [LiveMessage("/live/link", now, link), LiveMessage("/live/bus", now, bus),
+               LiveMessage("/live/verdict", now, verdict)]
+        if level is not None:
+            out.append(LiveMessage("/live/events", now, log_message(now, level, "verdict", verdict_line(verdict))))
+        return out
+
+
+def verdict_line(msg: dict[str, Any]) -> str:
+    """The `/live/events` line of a verdict status change: the status and every reason."""
+    return f"verdict {msg['status']}" + ("" if not msg["reasons"] else ": " + "; ".join(msg["reasons"]))

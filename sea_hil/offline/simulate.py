@@ -19,7 +19,7 @@ from sea_hil.report.summary import (
     transmissions_block,
     write_summary,
 )
-from sea_hil.report.verdict import verdict
+from sea_hil.verdict.rules import verdict
 
 
 def offline_transmissions(res: SimResult) -> dict[str, int]:

@@ -25,10 +25,9 @@ from collections.abc import Mapping
 from typing import IO, TYPE_CHECKING, Any, BinaryIO
 
 from sea_hil.config.comms import RecordConfig
-from sea_hil.config.live import LiveConfig
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
-from sea_hil.live.feed import start_live_feed
+from sea_hil.live.feed import LiveSpec, start_live_feed
 from sea_hil.live.link import live_child_argv
 from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
@@ -49,9 +48,9 @@ class RecorderProcess:
 
     def __init__(self, path: str | os.PathLike[str], cfg: RecordConfig, *, batch_ops: int = 512,
                  close_timeout_s: float = 300.0, nice: int = 10, idle: bool = False,
-                 time_base: TimeBase = "wall", live: tuple[LiveConfig, int] | None = None) -> None:
-        """`live` = (live config, CAN bitrate): the child also serves the live view (`sea_hil.live`), and
-        `self.live` is the parent's end of its notice pipe."""
+                 time_base: TimeBase = "wall", live: LiveSpec | None = None) -> None:
+        """`live`: the child also serves the live view (`sea_hil.live`), and `self.live` is the parent's end of its
+        notice pipe."""
         self.path = os.fspath(path)
         self.batch_ops = batch_ops
         self.close_timeout_s = close_timeout_s

@@ -24,9 +24,8 @@ from __future__ import annotations
 
 from typing import Any
 
-from sea_hil.drive_latches import Latch, LatchLog, latches_of_stats
+from sea_hil.drive_latches import LatchLog, latch_entry, latches_of_stats
 from sea_hil.errors import MalformedFrame
-from sea_hil.fault_explain import clear_policy, flag_names
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_MASK, DriverState, ErrorFlags, Heartbeat
 from sea_hil.protocol.cia402_decode import Cia402Decoder
@@ -97,7 +96,7 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     latches = LatchLog()
     for t_ns, hb in states:
         latches.on_heartbeat(t_ns, hb)
-    out = [_latch(la, t0_ns, end_ns is not None and la.t_ns > end_ns, "can") for la in latches.latches]
+    out = [latch_entry(la, t0_ns, end_ns is not None and la.t_ns > end_ns, "can") for la in latches.latches]
     return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
 
 
@@ -114,7 +113,7 @@ def edge_latches(data: SessionData) -> list[dict[str, Any]]:
     out = []
     for stats in finals.values():
         latches, origin_ns = latches_of_stats(stats)
-        out += [_latch(la, origin_ns, end is not None and la.t_ns > end, "edge") for la in latches]
+        out += [latch_entry(la, origin_ns, end is not None and la.t_ns > end, "edge") for la in latches]
     return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
 
 
@@ -129,9 +128,3 @@ def _cycle_end_sample_ns(data: SessionData) -> int | None:
         return None
     t0_ns = sample_ns[anchor["state_seq"]] - round(anchor["t_s"] * 1e9)
     return t0_ns + round(max(r["t_s"] for r in rows) * 1e9)
-
-
-def _latch(la: Latch, t0_ns: int, after: bool, source: str) -> dict[str, Any]:
-    return {"node_id": la.node_id, "t_s": (la.t_ns - t0_ns) * 1e-9, "state": la.state.name,
-            "flags": flag_names(la.flags), "in_fault_s": (la.until_t_ns - la.t_ns) * 1e-9, "cleared": la.cleared,
-            "clear_policy": clear_policy(la.state, la.flags), "after_session": after, "source": source}

@@ -8,8 +8,8 @@ Phases, by the controller's time t of the state a message carries or answers (t 
 (start-up and shut-down of the nodes).
 
 Everything is deterministic in lockstep except the block under `timing` (sea_hil/report/summary.py): the closed-loop
-latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIMING_KEYS`, `EDGE_TIMING_PREFIXES`);
-the edge's other final `/stats` counters are under `edge`.
+latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIMING_KEYS`, `EDGE_TIMING_PREFIXES`
+in sea_hil/verdict/edge_blocks.py); the edge's other final `/stats` counters are under `edge`.
 
 Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb's (the 1-limb layout), `limbs` has
 every limb's transmissions, tracking and latency (and, with several limbs, its own `edge` counters and `rejections`,
@@ -22,22 +22,14 @@ from typing import Any
 import numpy as np
 
 from sea_hil.config.verdict import VerdictConfig
-from sea_hil.protocol.payload_fields import RejectReason
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, ENGINE_SOURCE, META_SESSION
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.completeness import NodeCounters, completeness_block
 from sea_hil.report.drive_faults import drive_faults
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs, sync_block
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
-from sea_hil.report.verdict import verdict, verdict_config_of
-
-# edge /stats keys derived from wall-clock time: loop and apply times, overruns of the real-time period, lockstep
-# re-sends after a 100 ms wait timed out and the repeated answers they draw (duplicate setpoints, dropped as stale),
-# extra commands on real-time setpoint arrival, the cia402 SYNC producer's missed periods (`latency_*` go to
-# timing.latency_us)
-EDGE_TIMING_PREFIXES = ("latency_", "apply_latency_us_", "loop_us_", "can_")   # can_: the bus-timing model
-EDGE_TIMING_KEYS = frozenset({"loop_overruns", "lockstep_resends", "lockstep_startup_resends", "arrival_commands",
-                              "seq_duplicates", "stale_setpoints", "cia402_sync_misses"})
+from sea_hil.verdict.edge_blocks import rejections_blocks, split_edge_stats, uplink_losses
+from sea_hil.verdict.rules import verdict, verdict_config_of
 
 
 def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
@@ -91,22 +83,6 @@ def tracking_or_zero(theta: np.ndarray, desired: np.ndarray) -> dict[str, list[f
     return {"max_abs_error_rad": [0.0, 0.0], "rms_error_rad": [0.0, 0.0]}
 
 
-# every class of input the edge rejects (counted, logged, dropped), by its /stats counter: `rejections` in
-# summary.json; the wall-time-derived one (lockstep re-sends draw duplicate answers) under `timing.rejections`
-REJECTION_CLASSES = (*(f"payload_rejected_{r.value}" for r in RejectReason), "unexpected_payloads", "epoch_old",
-                     "epoch_foreign", "setpoints_out_of_envelope", "late_setpoints", "late_samples",
-                     "rejected_frames", "rejected_samples", "edge_fallback_rejected")
-TIMING_REJECTION_CLASSES = ("stale_setpoints",)
-
-
-def rejections_blocks(edge: dict[str, Any]) -> tuple[dict[str, int], dict[str, int]]:
-    """(`rejections`, `timing.rejections`): the count of every rejection class in the edge's final /stats record (0
-    where the recording has none of it: an older recording, the paper's placement without the edge's fallback)."""
-    def block(classes: tuple[str, ...]) -> dict[str, int]:
-        return {k: int(edge.get(k, 0)) for k in classes}
-    return block(REJECTION_CLASSES), block(TIMING_REJECTION_CLASSES)
-
-
 def final_edge_stats(data: SessionData, node: str = "edge") -> dict[str, Any]:
     """The final `/stats` record of the edge (or of `node`, e.g. "controller"); {} when there is none."""
     finals = [m.payload for m in data.messages.get("/stats", [])
@@ -134,32 +110,13 @@ def recording_block(data: SessionData) -> dict[str, Any] | None:
 
 
 def link_losses(data: SessionData, edge: dict[str, Any]) -> dict[str, int] | None:
-    """summary.json `link_losses`: states missing on arrival at the controller beyond the uplink model's own drops
-    (the controller's stream-seq gaps minus `uplink_dropped`); None without the controller's final stats."""
-    ctl = final_edge_stats(data, "controller")
-    if "state_seq_lost" not in ctl:
-        return None
-    return {"uplink_beyond_model": max(0, int(ctl["state_seq_lost"]) - int(edge.get("uplink_dropped", 0)))}
+    """summary.json `link_losses` (`uplink_losses`) from the controller's final stats; None without them."""
+    return uplink_losses(final_edge_stats(data, "controller"), edge)
 
 
 def _lockstep(data: SessionData) -> bool:
     """Was the recording made in lockstep (metadata `sea-hil.session`; the offline engine's has none: lockstep)."""
     return str(data.metadata.get("sea-hil.session", {}).get("lockstep", "True")) == "True"
-
-
-def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, Any]]:
-    """The edge's final /stats record -> (deterministic counters, wall-time-derived ones without `latency_*`)."""
-    det: dict[str, Any] = {}
-    timing: dict[str, Any] = {}
-    for k in sorted(edge):
-        if k in ("key", "final", "node", "t_ns"):   # the stats record's envelope (t_ns: the writer's clock)
-            continue
-        if k in EDGE_TIMING_KEYS or k.startswith(EDGE_TIMING_PREFIXES):
-            if not k.startswith("latency_"):
-                timing[k] = edge[k]
-        else:
-            det[k] = edge[k]
-    return det, timing
 
 
 def recorded(data: SessionData) -> bool:

@@ -37,7 +37,7 @@ DRIVE_FAULT = _object({"node_id": _COUNT, "t_s": _NULLABLE_NUMBER, "state": {"en
                        "cleared": {"type": "boolean"}, "clear_policy": {"type": "string"},
                        "after_session": {"type": "boolean"}, "source": {"enum": ["can", "edge"]}}, required=("node_id", "t_s", "state", "flags",
                                                                        "in_fault_s", "cleared", "clear_policy"))
-# sea_hil/report/verdict.py: a reason has its code, severity, message, figure and threshold, and may say more
+# sea_hil/verdict/rules.py: a reason has its code, severity, message, figure and threshold, and may say more
 REASON = {"type": "object", "required": ["code", "severity", "message", "value", "threshold"],
           "properties": {"code": {"type": "string"}, "severity": {"enum": ["degraded", "invalid"]},
                          "message": {"type": "string"}}}

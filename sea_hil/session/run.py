@@ -22,6 +22,7 @@ from typing import Any
 from sea_hil.config.loader import config_to_toml
 from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import ConfigError, SeaHilError
+from sea_hil.live.feed import LiveSpec
 from sea_hil.live.link import await_live
 from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.clock import TimeBase
@@ -146,6 +147,13 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     return summary
 
 
+def _floor_figures(floor: dict[str, Any] | None) -> dict[str, float] | None:
+    """The host floor's figures for the live view's verdict (its numbers, as the recording's metadata has them)."""
+    if floor is None:
+        return None
+    return {k: float(v) for k, v in floor.items() if isinstance(v, (int, float)) and not isinstance(v, bool)}
+
+
 def _without_live(cfg: SeaHilConfig) -> SeaHilConfig:
     return cfg.model_copy(update={"live": cfg.live.model_copy(update={"enabled": False})})
 
@@ -163,13 +171,16 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base: TimeBase = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
-                          live=(cfg.live, cfg.can.bitrate_bps) if cfg.live.enabled else None)
+                          live=LiveSpec(live=cfg.live, bitrate_bps=cfg.can.bitrate_bps, verdict=cfg.verdict,
+                                        lockstep=opts.lockstep, floor=_floor_figures(floor),
+                                        limbs={limb.node_id: limb.name for limb in nodes.limbs})
+                          if cfg.live.enabled else None)
     b.callback(rec.close)   # idempotent: closes the file if building the nodes failed
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
                                     "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
     rec.add_metadata("sea-hil.limbs", nodes.metadata())
-    if floor is not None:   # the verdict weighs the driver's tick misses against it (sea_hil/report/verdict.py)
+    if floor is not None:   # the verdict weighs the driver's tick misses against it (sea_hil/verdict/rules.py)
         rec.add_metadata(META_FLOOR, {k: str(v) for k, v in floor.items()})
     # --foxglove: announce the live view; --foxglove-wait: hold here until a client has subscribed
     waited_s = await_live(rec.live, cfg.live, log) if rec.live is not None else 0.0

@@ -24,7 +24,7 @@ from sea_hil.config.loader import validation_line
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.payload_fields import RejectReason
-from sea_hil.report.console import field, sync_periods
+from sea_hil.verdict.summary_fields import field, sync_periods
 
 OK, DEGRADED, INVALID = "ok", "degraded", "invalid"
 STRICT_EXIT = 3   # `--strict`: the exit status of a run whose verdict is not ok
