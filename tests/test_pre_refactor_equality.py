@@ -81,7 +81,7 @@ TIMING_ADDED = ("driver", "rejections")
 VERDICT_OK = {"status": "ok", "reasons": []}
 VERDICT_ADDED: dict[str, Any] = {
     "verdict": VERDICT_OK, "drive_faults": [], "link_losses": {"uplink_beyond_model": 0},
-    "recording": {"dropped": 0, "write_errors": 0, "can_frames_missed": 0, "recorder_dropped_ops": 0,
+    "recording": {"dropped": 0, "write_errors": 0, "can_frames_missed": 0, "can_command_gaps": 0, "recorder_dropped_ops": 0,
                   "can_tap_unfinished": 0, "lost": 0, "complete": True}}
 
 

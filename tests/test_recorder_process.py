@@ -17,7 +17,7 @@ import pytest
 from sea_hil.config.loader import load_config
 from sea_hil.errors import RecordingError
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import Feedback, VoltageCmd
+from sea_hil.protocol.can_frames import Feedback, FeedbackAngle, VoltageCmd
 from sea_hil.protocol.canbus import open_bus
 from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
 from sea_hil.recorder.meta import META_FINAL
@@ -130,20 +130,25 @@ def _voltage_frames(seqs: list[int], node_id: int = 1) -> list[RawFrame]:
     return [RawFrame.of(1_000 + i, codec.encode(VoltageCmd(node_id, (0.5, 0.0), q))) for i, q in enumerate(seqs)]
 
 
+def _feedback_angle_frames(seqs: list[int], node_id: int = 1) -> list[RawFrame]:
+    codec = SeaCodec()
+    return [RawFrame.of(1_000 + i, codec.encode(FeedbackAngle(node_id, q, q, (0.0, 0.0)))) for i, q in enumerate(seqs)]
+
+
 def test_can_tap_counts_frames_rejects_and_missed_feedback_and_commands() -> None:
     codec, tap = SeaCodec(), CanTap()
     fb = [RawFrame.of(i, m) for i, q in enumerate((3, 4, 6))
           for m in codec.encode_feedback(Feedback(1, q, q, (0.0, 0.0), (0.0, 0.0), (0.0, 0.0), (0.0, 0.0)))]
     for f in [*fb, *_voltage_frames([3, 4, 4, 9]), RawFrame(9, 0x3F, 0, b"")]:   # + one unknown id
         tap.records(f)
-    feedback_missed = 3 * 1   # seq 5 of each of the 3 feedback frame ids
-    voltage_missed = 4        # seq 5..8
-    assert tap.counters() == {"can_frames": len(fb) + 5, "can_rejected": 1,
-                              "can_frames_missed": feedback_missed + voltage_missed}
+    feedback_missed = 3 * 1   # seq 5 of each of the 3 feedback frame ids: lost
+    voltage_gaps = 4          # seq 5..8: lost, or samples the edge did not answer (counted apart)
+    assert tap.counters() == {"can_frames": len(fb) + 5, "can_rejected": 1, "can_frames_missed": feedback_missed,
+                              "can_command_gaps": voltage_gaps}
 
 
 def test_missed_frames_reach_the_final_stats_in_both_recorder_paths(tmp_path: Path) -> None:
-    frames = _voltage_frames([0, 1, 2, 5, 6, 10])   # 2 + 3 missed
+    frames = _feedback_angle_frames([0, 1, 2, 5, 6, 10])   # 2 + 3 missed
     proc = RecorderProcess(tmp_path / "p.mcap", CFG)
     node = RecorderNode(proc, None, "sea")
     for f in frames:

@@ -17,11 +17,14 @@ read it as in the sea profile. Sample time base: one `can.feedback_rate_hz` peri
 dictionary's default) seen on the frame's bus, the drive's lockstep clock (frames before the first SYNC: 0), given
 by the bus's recorder node (`stamp`): a frame is recorded at the time it comes with.
 
-Missed frames: feedback and voltage frames carry an 8-bit `seq` that steps by one per sample, and CAN keeps the
-order of one id's frames, so a forward step of n > 1 on one id means n - 1 frames of that id never reached the
-recorder (`SeqGapCounter`). A repeat (step 0: a lockstep re-send) is not a gap. Limits: a loss of a multiple of 256
-frames in a row of one id is invisible, frames lost after an id's last received frame are not seen, and a sender
-that restarts its count (or skips a sample it did not answer) shows up as a gap too.
+Missed frames: the driver's feedback frames carry an 8-bit `seq` that steps by one per sample it integrates (a
+skipped deadline is no sample), and CAN keeps the order of one id's frames, so a forward step of n > 1 on one id
+means n - 1 frames of that id never reached the recorder (`SeqGapCounter`, `can_frames_missed`). A repeat (step 0: a
+lockstep re-send) is not a gap. A VOLTAGE_CMD's `seq` is the sample it answers, and a real-time edge behind its
+samples answers only the freshest, so its gaps (`can_command_gaps`) are lost frames or unanswered samples: counted
+apart, never called lost (the recording's `can_command` channel checks those frames against the edge's own count,
+summary.json `completeness`). Limits: a loss of a multiple of 256 frames in a row of one id is invisible, frames lost
+after an id's last received frame are not seen, and a driver that restarts its count shows up as a gap too.
 """
 from __future__ import annotations
 
@@ -135,7 +138,8 @@ class CanTap:
         self.codec = codec or SeaCodec(fd=None)
         self.time_base = check_time_base(time_base)
         self.clock = SampleClock()
-        self.gaps = SeqGapCounter()
+        self.gaps = SeqGapCounter()           # the driver's feedback frames: a gap is a frame lost (module doc)
+        self.command_gaps = SeqGapCounter()   # VOLTAGE_CMD frames: lost, or samples the edge did not answer
         self.frames = self.rejected = 0
         self._driver: dict[int, tuple[DriverState, ErrorFlags]] = {}
         self.latches: LatchWatch | None = None   # `configure`: the session's drive limits explain each latch
@@ -179,7 +183,9 @@ class CanTap:
         logs: list[tuple[LogLevel, str, str]] = []
         if rejected:
             logs.append((LogLevel.WARNING, "recorder", f"CAN frame 0x{f.can_id:03X} rejected by the DBC: {decoded}"))
-        elif len(out) > 1 and isinstance(out[1][1].get("seq"), int):   # the decoded record of a seq-carrying frame
+        elif isinstance(decoded, VoltageCmd):   # its seq is the sample it answers: a gap may be an unanswered one
+            self.command_gaps.feed(f.can_id, decoded.seq)
+        elif len(out) > 1 and isinstance(out[1][1].get("seq"), int):   # the driver's own numbering of its samples
             missed = self.gaps.feed(f.can_id, out[1][1]["seq"])
             if missed:
                 logs.append((LogLevel.WARNING, "recorder", f"CAN id 0x{f.can_id:03X}: {missed} frame(s) missed"))
@@ -247,4 +253,5 @@ class CanTap:
                                                f"rejected frames {hb.rejected_frames}, overruns {hb.overruns}")]
 
     def counters(self) -> dict[str, int]:
-        return {"can_frames": self.frames, "can_rejected": self.rejected, "can_frames_missed": self.gaps.missed}
+        return {"can_frames": self.frames, "can_rejected": self.rejected, "can_frames_missed": self.gaps.missed,
+                "can_command_gaps": self.command_gaps.missed}

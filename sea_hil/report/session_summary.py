@@ -91,21 +91,22 @@ def final_edge_stats(data: SessionData, node: str = "edge") -> dict[str, Any]:
 
 
 # the recorder's final counters of what it lost (`sea-hil.final` metadata, sea_hil/recorder/)
-RECORDING_LOSS_KEYS = ("dropped", "write_errors", "can_frames_missed", "recorder_dropped_ops", "can_tap_unfinished")
+RECORDING_LOSS_KEYS = ("dropped", "write_errors", "can_frames_missed", "can_command_gaps", "recorder_dropped_ops",
+                       "can_tap_unfinished")
+NOT_SURELY_LOST = ("can_frames_missed", "can_command_gaps")   # lost on the bus or by the recorder; or never sent
 
 
 def recording_block(data: SessionData) -> dict[str, Any] | None:
     """summary.json `recording`: what the recorder lost (each counter, and `lost`: the sum of those that are surely its
-    own -- messages dropped or not written -- without `can_frames_missed`, whose seq gaps cannot tell a frame the
-    recorder missed from one its sender never sent) and whether the file is complete; None for a recording without
-    final counters (the offline session engine's)."""
+    own -- messages dropped or not written -- without the CAN seq gaps: `can_frames_missed`, the driver's frames lost
+    on the bus or by the recorder, and `can_command_gaps`, VOLTAGE_CMDs lost or samples the edge did not answer,
+    sea_hil/recorder/can_tap.py) and whether the file is complete; None for a recording without final counters (the
+    offline session engine's)."""
     final = data.metadata.get("sea-hil.final")
     if not final:
         return None
     counts = {k: int(float(final.get(k, 0) or 0)) for k in RECORDING_LOSS_KEYS}
-    # a CAN seq gap is also a frame its sender never sent (a skipped driver tick, a sample the edge left unanswered):
-    # reported, not counted as the recorder's loss
-    lost = sum(v for k, v in counts.items() if k != "can_frames_missed")
+    lost = sum(v for k, v in counts.items() if k not in NOT_SURELY_LOST)
     return {**counts, "lost": lost, "complete": bool(data.complete)}
 
 

@@ -43,7 +43,7 @@ REASON = {"type": "object", "required": ["code", "severity", "message", "value",
                          "message": {"type": "string"}}}
 VERDICT = _object({"status": {"enum": ["ok", "degraded", "invalid"]}, "reasons": {"type": "array", "items": REASON}})
 RECORDING = _object({"dropped": _COUNT, "write_errors": _COUNT, "can_frames_missed": _COUNT,
-                     "recorder_dropped_ops": _COUNT, "can_tap_unfinished": _COUNT, "lost": _COUNT,
+                     "can_command_gaps": _COUNT, "recorder_dropped_ops": _COUNT, "can_tap_unfinished": _COUNT, "lost": _COUNT,
                      "complete": {"type": "boolean"}})
 TIMING = _object({
     "cpu_s": _NUMBER,                                                        # offline

@@ -200,9 +200,10 @@ def _counter_reason(rule: CounterRule, summary: Mapping[str, Any], value: float,
                                         f"{threshold:g}", value, threshold, counter=name)
 
 
-# channels of summary.json `completeness` judged here; the CAN sequence gaps (`can_frames`) are reported, not judged:
-# a gap is also a frame its sender never sent (a skipped tick), not only one the recorder lost
-COMPLETENESS_JUDGED = ("state", "downlink", "can_command")
+# channels of summary.json `completeness` judged here; `can_frames` is the driver's feedback frames missing from their
+# seq gaps (a driver numbers every sample it sends: a gap is a frame lost; the VOLTAGE_CMD gaps, which may be samples
+# the edge did not answer, are `recording.can_command_gaps`, not judged: `can_command` checks those frames)
+COMPLETENESS_JUDGED = ("state", "downlink", "can_command", "can_frames")
 
 
 def _completeness_reasons(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[str, Any]]:

@@ -1,5 +1,6 @@
 """The recorder's CAN tap on a real SocketCAN socket: it asks for a large receive buffer, and the frames the kernel
-drops when the tap's receive queue overflows are counted exactly from the frames' seq gaps (`can_frames_missed`).
+drops when the tap's receive queue overflows are counted exactly from the driver frames' seq gaps
+(`can_frames_missed`).
 
 The overflow is provoked with the smallest receive buffer the kernel grants and a tap that does not read while a
 burst is sent; the tap then drains the queue. One frame per id before the burst and one after it (each sent and read
@@ -17,7 +18,7 @@ import pytest
 
 from sea_hil.config.loader import load_config
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import VoltageCmd
+from sea_hil.protocol.can_frames import FeedbackAngle
 from sea_hil.protocol.canbus import RX_BUFFER_BYTES, send_with_retry
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.writer import SessionRecorder
@@ -29,7 +30,7 @@ MARKER_TIMEOUT_S = 10.0
 
 
 def _send(bus: can.BusABC, codec: SeaCodec, node_id: int, seq: int) -> None:
-    send_with_retry(bus, codec.encode(VoltageCmd(node_id, (0.0, 0.0), seq)), 1000, 0.001)  # vcan tx queue full
+    send_with_retry(bus, codec.encode(FeedbackAngle(node_id, seq, seq, (0.0, 0.0))), 1000, 0.001)  # vcan tx queue full
 
 
 def _drain_until(bus: can.BusABC, node: RecorderNode, done: Callable[[can.Message], bool] | None) -> None:
@@ -52,7 +53,7 @@ def _one_at_a_time(sender: can.BusABC, tap_bus: can.BusABC, node: RecorderNode, 
     """Send frame `seq` of every id, each read back by the tap before the next is sent (so none is dropped)."""
     for n in NODES:
         _send(sender, codec, n, seq)
-        marker = VoltageCmd(n, (0.0, 0.0), seq)
+        marker = FeedbackAngle(n, seq, seq, (0.0, 0.0))
         _drain_until(tap_bus, node, lambda m, marker=marker: codec.decode(m) == marker)
 
 
