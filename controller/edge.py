@@ -92,6 +92,7 @@ class EdgeNode(Node):
 
     def _stats(self) -> dict[str, float]:
         out = self.core.stats()
+        out["lockstep"] = int(self.sync.lockstep)   # the record's envelope: what kind of run a recording holds
         timing = getattr(self.bus, "timing_stats", None)   # [can] emulate_bitrate: queueing delay per CAN id
         if timing is not None:
             out.update(timing())

@@ -199,3 +199,20 @@ def test_a_recorder_cut_off_in_the_lead_in_writes_not_recorded_for_the_cycle() -
     assert rows["error hip max / RMS"].endswith(" rad"), rows
     assert "| max abs tracking error hip / knee [rad] | not recorded |" not in report_markdown(
         session_summary(whole, "et"), whole)
+
+
+def test_a_standalone_recording_is_judged_as_the_edge_ran() -> None:
+    """`sea-hil record` of a distributed session writes no `lockstep` in its session metadata: the kind of run is the
+    edge's own (its final /stats `lockstep`), so a real-time session's stale setpoints (a real-time-only rule) are
+    judged and a lockstep one's re-sent answers are not; `sea-hil run`'s metadata, when there, decides."""
+    def judged(lockstep: int, meta: dict[str, str] | None = None) -> list[str]:
+        data = _with_finals(_session(20, 170, PUBLISHED, EVENTS),
+                            _final("edge", uplink_msgs=len(PUBLISHED), stale_setpoints=50, lockstep=lockstep),
+                            _final("controller", setpoints_sent=len(EVENTS)))
+        if meta is not None:
+            data.metadata["sea-hil.session"] = meta
+        return [r["code"] for r in session_summary(data, "et")["verdict"]["reasons"]]
+    assert "stale_setpoints" in judged(0)
+    assert "stale_setpoints" not in judged(1)
+    assert "stale_setpoints" not in judged(0, {"lockstep": "True"})   # `run`'s own word
+    assert "stale_setpoints" in judged(1, {"lockstep": "False"})

@@ -94,7 +94,8 @@ def test_recording_is_complete_and_report_reproduces_summary(et_runs, tmp_path):
     data = read_session(path)
     assert data.complete and len(data.messages["/can/raw"]) > 1000
     rep = run_report(path, tmp_path / "report")
-    assert rep == {k: v for k, v in a.items() if k not in ("lockstep", "inner")} | {   # wall_s: run only
+    assert rep["lockstep"] is a["lockstep"] is True      # the report says what kind of run the file holds
+    assert rep == {k: v for k, v in a.items() if k != "inner"} | {   # wall_s: run only
         "timing": {k: v for k, v in a["timing"].items() if k != "wall_s"}}
     for png in FIGURES:
         assert (tmp_path / "report" / png).stat().st_size > 1000

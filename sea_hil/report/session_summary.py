@@ -115,9 +115,15 @@ def link_losses(data: SessionData, edge: dict[str, Any]) -> dict[str, int] | Non
     return uplink_losses(final_edge_stats(data, "controller"), edge)
 
 
-def _lockstep(data: SessionData) -> bool:
-    """Was the recording made in lockstep (metadata `sea-hil.session`; the offline engine's has none: lockstep)."""
-    return str(data.metadata.get("sea-hil.session", {}).get("lockstep", "True")) == "True"
+def recorded_lockstep(data: SessionData) -> bool:
+    """Was the recording made in lockstep: metadata `sea-hil.session` (`sea-hil run`), else the edge's final `/stats`
+    (`lockstep`: a `sea-hil record` of a distributed session knows only what the nodes say), else lockstep (the
+    offline engine's sessions, simulated time)."""
+    meta = data.metadata.get("sea-hil.session", {})
+    if "lockstep" in meta:
+        return str(meta["lockstep"]) == "True"
+    edge = final_edge_stats(data)
+    return bool(edge.get("lockstep", 1))
 
 
 def recorded(data: SessionData) -> bool:
@@ -155,7 +161,7 @@ def session_summary(data: SessionData, controller: str, node_counters: NodeCount
     if recorded(data):
         summary["completeness"] = completeness_block(data, node_counters)
     cfg = verdict_cfg if verdict_cfg is not None else verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT))
-    summary["verdict"] = verdict({**summary, "lockstep": _lockstep(data)}, cfg)
+    summary["verdict"] = verdict({**summary, "lockstep": recorded_lockstep(data)}, cfg)
     return summary
 
 

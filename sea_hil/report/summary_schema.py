@@ -95,7 +95,7 @@ SUMMARY_SCHEMA: dict[str, Any] = {
         "rejections": {"type": "object", "additionalProperties": _COUNT},   # sessions: count per rejection class
         "limbs": {"type": "array", "items": LIMB, "minItems": 1},           # sessions: every limb
         "limbs_total": LIMBS_TOTAL,                                           # sessions: all limbs
-        "lockstep": {"type": "boolean"},                                     # `run` only
+        "lockstep": {"type": "boolean"},                                     # `run`, `report`
         "inner": {"enum": ["edge", "remote"]},                               # `run` only
         "completeness": COMPLETENESS_SCHEMA,                                 # from a recording: `run`, `report`
     }, required=("controller", "duration_s", "transmissions", "events_by_reason", "tracking", "inter_event_s",

@@ -12,7 +12,7 @@ from sea_hil.recorder.reader import SessionData, read_session
 from sea_hil.report.completeness import NodeCounters, completeness_lines
 from sea_hil.report.figures import histogram_cdf_figure, inter_event_figure, series_figure, tracking_figure
 from sea_hil.report.limbs import limb_view, recorded_limbs
-from sea_hil.report.session_summary import session_summary, tracking_arrays
+from sea_hil.report.session_summary import recorded_lockstep, session_summary, tracking_arrays
 from sea_hil.report.summary import write_summary
 from sea_hil.stats.can_bits import nominal_bits
 
@@ -204,6 +204,7 @@ def run_report(path: Path, out: Path, node_counters: NodeCounters | None = None)
     data = read_session(path)
     session = data.metadata.get("sea-hil.session", {})
     summary = session_summary(data, session.get("controller", "et"), node_counters)
+    summary["lockstep"] = recorded_lockstep(data)   # as `run` says it (the table's mode line, the verdict's rules)
     write_report_figures(data, out)
     write_summary(out / "summary.json", summary)
     (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")

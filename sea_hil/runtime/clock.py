@@ -44,6 +44,7 @@ class EdgeSync(Protocol):
     the edge waits for the controller."""
 
     congestion_control: zenoh.CongestionControl
+    lockstep: bool      # simulated time (the edge's final /stats says so: a recording's kind of run)
 
     def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]: ...
 
@@ -180,6 +181,7 @@ class RealTimePacer:
 class RealTimeEdgeSync:
     """Edge in real time: setpoints/voltages are handled as they arrive (`EdgeNode.on_arrival`); nothing waits."""
     congestion_control = zenoh.CongestionControl.DROP   # a late control message is worth less than a fresh one
+    lockstep = False
 
     def __init__(self, edge: Any) -> None:
         self.edge = edge

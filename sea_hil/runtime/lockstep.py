@@ -105,6 +105,7 @@ CONGESTION = zenoh.CongestionControl.BLOCK
 
 class LockstepEdgeSync:
     congestion_control = CONGESTION
+    lockstep = True
 
     def __init__(self, edge: Any, resend_s: float) -> None:
         self.edge = edge

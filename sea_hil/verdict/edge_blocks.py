@@ -40,7 +40,7 @@ def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
     det: dict[str, Any] = {}
     timing: dict[str, Any] = {}
     for k in sorted(edge):
-        if k in ("key", "final", "node", "t_ns"):   # the stats record's envelope (t_ns: the writer's clock)
+        if k in ("key", "final", "node", "t_ns", "lockstep"):   # the stats record's envelope (t_ns: the writer's clock)
             continue
         if k in EDGE_TIMING_KEYS or k.startswith(EDGE_TIMING_PREFIXES):
             if not k.startswith("latency_"):
