@@ -616,7 +616,8 @@ class EdgeCore:
                    **percentiles_us("apply_latency", c.apply_latency, ("p50", "p99", "max")),
                    **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
                    loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
-                   uplink_pending=pub.uplink.pending, **latch_stats(self.latch_log.latches, self.first_sample_t_ns))
+                   uplink_pending=pub.uplink.pending, **latch_stats(self.latch_log.latches, self.first_sample_t_ns,
+                                                                  self.node_id))
         if self.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
             out.update(self.events.stats(), **self.events.fallback_stats())
         return out

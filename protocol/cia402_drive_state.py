@@ -1,7 +1,8 @@
 """A CiA 402 node's drive state in the sea profile's terms (a `Heartbeat`: `DriverState` and `ErrorFlags`), from the
 frames a bus monitor decodes (`protocol.cia402_decode`): one rule for the report's latches
-(sea_hil/report/drive_faults.py), the live view's `/live/driver` (sea_hil/live/view.py) and the ROS 2 export's
-`/diagnostics` (sea_hil/ros2/convert.py), so none of them reads a cia402 bus through the DBC (a TPDO of a node whose
+(sea_hil/report/drive_faults.py), the edge's own latch count (controller/cia402_master.py: a recording without a CAN
+tap), the live view's `/live/driver` (sea_hil/live/view.py) and the ROS 2 export's `/diagnostics`
+(sea_hil/ros2/convert.py), so none of them reads a cia402 bus through the DBC (a TPDO of a node whose
 COB-ID has the DBC's HEARTBEAT command bits would be misread as a heartbeat).
 
 Each statusword (a TPDO mapping 0x6041) gives one state: FAULT for CiA 402 FAULT or FAULT REACTION ACTIVE, with the
@@ -29,14 +30,20 @@ class Cia402DriveStates:
 
     def on_frame(self, d: Decoded) -> Heartbeat | None:
         if d.kind == "EMCY":
-            flag = FLAG_OF_CODE.get(d.values.get("error_code", 0), ErrorFlags(0))
-            self._flags[d.node_id] = self._flags.get(d.node_id, ErrorFlags(0)) | flag
+            self.on_emcy(d.node_id, d.values.get("error_code", 0))
             return None
         sw = d.values.get("statusword")
-        if sw is None:
-            return None
+        return None if sw is None else self.on_statusword(d.node_id, sw)
+
+    def on_emcy(self, node_id: int, error_code: int) -> None:
+        """An EMCY of the node: its error code's flag joins the current fault's."""
+        flag = FLAG_OF_CODE.get(error_code, ErrorFlags(0))
+        self._flags[node_id] = self._flags.get(node_id, ErrorFlags(0)) | flag
+
+    def on_statusword(self, node_id: int, sw: int) -> Heartbeat:
+        """The state a statusword of the node reports (module docstring)."""
         if sw & 0x4F in FAULT_STATES:
-            return Heartbeat(d.node_id, DriverState.FAULT, self._flags.get(d.node_id, ErrorFlags(0)), 0, 0, 0)
-        self._flags.pop(d.node_id, None)
+            return Heartbeat(node_id, DriverState.FAULT, self._flags.get(node_id, ErrorFlags(0)), 0, 0, 0)
+        self._flags.pop(node_id, None)
         state = DriverState.RUNNING if sw & 0x6F == OPERATION_ENABLED else DriverState.INIT
-        return Heartbeat(d.node_id, state, ErrorFlags(0), 0, 0, 0)
+        return Heartbeat(node_id, state, ErrorFlags(0), 0, 0, 0)

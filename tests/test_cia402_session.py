@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from sea_hil.recorder.reader import read_session
+from sea_hil.report.session_summary import session_summary
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
@@ -73,7 +74,8 @@ def test_a_latched_drive_fault_ends_the_session_invalid(tmp_path: Path) -> None:
     """The forced start pose (tests/test_verdict.py's, past the input check) on a 2 s gait: both nodes latch a
     position-limit FAULT at their first samples, the lead-in's answers all fall outside the setpoint envelope, and
     the session still ends after its cycles (the edge had re-anchored on those refused answers and run past the end
-    until the 66 s budget) with verdict invalid: each node's fault, its time and flags; `--strict` exits 3."""
+    until the 66 s budget) with verdict invalid: each node's fault, its time and flags; `--strict` exits 3. The edge
+    counts the same latches from the statuswords it receives (a recording without a CAN tap still says so)."""
     cfg = tmp_path / "forced.toml"
     cfg.write_text("[trajectory]\nperiod_s = 2.0\n[plant]\ninitial_theta_rad = [0.9, 1.3]\n")
     out = tmp_path / "forced"
@@ -91,3 +93,14 @@ def test_a_latched_drive_fault_ends_the_session_invalid(tmp_path: Path) -> None:
     lead_in_s = s["lead_in"]["duration_s"]
     for r in faults:     # at the first samples, latched to the end (lead-in + cycle)
         assert 0.0 <= r["t_s"] <= 0.1 and r["in_fault_s"] > lead_in_s + 1.9
+    # without the CAN tap (`sea-hil record` without `--can`) the edge's own latch count, from the same statuswords
+    data = read_session(out / "session.mcap")
+    data.messages.pop("/can/raw")
+    untapped = session_summary(data, "et")
+    assert s["edge"]["drive_latches"] == 2 and untapped["verdict"]["status"] == "invalid"
+    edge = [(f["source"], f["node_id"], f["flags"], f["cleared"]) for f in untapped["drive_faults"]]
+    assert edge == [("edge", 1, ["POSITION_LIMIT"], False), ("edge", 2, ["POSITION_LIMIT"], False)]
+    for f, r in zip(untapped["drive_faults"], faults, strict=True):
+        # the same statusword, within two SYNC periods (1 ms each): the tap counts from the first frame, the edge
+        # from its first sample, and stamps it with the sample before the one its SYNC completes
+        assert abs(f["t_s"] - r["t_s"]) <= 0.002 + 1e-9, (f, r)
