@@ -98,6 +98,8 @@ class Cia402EdgeNode(EdgeNode):
         running = self.master.phase == "run"
         self._send_frames(self.master.receive(Frame(msg.arbitration_id, bytes(msg.data))))
         core = self.core
+        if self.master.drive_state is not None:   # every latch counted, as from the sea profile's heartbeats
+            core.latch_log.on_heartbeat(core.sample_t_ns, self.master.drive_state)
         if running and self.master.faulted and core.driver_state is not DriverState.FAULT:
             core.driver_state = DriverState.FAULT    # the edge core clears it as the sea profile's
             codes = set(self.master.emcy_code.values())

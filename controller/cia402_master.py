@@ -4,7 +4,8 @@ wait for both boot-ups, configure by SDO (RPDO 3, target voltage, to transmissio
 arrival as in the sea profile; modes of operation -1, the paper's voltage input), walk the CiA 402 state machine
 (shutdown, switch on, enable operation), NMT start. Then per SYNC: the SYNC frame out, TPDO 2 and 3 of both nodes in
 (position, velocity, spring deflection, nut velocity: the inner loop's measurement), one RPDO 3 per node out with
-the voltages. A FAULT statusword or an EMCY is counted; `fault_reset()` clears it the way the edge clears the sea
+the voltages. A FAULT statusword or an EMCY is counted, each statusword's drive state (`drive_state`,
+`protocol.cia402_drive_state`) is the edge's latch count's input; `fault_reset()` clears it the way the edge clears the sea
 profile's errors (controlword bit 7 rising edge, then the walk again). PDO layouts and units come from
 `protocol.cia402_od`, the source of the drive's EDS."""
 from __future__ import annotations
@@ -13,6 +14,8 @@ import struct
 from dataclasses import dataclass, field
 from typing import NamedTuple
 
+from sea_hil.protocol.can_frames import Heartbeat
+from sea_hil.protocol.cia402_drive_state import Cia402DriveStates
 from sea_hil.protocol.cia402_od import MODE_VOLTAGE, PDO_INVALID
 
 
@@ -60,6 +63,8 @@ class Cia402Master:
     counters: MasterCounters = field(default_factory=MasterCounters)
     statusword: dict[int, int] = field(default_factory=dict)
     emcy_code: dict[int, int] = field(default_factory=dict)     # the newest EMCY error code per node
+    drive_states: Cia402DriveStates = field(default_factory=Cia402DriveStates)
+    drive_state: Heartbeat | None = None   # the drive state the last frame received reported (its statusword), else None
     _booted: set[int] = field(default_factory=set)
     _queue: dict[int, list[Frame]] = field(default_factory=dict)   # per node: SDO writes still to send, in order
     _parts: dict[int, bytes] = field(default_factory=dict)          # this SYNC's TPDO 2 / 3 data by COB-ID
@@ -73,6 +78,7 @@ class Cia402Master:
         """One frame from the bus; the frames to send in answer (the next SDO write, NMT start)."""
         node = f.can_id & 0x7F
         kind = f.can_id & ~0x7F
+        self.drive_state = None
         if node not in self.node_ids:
             return []
         if len(f.data) < MIN_BYTES.get(kind, 0):   # malformed: rejected and counted, never raised out of the node
@@ -97,8 +103,10 @@ class Cia402Master:
             self.counters.emcys += 1
             if len(f.data) >= 2:
                 self.emcy_code[node] = struct.unpack_from("<H", f.data)[0]
+                self.drive_states.on_emcy(node, self.emcy_code[node])
         elif kind == 0x180:
             self.statusword[node] = struct.unpack_from("<H", f.data)[0]
+            self.drive_state = self.drive_states.on_statusword(node, self.statusword[node])
             if self.statusword[node] & 0x4F == 0x08:
                 self.counters.faults += 1
         elif kind in (0x280, 0x380):

@@ -197,6 +197,7 @@ class SetpointIntake:
         self.seen_setpoints: set[int] = set()
         self.last_rx_ns = 0                       # sample time of the newest accepted setpoint/voltage
         self.last_setpoint_ns: int | None = None  # sample time of the newest applied one
+        self.on_refused: Callable[[int, int], None] | None = None   # (state seq, sample ns) of an envelope refusal
 
     def submit(self, data: bytes, sample_t_ns: int, sent_at: dict[int, int], rx_ns: int | None,
                channel: str | None = None) -> bool:
@@ -228,6 +229,8 @@ class SetpointIntake:
         self.last_rx_ns = sample_t_ns
         if isinstance(p, SetpointPayload) and self.envelope is not None \
                 and not self.envelope.admit(p.seq, p.deflection_m):
+            if self.on_refused is not None:   # an answer all the same: the edge trigger's anchor handshake counts it
+                self.on_refused(p.state_seq, sample_t_ns)
             return False        # out of the envelope: seen (lockstep goes on), counted, never applied
         at = self.downlink.submit(sample_t_ns, len(data))
         if at is not None:
@@ -382,6 +385,8 @@ class EdgeCore:
                                      int(round(2 * cfg.trigger.max_inter_event_s * 1e9)), restart_possible,
                                      self.envelope, int(round(cfg.safety.setpoint.max_answer_age_s * 1e9)), wall_ns,
                                      inner)
+        if self.events is not None:
+            self.intake.on_refused = self.events.heard
         self.voltage: tuple[float, float] | None = None    # the newest tunnelled voltage (inner = remote)
         self.driver_state = DriverState.INIT
         self.driver_flags = ErrorFlags(0)         # the driver's error flags from its latest HEARTBEAT
@@ -611,7 +616,8 @@ class EdgeCore:
                    **percentiles_us("apply_latency", c.apply_latency, ("p50", "p99", "max")),
                    **percentiles_us("loop", c.loop, ("p50", "p99", "max")),
                    loop_count=c.loop.count, loop_overruns=c.loop_overruns, uplink_out_of_order=c.uplink_out_of_order,
-                   uplink_pending=pub.uplink.pending, **latch_stats(self.latch_log.latches, self.first_sample_t_ns))
+                   uplink_pending=pub.uplink.pending, **latch_stats(self.latch_log.latches, self.first_sample_t_ns,
+                                                                  self.node_id))
         if self.events is not None:     # the trigger at the edge (issue 16); absent on the paper's path
             out.update(self.events.stats(), **self.events.fallback_stats())
         return out

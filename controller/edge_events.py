@@ -152,6 +152,10 @@ class EdgeEvents:
         self._last_hold_ns = sampled        # the held setpoint is the answer to the state of that sample
         self.generator.answered(state_seq, now_ns, sampled)
 
+    def heard(self, state_seq: int, now_ns: int) -> None:
+        """The controller answered `state_seq` but the edge refused the answer (the setpoint envelope)."""
+        self.generator.heard(state_seq, now_ns)
+
     def drive_cleared(self, sample_ns: int) -> bool:
         """The edge has just cleared the drive's safe state (CLEAR_ERRORS sent). If that happened inside the current
         anchor's lead-in, the lead-in's clock ran while the drive could not follow (its first commands met the

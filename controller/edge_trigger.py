@@ -17,7 +17,8 @@ the controller counts its t from the same state (controller/remote_core.py), so 
 same t. Until the controller has answered the anchor nothing else is published (ET; TT goes on publishing); when
 no answer to it comes within `anchor_timeout_ns` (a controller that was not listening yet, a lost state or answer)
 the edge re-anchors on its current sample, and also when no answer at all came for `reanchor_after_ns` (a restarted
-controller: the edge has stopped commanding by then). Before this, the edge anchored on its own first sample whether
+controller: the edge has stopped commanding by then); an answer the edge refused (the setpoint envelope) counts for
+both (`heard`). Before this, the edge anchored on its own first sample whether
 or not the controller received it, so a controller that started listening later ran the trajectory shifted by that
 time (issue 16's real-time failure, docs/studies/et-over-links.md).
 
@@ -179,6 +180,17 @@ class EdgeEventGenerator:
             del self.outstanding[0]
         if self._anchoring:
             self.anchor_seq, self._anchoring = seq, False
+
+    def heard(self, state_seq: int, now_ns: int) -> None:
+        """An answer to state `state_seq` arrived at `now_ns` and the edge refused it (outside the setpoint envelope):
+        the controller is listening and has anchored where the edge did, so the anchor handshake and the silence
+        rule (`reanchor_after_ns`) count it. Without this a drive that cannot follow (latched in a fault that needs
+        the user) made every answer of the lead-in too large, the edge re-anchored each `reanchor_after_ns` and the
+        cycles never began (a lockstep session ran on past its end). The in-flight gate, the round trip and the
+        outstanding states (the local fallback) do not count it: nothing was applied."""
+        self.last_answer_ns = max(self.last_answer_ns, now_ns)
+        if not self.anchored and state_seq == self.anchor_seq:
+            self.anchored = True
 
     def answered(self, state_seq: int, now_ns: int, sampled_ns: int) -> None:
         """A setpoint answering state `state_seq` (sampled at `sampled_ns`) was applied at `now_ns`."""

@@ -79,6 +79,10 @@ class Cia402Decoder:
             self._reset(n)
 
     # ---- what the bus changed -------------------------------------------------------------------------------------
+    def fresh(self) -> Cia402Decoder:
+        """A second monitor of the same bus, at the dictionary's defaults (each reader follows the bus itself)."""
+        return Cia402Decoder(self.objects, self.node_ids)
+
     def _reset(self, node: int) -> None:
         self._values[node] = {k: int(e.default_for(node)) for k, e in self._entries.items() if k[0] in _TRACKED}
         self._pending.pop(node, None)

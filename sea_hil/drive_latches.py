@@ -8,7 +8,8 @@ drive reported during it, its state ESTOP if any heartbeat of it said so. Pure: 
 
 In a stats record (flat numbers, sea_hil/stats/schema.py): `drive_latches` (how many), and for the first
 `DETAILED` of them `drive_latch_<i>_t_ns`, `_until_t_ns` (the end, or the last heartbeat while still latched),
-`_state` (`DriverState` value), `_flags` (`ErrorFlags` bits), `_cleared` (0 / 1), i from 1; `drive_latch_origin_t_ns`
+`_state` (`DriverState` value), `_flags` (`ErrorFlags` bits), `_cleared` (0 / 1), and `_node_id` for a latch of
+another node than the record's (a cia402 limb's knee), i from 1; `drive_latch_origin_t_ns`
 (the time a latch's `t_s` counts from: the edge's first sample) when there is a latch.
 """
 from __future__ import annotations
@@ -57,8 +58,9 @@ class LatchLog:
             del self._open[hb.node_id]
 
 
-def latch_stats(latches: list[Latch], origin_t_ns: int) -> dict[str, int]:
-    """The stats record fields of `latches` (module docstring)."""
+def latch_stats(latches: list[Latch], origin_t_ns: int, node_id: int | None = None) -> dict[str, int]:
+    """The stats record fields of `latches` (module docstring); a latch of another node than the record's
+    `node_id` (a cia402 limb's knee node) also carries its `_node_id`."""
     out = {COUNT_KEY: len(latches)}
     if latches:
         out[ORIGIN_KEY] = origin_t_ns
@@ -66,16 +68,19 @@ def latch_stats(latches: list[Latch], origin_t_ns: int) -> dict[str, int]:
         out.update({f"drive_latch_{i}_t_ns": la.t_ns, f"drive_latch_{i}_until_t_ns": la.until_t_ns,
                     f"drive_latch_{i}_state": int(la.state), f"drive_latch_{i}_flags": int(la.flags),
                     f"drive_latch_{i}_cleared": int(la.cleared)})
+        if node_id is not None and la.node_id != node_id:
+            out[f"drive_latch_{i}_node_id"] = la.node_id
     return out
 
 
 def latches_of_stats(stats: dict[str, Any]) -> tuple[list[Latch], int]:
-    """(the detailed latches, the origin time) of an edge's stats record (`latch_stats`); node id: the record's."""
+    """(the detailed latches, the origin time) of an edge's stats record (`latch_stats`); node id: the latch's
+    `_node_id`, else the record's."""
     node = int(stats.get("node_id", 1))
     out = []
     for i in range(1, min(int(stats.get(COUNT_KEY, 0)), DETAILED) + 1):
         p = f"drive_latch_{i}_"
-        out.append(Latch(node, int(stats[p + "t_ns"]), DriverState(int(stats[p + "state"])),
+        out.append(Latch(int(stats.get(p + "node_id", node)), int(stats[p + "t_ns"]), DriverState(int(stats[p + "state"])),
                          ErrorFlags(int(stats[p + "flags"])), int(stats[p + "until_t_ns"]),
                          bool(stats[p + "cleared"])))
     return out, int(stats.get(ORIGIN_KEY, 0))

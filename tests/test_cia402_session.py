@@ -13,6 +13,7 @@ from pathlib import Path
 import pytest
 
 from sea_hil.recorder.reader import read_session
+from sea_hil.report.session_summary import session_summary
 
 pytestmark = pytest.mark.slow
 REPO = Path(__file__).resolve().parents[1]
@@ -67,3 +68,39 @@ def test_two_limbs_each_on_its_own_bus_track_as_one(tmp_path: Path, cia402_run: 
     assert collections.Counter(c.payload["node_id"] for c in commands) == \
         {1: one["edge"]["cia402_syncs"], 5: one["edge"]["cia402_syncs"]}
     assert two["verdict"]["status"] == "ok"
+
+
+def test_a_latched_drive_fault_ends_the_session_invalid(tmp_path: Path) -> None:
+    """The forced start pose (tests/test_verdict.py's, past the input check) on a 2 s gait: both nodes latch a
+    position-limit FAULT at their first samples, the lead-in's answers all fall outside the setpoint envelope, and
+    the session still ends after its cycles (the edge had re-anchored on those refused answers and run past the end
+    until the 66 s budget) with verdict invalid: each node's fault, its time and flags; `--strict` exits 3. The edge
+    counts the same latches from the statuswords it receives (a recording without a CAN tap still says so)."""
+    cfg = tmp_path / "forced.toml"
+    cfg.write_text("[trajectory]\nperiod_s = 2.0\n[plant]\ninitial_theta_rad = [0.9, 1.3]\n")
+    out = tmp_path / "forced"
+    done = subprocess.run([sys.executable, "-m", "sea_hil.cli", "run", "--can-profile", "cia402", "--lockstep",
+                           "--controller", "et", "--cycles", "1", "--config", str(cfg), "--out", str(out), "--quiet",
+                           "--no-figures", "--can", "virtual:cia402-session-forced", "--allow-unsafe-start",
+                           "--strict"], cwd=REPO, timeout=600, capture_output=True, text=True)
+    assert done.returncode == 3, done.stderr[-2000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["verdict"]["status"] == "invalid" and s["edge"]["setpoints_out_of_envelope"] > 0
+    assert s["edge"]["edge_reanchors"] == 0 and s["duration_s"] < 2.1      # the cycles began and ended on time
+    faults = [r for r in s["verdict"]["reasons"] if r["code"] == "drive_fault"]
+    assert [(r["node_id"], r["flags"], r["cleared"]) for r in faults] == \
+        [(1, ["POSITION_LIMIT"], False), (2, ["POSITION_LIMIT"], False)]
+    lead_in_s = s["lead_in"]["duration_s"]
+    for r in faults:     # at the first samples, latched to the end (lead-in + cycle)
+        assert 0.0 <= r["t_s"] <= 0.1 and r["in_fault_s"] > lead_in_s + 1.9
+    # without the CAN tap (`sea-hil record` without `--can`) the edge's own latch count, from the same statuswords
+    data = read_session(out / "session.mcap")
+    data.messages.pop("/can/raw")
+    untapped = session_summary(data, "et")
+    assert s["edge"]["drive_latches"] == 2 and untapped["verdict"]["status"] == "invalid"
+    edge = [(f["source"], f["node_id"], f["flags"], f["cleared"]) for f in untapped["drive_faults"]]
+    assert edge == [("edge", 1, ["POSITION_LIMIT"], False), ("edge", 2, ["POSITION_LIMIT"], False)]
+    for f, r in zip(untapped["drive_faults"], faults, strict=True):
+        # the same statusword, within two SYNC periods (1 ms each): the tap counts from the first frame, the edge
+        # from its first sample, and stamps it with the sample before the one its SYNC completes
+        assert abs(f["t_s"] - r["t_s"]) <= 0.002 + 1e-9, (f, r)

@@ -99,6 +99,25 @@ def test_no_answer_for_the_setpoint_timeout_reanchors():
     assert _on_track(gen, 500 * MS) is TriggerReason.INITIAL and gen.reanchors == 1 and not gen.anchored
 
 
+def test_refused_answers_keep_the_anchor_and_the_link_alive():
+    """An answer the edge refuses (outside the setpoint envelope: a drive latched in a fault cannot follow, so the
+    lead-in's setpoints grow) is still an answer: it confirms the anchor and holds off the silence re-anchor, which
+    had restarted the lead-in every `reanchor_after_ns` so the cycles never began; the answer in flight stays."""
+    gen = _gen()
+    assert _on_track(gen, 0) is TriggerReason.INITIAL
+    gen.sent(1, 0)
+    gen.heard(1, 0)                                    # the anchor's answer, refused
+    assert gen.anchored and gen.awaiting_seq == 1 and gen.rtt_ns is None and gen.outstanding == [(1, 0)]
+    gen.reanchor_after_ns = 500 * MS
+    for k in range(1, 100):                            # 1 s of answers, every one refused: t runs on
+        t_ns = k * 10 * MS
+        if _on_track(gen, t_ns, offset=0.3) is not None:
+            gen.sent(t_ns // MS + 1, t_ns)
+        gen.heard(t_ns // MS + 1, t_ns)
+    assert gen.reanchors == 0 and gen.time_of(990 * MS) == 990 * MS
+    assert _on_track(gen, 1500 * MS, offset=0.3) is TriggerReason.INITIAL and gen.reanchors == 1   # silence: still
+
+
 def _summary(link: str, opts: EngineOptions) -> dict:
     ov = {"link": {"seed": 1}}
     if link:

@@ -4,6 +4,7 @@ while writing: one line, exit 2, nothing left behind). Recordings made here with
 from __future__ import annotations
 
 import json
+import struct
 import subprocess
 import sys
 from pathlib import Path
@@ -15,11 +16,15 @@ from mcap.writer import Writer
 from ros2_bag import export, t_ns
 
 from sea_hil.cli import main
+from sea_hil.config.loader import load_config
 from sea_hil.errors import RecordingError
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat, VoltageCmd
+from sea_hil.protocol.cia402_od import EMCY_CODES
 from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.ros2.convert import DIAGNOSTICS, Converter
 
 REPO = Path(__file__).resolve().parent.parent
 T0_NS = 1_700_000_000_000_000_000
@@ -143,3 +148,26 @@ def test_the_bench_script_times_the_cli_on_a_recording(tmp_path: Path):
     (rec,) = json.loads(out.read_text())
     assert (rec["figure"], rec["runs"], rec["unit"]) == ("ros2", 1, "s") and rec["median"] > 0
     assert rec["command"].startswith("python -m bench.bench_ros2_export") and rec["details"][0]["bag_bytes"] > 0
+
+
+def test_a_cia402_recordings_driver_diagnostics_come_from_statuswords() -> None:
+    """A cia402 session (nodes 7 and 8: COB-IDs whose low five bits are the DBC's HEARTBEAT command): `/diagnostics`
+    has one driver status per statusword TPDO (FAULT with the EMCY's flag, then cleared), none for the TPDO 2 that
+    the DBC would read as driver 20's FAULT heartbeat (position 2 urad, velocity 0), and every frame is still a
+    can_msgs/Frame."""
+    tpdo2 = struct.pack("<ii", 2, 0)
+    hb = SeaCodec(fd=None).decode_raw(0x287, tpdo2, 8)           # the hazard: the DBC's reading of it
+    assert isinstance(hb, Heartbeat) and (hb.node_id, hb.state) == (20, DriverState.FAULT)
+    frames = [(0x187, bytes([0x27, 0x00, 0xFF])), (0x287, tpdo2),
+              (0x87, struct.pack("<HB5x", EMCY_CODES[ErrorFlags.POSITION_LIMIT], 0x01)),
+              (0x187, bytes([0x08, 0x00, 0xFF])), (0x187, bytes([0x27, 0x00, 0xFF]))]
+    raw = [RecordedMessage(k * 1_000_000, k * 1_000_000, {"can_id": c, "dlc": len(d), "data_hex": d.hex(),
+                                                           "direction": "rx", "is_extended": False, "node_id": 7}, k)
+           for k, (c, d) in enumerate(frames)]
+    cfg = load_config(overrides={"can": {"profile": "cia402", "cia402": {"node_ids": [7, 8]}}})
+    out = list(Converter(SessionData(messages={"/can/raw": raw}), cfg).can_frames())
+    diags = [m.message["status"][0] for m in out if m.type_name == DIAGNOSTICS]
+    assert [(d["name"], d["message"], d["level"]) for d in diags] == [
+        ("driver7", "RUNNING, error flags none", 0), ("driver7", "FAULT, error flags POSITION_LIMIT", 2),
+        ("driver7", "RUNNING, error flags none", 0)]
+    assert sum(m.type_name != DIAGNOSTICS for m in out) == len(frames)

@@ -6,12 +6,14 @@ import argparse
 import json
 import math
 import socket
+import struct
 from pathlib import Path
+from typing import Any, cast
 
 import pytest
 
 from sea_hil.config.live import LiveConfig
-from sea_hil.config.loader import load_config
+from sea_hil.config.loader import config_to_toml, load_config
 from sea_hil.config.verdict import VerdictConfig
 from sea_hil.live import layout
 from sea_hil.live.channels import CHANNELS, LOG_LEVELS
@@ -19,6 +21,12 @@ from sea_hil.live.cli import add_live_args, live_overrides
 from sea_hil.live.view import LiveView
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Heartbeat
+from sea_hil.protocol.cia402_decode import decoder_for
+from sea_hil.protocol.cia402_od import EMCY_CODES
+from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.meta import CONFIG_ATTACHMENT
+from sea_hil.recorder.process import ATTACHMENT, CANS, _apply
+from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.verdict.rules import verdict
 
 REPO = Path(__file__).resolve().parent.parent
@@ -267,3 +275,61 @@ def test_a_stats_record_the_verdict_cannot_read_is_shown_counted_and_not_judged(
     assert [m.topic for m in out] == ["/live/node_stats"] * 2 and v.ignored == 2
     assert [r["code"] for r in v.verdict.judge()["reasons"]] == ["lost_setpoints"]   # the last readable record
     assert [m.topic for m in v.finish()] == ["/live/link", "/live/bus", "/live/verdict", "/live/events"]
+
+
+def _cia402_frames() -> list[tuple[int, bytes]]:
+    """Node 7 of a cia402 bus (COB-IDs whose low five bits are the DBC's HEARTBEAT command, 7): enabled, a TPDO 2 at
+    rest near zero (position 2 urad, velocity 0: the bytes of a DBC heartbeat in FAULT), an EMCY for the position
+    limit, FAULT, fault reset back to OPERATION ENABLED."""
+    emcy = struct.pack("<HB5x", EMCY_CODES[ErrorFlags.POSITION_LIMIT], 0x01)
+    return [(0x187, bytes([0x27, 0x00, 0xFF])), (0x287, struct.pack("<ii", 2, 0)), (0x87, emcy),
+            (0x187, bytes([0x08, 0x00, 0xFF])), (0x187, bytes([0x27, 0x00, 0xFF]))]
+
+
+def test_a_cia402_bus_reports_driver_state_from_statuswords_not_the_dbc():
+    """A cia402 recording's driver state (sea_hil/live/view.py `follow_canopen`): from the statusword TPDOs and EMCYs
+    (protocol.cia402_drive_state, the report's rule); the TPDO 2 that the DBC would read as driver 20's FAULT
+    heartbeat gives no /live/driver message."""
+    frames = _cia402_frames()
+    hb = SeaCodec(fd=None).decode_raw(0x287, frames[1][1], 8)     # the hazard: the DBC's reading of the TPDO 2
+    assert isinstance(hb, Heartbeat) and (hb.node_id, hb.state) == (20, DriverState.FAULT)
+    v = LiveView(bitrate_bps=1_000_000)
+    v.follow_canopen(decoder_for(load_config(overrides={"can": {"profile": "cia402",
+                                                                "cia402": {"node_ids": [7, 8]}}})))
+    drivers, logs = [], []
+    for i, (can_id, data) in enumerate(frames):
+        out = v.feed("/can/raw", i * MS, {"can_id": can_id, "dlc": len(data), "data_hex": data.hex(),
+                                          "direction": "rx", "is_extended": False, "node_id": 7})
+        drivers += [m.message for m in out if m.topic == "/live/driver"]
+        logs += [m.message["message"] for m in out if m.topic == "/live/events"]
+    assert [(d["node_id"], d["state_name"], d["err_position_limit"]) for d in drivers] == \
+        [(7, "RUNNING", False), (7, "FAULT", True), (7, "RUNNING", False)]
+    assert logs == ["state RUNNING", "state FAULT (was RUNNING)",
+                    "error flags set: POSITION_LIMIT (rejected 0, overruns 0)", "state RUNNING (was FAULT)",
+                    "error flags cleared: POSITION_LIMIT"]
+    assert v.ignored == 0 and v.bus.frames == len(frames)
+
+
+class _Feed:
+    """A live feed without a server: the recorder child's `LiveFeed.view` and `feed`, collecting what it makes."""
+
+    def __init__(self) -> None:
+        self.view = LiveView(bitrate_bps=1_000_000)
+        self.out: list = []
+
+    def feed(self, topic: str, log_time_ns: int, payload: dict) -> None:
+        self.out += self.view.feed(topic, log_time_ns, payload)
+
+
+@pytest.mark.parametrize("profile", ["sea", "cia402"])
+def test_the_recorder_child_points_the_live_view_at_its_sessions_profile(tmp_path: Path, profile: str):
+    """The recorder child (sea_hil/recorder/process.py) hands the live view the bus's CANopen decoder when the
+    attached config is a cia402 session's: its statuswords make /live/driver; the sea profile keeps the DBC."""
+    cfg = load_config(overrides={"can": {"profile": profile, "cia402": {"node_ids": [7, 8]}}})
+    feed = _Feed()
+    frames = tuple(RawFrame(k * MS, c, len(d), d) for k, (c, d) in enumerate(_cia402_frames()))
+    with SessionRecorder(tmp_path / "s.mcap") as rec:
+        _apply(rec, CanTap(), [(ATTACHMENT, CONFIG_ATTACHMENT, config_to_toml(cfg).encode(), "text/plain", 0),
+                               (CANS, frames)], cast(Any, feed))
+    drivers = [(m.message["node_id"], m.message["state_name"]) for m in feed.out if m.topic == "/live/driver"]
+    assert drivers == ([(7, "RUNNING"), (7, "FAULT"), (7, "RUNNING")] if profile == "cia402" else [(20, "FAULT")])

@@ -228,6 +228,8 @@ def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: 
                 rec.add_attachment(*op[1:])
                 if op[1] == CONFIG_ATTACHMENT:   # the session's drive limits: each latch explained in /log/faults
                     tap.configure(bytes(op[2]).decode("utf-8", "replace"))
+                    if live is not None and tap.canopen is not None:   # a cia402 bus: driver state by statusword
+                        live.view.follow_canopen(tap.canopen.fresh())
             elif kind == CLOSE:
                 live_counts = live.counters() if live is not None else {}
                 rec.close(final_stats={**op[1], **tap.counters(), **live_counts})  # the child's CAN counts rule

@@ -16,9 +16,9 @@ not count it. An edge's record details its first `DETAILED` latches (`drive_latc
 
 A cia402 session (docs/cia402.md) has no DBC heartbeat: a latch is read from the nodes' statusword TPDOs instead
 (CiA 402 FAULT or FAULT REACTION ACTIVE; a statusword out of it ends the latch, as the fault reset does), its
-flags from the EMCY codes the node sent since its last statusword outside FAULT (`EMCY_CODES` back to the drive's
-error flags), `node_id` the CANopen node's. The frames are decoded as the bus configured them
-(`protocol.cia402_decode`).
+flags from the EMCY codes the node sent since its last statusword outside FAULT (`protocol.cia402_drive_state`, the
+live view's and the ROS 2 export's rule too), `node_id` the CANopen node's. The frames are decoded as the bus
+configured them (`protocol.cia402_decode`).
 """
 from __future__ import annotations
 
@@ -27,14 +27,11 @@ from typing import Any
 from sea_hil.drive_latches import LatchLog, latch_entry, latches_of_stats
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_codec import SeaCodec, load_database
-from sea_hil.protocol.can_frames import CMD_MASK, DriverState, ErrorFlags, Heartbeat
+from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
 from sea_hil.protocol.cia402_decode import Cia402Decoder
-from sea_hil.protocol.cia402_od import EMCY_CODES
+from sea_hil.protocol.cia402_drive_state import Cia402DriveStates
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.recorder.session_config import canopen_decoder
-
-FLAG_OF_CODE = {code: flag for flag, code in EMCY_CODES.items()}
-CIA402_FAULT_STATES = (0x08, 0x0F)   # statusword & 0x4F: FAULT, FAULT REACTION ACTIVE (CiA 402)
 
 
 def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[int, Heartbeat]]:
@@ -54,25 +51,16 @@ def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[i
 
 
 def _cia402_states(raw: list[RecordedMessage], decoder: Cia402Decoder) -> list[tuple[int, Heartbeat]]:
-    """A cia402 recording's statusword TPDOs as the latch reader's (time, state) pairs: FAULT with the flags of the
-    node's EMCYs since its last statusword outside FAULT, else RUNNING (module docstring)."""
+    """A cia402 recording's statusword TPDOs as the latch reader's (time, state) pairs (`Cia402DriveStates`)."""
     out: list[tuple[int, Heartbeat]] = []
-    flags: dict[int, ErrorFlags] = {}
+    states = Cia402DriveStates()
     for m in raw:
         p = m.payload
         try:
             d = decoder.decode(int(p["can_id"]), bytes.fromhex(p["data_hex"]), extended=bool(p.get("is_extended")))
         except (KeyError, TypeError, ValueError):
             continue
-        if d.kind == "EMCY":
-            flags[d.node_id] = flags.get(d.node_id, ErrorFlags(0)) | FLAG_OF_CODE.get(d.values.get("error_code", 0),
-                                                                                       ErrorFlags(0))
-        elif "statusword" in d.values:
-            fault = d.values["statusword"] & 0x4F in CIA402_FAULT_STATES
-            hb = Heartbeat(d.node_id, DriverState.FAULT if fault else DriverState.RUNNING,
-                           flags.get(d.node_id, ErrorFlags(0)) if fault else ErrorFlags(0), 0, 0, 0)
-            if not fault:
-                flags.pop(d.node_id, None)
+        if (hb := states.on_frame(d)) is not None:
             out.append((m.log_time_ns, hb))
     return out
 

@@ -8,8 +8,8 @@ torque -k Delta a(theta) of Eq. 4), `joint_states_desired` (the desired angles o
 `setpoint` (sea_hil_msgs: the event-triggered Zenoh traffic), `from_can_bus` (can_msgs/Frame, one per recorded
 frame, ros2_socketcan's topic and type; a CAN FD session: `from_can_bus_fd`, ros2_socketcan_msgs/FdFrame, as
 ros2_socketcan publishes with `enable_can_fd`), and the global `/rosout` (rcl_interfaces/Log: trigger events and
-driver faults) and `/diagnostics` (diagnostic_msgs/DiagnosticArray: driver heartbeats, node statistics, the
-recorder's final counters).
+driver faults) and `/diagnostics` (diagnostic_msgs/DiagnosticArray: driver heartbeats, or in a cia402 session the
+nodes' statusword TPDOs, node statistics, the recorder's final counters).
 
 Times: a message's log time (and publish time) is its source message's MCAP log time, i.e. the recording's clock
 (wall clock in real time, the sample time in lockstep: `sea_hil.recorder.clock`); `header.stamp` (and Log.stamp) is
@@ -32,6 +32,8 @@ from sea_hil.mechanics import LimbParams, limb_params, sea_geometry
 from sea_hil.protocol.can_assembly import unwrap_us
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import Heartbeat
+from sea_hil.protocol.cia402_decode import decoder_for
+from sea_hil.protocol.cia402_drive_state import Cia402DriveStates
 from sea_hil.recorder.meta import META_FINAL
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.ros2.diagnostics import counter_status, hardware_id, heartbeat_status
@@ -126,7 +128,11 @@ class Converter:
 
     def can_frames(self) -> Iterator[BagMessage]:
         """One can_msgs/Frame (FdFrame in a CAN FD session) per `/can/raw` frame, plus one DiagnosticArray per
-        driver HEARTBEAT (decoded through the DBC)."""
+        driver HEARTBEAT (decoded through the DBC); in a cia402 session per statusword TPDO instead, the node's
+        state by `protocol.cia402_drive_state` (EMCYs set its flags; no frame is read through the DBC)."""
+        cfg = self.config
+        canopen = decoder_for(cfg) if cfg is not None and cfg.can.profile == "cia402" else None
+        states = Cia402DriveStates()
         codec = SeaCodec(fd=None)
         not_heartbeat: set[int] = set()
         for m in self.data.messages.get("/can/raw", []):
@@ -148,16 +154,23 @@ class Converter:
                 msg = {"header": header(t, CAN_FRAME_ID), "id": can_id, "is_rtr": False, "is_extended": ext,
                        "is_error": False, "dlc": dlc, "data": data[:8].ljust(8, b"\0")}
                 yield BagMessage(m.log_time_ns, f"{self.limbs.ns(limb)}/from_can_bus", CAN_FRAME, msg, m.sequence)
-            if can_id in not_heartbeat:
-                continue
-            try:
-                d = codec.decode_raw(can_id, data, dlc, is_extended=ext, is_fd=bool(p.get("is_fd", False)))
-            except MalformedFrame:
-                not_heartbeat.add(can_id)
-                continue
-            if not isinstance(d, Heartbeat):
-                not_heartbeat.add(can_id)
-                continue
+            d: Heartbeat | None
+            if canopen is not None:
+                d = states.on_frame(canopen.decode(can_id, data, extended=ext))
+                if d is None:
+                    continue
+            else:
+                if can_id in not_heartbeat:
+                    continue
+                try:
+                    frame = codec.decode_raw(can_id, data, dlc, is_extended=ext, is_fd=bool(p.get("is_fd", False)))
+                except MalformedFrame:
+                    not_heartbeat.add(can_id)
+                    continue
+                if not isinstance(frame, Heartbeat):
+                    not_heartbeat.add(can_id)
+                    continue
+                d = frame
             yield BagMessage(m.log_time_ns, "/diagnostics", DIAGNOSTICS,
                              {"header": header(t), "status": [heartbeat_status(d, self._name(limb, f"driver{d.node_id}"))]}, m.sequence)
 
