@@ -37,6 +37,9 @@ class _Bus:
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         self.sent.append(msg)
 
+    def recv(self, timeout: float | None = None) -> can.Message | None:
+        return None     # the frames reach the node through `handle`, as the shell hands them over
+
 
 def _message(f: MasterFrame) -> can.Message:
     return can.Message(arbitration_id=f.can_id, data=f.data, is_extended_id=False)
@@ -46,8 +49,9 @@ def session(syncs: int) -> tuple[Callable[[], None], Callable[[], None], Callabl
     """(the set-up, one SYNC period, the traffic digest) of a lockstep drive node and master."""
     cfg = load_config(overrides={"can": {"profile": "cia402"}})
     bus = _Bus()
-    plant = Cia402PlantNode(cfg, bus, lockstep=True)   # type: ignore[arg-type]
-    master = Cia402Master(cfg.can.cia402.node_ids[:2])   # type: ignore[arg-type]
+    plant = Cia402PlantNode(cfg, bus, lockstep=True)
+    hip, knee = cfg.can.cia402.node_ids[:2]
+    master = Cia402Master((hip, knee))
     digest = hashlib.sha256()
     k = [0]
 

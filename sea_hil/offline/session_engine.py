@@ -261,16 +261,19 @@ class _Session:
         released, self.released[:] = list(self.released), []
         for data in released:
             p = decode(data)
-            self.rec.state(p, now)   # type: ignore[arg-type]
+            assert isinstance(p, StatePayload)   # the edge core's uplink carries its state payloads only
+            self.rec.state(p, now)
             if p.seq <= self.newest:
                 self.edge.counters.uplink_out_of_order += 1
                 continue
             self.newest = p.seq
-            ans = self.controller.on_state(p, _stamp, lambda: now)   # type: ignore[arg-type]
+            ans = self.controller.on_state(p, _stamp, lambda: now)
             if ans is None:
                 return False
             for _channel, msg in ans.messages:
-                self.rec.setpoint(decode(msg), now)   # type: ignore[arg-type]
+                sp = decode(msg)
+                assert isinstance(sp, SetpointPayload)   # the edge holds the inner loop: setpoints only
+                self.rec.setpoint(sp, now)
                 self.edge.on_downlink(msg)
             if ans.record is not None:
                 self.rec.tracking(ans.record, now)     # as the recorder decodes its JSON (floats round-trip)
