@@ -10,7 +10,9 @@ voltage); the torque the spring puts on the joint, -k Delta dL/dtheta, is 0x2103
 
 Faults reuse the driver firmware's soft-limit logic (`soft_limits.DriveLimits`, restricted to this joint, checked
 on every sample while OPERATION ENABLED, as `DriverCore` does while RUNNING) and its command watchdog rule (no
-target for longer than 0x2012 ms while a target is followed). A fault: FAULT REACTION ACTIVE (0 V from that
+target for longer than 0x2012 ms while a target is followed). The watchdog is armed by the first target written
+after OPERATION ENABLED (CiA 301's RPDO deadline monitoring starts with the first reception; `DriverCore`'s arms as
+its first command takes it to RUNNING): a drive enabled before its master streams targets does not trip. A fault: FAULT REACTION ACTIVE (0 V from that
 instant) until the next sample, then FAULT; fault reset = controlword bit 7 rising edge -> SWITCH ON DISABLED.
 """
 from __future__ import annotations
@@ -64,7 +66,7 @@ class Cia402Axis:
     slave: CanopenSlave = field(init=False)
     state: State = State.NOT_READY
     voltage_v: float = 0.0          # motor voltage commanded now
-    last_target_ns: int = 0
+    last_target_ns: int | None = None   # the newest target written since OPERATION ENABLED (None: none yet)
     warnings: ErrorFlags = ErrorFlags(0)
     fault_flags: ErrorFlags = ErrorFlags(0)
     pending: list[Frame] = field(default_factory=list)   # EMCYs raised inside a write (sent by the limb core)
@@ -135,7 +137,7 @@ class Cia402Axis:
         elif low == 0x0F:                                  # enable operation: 4, 16 (3 + 4 from ready)
             if s in (State.READY_TO_SWITCH_ON, State.SWITCHED_ON, State.QUICK_STOP_ACTIVE):
                 if self.state is not State.OPERATION_ENABLED:
-                    self.last_target_ns = t_ns
+                    self.last_target_ns = None       # the watchdog waits for the first target
                 self.state = State.OPERATION_ENABLED
         self._publish_status()
 
@@ -216,7 +218,8 @@ class Cia402Axis:
             self._fault(EMCY_CODES[first], flags, t_ns)
             return
         watchdog_ns = int(v[(0x2012, 0)]) * 1_000_000
-        if watchdog_ns and self._target_index() is not None and t_ns - self.last_target_ns > watchdog_ns:
+        if watchdog_ns and self._target_index() is not None and self.last_target_ns is not None \
+                and t_ns - self.last_target_ns > watchdog_ns:
             self.watchdog_trips += 1
             self._fault(EMCY_CODES[ErrorFlags.WATCHDOG], ErrorFlags.WATCHDOG, t_ns)
 

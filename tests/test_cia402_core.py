@@ -96,7 +96,9 @@ def test_velocity_limit_and_watchdog_faults() -> None:
         sdo_write(limb, KNEE, 0x6071, 0, "h", 200, k * MS)
     assert emcys(out, KNEE) == [(0x8400, 0x21)]
     enable(limb, HIP, 10, 200 * MS)
-    out = limb.advance(301 * MS)                                           # no target for 101 ms
+    assert emcys(limb.advance(400 * MS), HIP) == []                      # enabled, no target yet: not armed
+    sdo_write(limb, HIP, 0x6071, 0, "h", 0, 400 * MS)                     # the first target arms it
+    out = limb.advance(501 * MS)                                           # no target for 101 ms
     assert emcys(out, HIP) == [(0x8250, 0x11)] and limb.axes[0].watchdog_trips == 1
 
 

@@ -128,7 +128,7 @@ def test_soft_limit_emcy_fault_and_fault_reset(rig: Rig) -> None:
     assert hip.state == "FAULT" and rig.knee.state == "OPERATION ENABLED"
     assert hip.sdo[0x603F].raw == 0x8612 and hip.sdo[0x1003][1].raw == 0x8612 and hip.sdo[0x1001].raw & 0x01
     hip.sdo[0x607D][2].raw = default_max
-    rig.knee.state = "SWITCHED ON"     # else its command watchdog (0x2012, 100 ms) trips while the clock runs
+    rig.knee.state = "SWITCHED ON"     # else its command watchdog (0x2012, 100 ms, armed by its targets) trips
     with rig.pumping():     # canopen waits in wall-clock time for statusword TPDOs (every 50 ms of drive time)
         hip.reset_from_fault()      # controlword 0, then bit 7's rising edge, then on to OPERATION ENABLED
     assert hip.state == "OPERATION ENABLED" and hip.sdo[0x603F].raw == 0
