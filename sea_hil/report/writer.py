@@ -31,7 +31,8 @@ def _bins(msgs: list, value: Any, t0_ns: int, width_s: float = 1.0) -> tuple[np.
 
 def state_to_setpoint_latency_us(data: SessionData) -> np.ndarray:
     """Per event: controller's setpoint send time minus the edge's send time of the state it answers (both
-    CLOCK_MONOTONIC of one host: valid for same-host sessions)."""
+    CLOCK_MONOTONIC of one host: valid for real-time same-host sessions; in lockstep a state's stamp is its release
+    on the simulated clock)."""
     sent = {m.payload["seq"]: m.payload["sent_t_ns"] for m in data.messages.get("/zenoh/state", [])}
     out = [(m.payload["sent_t_ns"] - sent[m.payload["state_seq"]]) * 1e-3
            for topic in ("/zenoh/setpoint", "/zenoh/voltage") for m in data.messages.get(topic, [])

@@ -4,9 +4,11 @@
 Namespace ``bus`` holds its own vcan0 with the plant, the edge (listening on 192.0.2.1) and the recorder;
 namespace ``ctl`` holds only the controller (192.0.2.2), which connects to the edge's endpoint. Lockstep, so the
 session's result does not depend on the delay; only its latency figures do: the edge's closed-loop latency (state
-published -> setpoint for that state applied) must be >= 2 D for every setpoint, and the one-way figure (edge's
-state send -> controller's setpoint send, one CLOCK_MONOTONIC across namespaces) >= D. Without netem both are a
-few ms in the guest, so the bounds fail if the delay is not on the path. Addresses are TEST-NET-1 (RFC 5737).
+published -> setpoint for that state applied, on the edge's one clock) must be >= 2 D for every setpoint. Without
+netem it is a few ms in the guest, so the bound fails if the delay is not on the path. (The recording's one-way
+figure, `state_to_setpoint_latency_us`, is not checked: in lockstep a state's stamp is its release on the simulated
+clock and the controller's send time a wall-clock one, so their difference bounds nothing.) Addresses are
+TEST-NET-1 (RFC 5737).
 
 Issue 32's third topology: the recording's per-channel counts equal the nodes' own counters (their final records
 in the file, and their `--json` results), no figure is -1, and the summary equals `sea-hil run --lockstep`'s on the
@@ -17,7 +19,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 from netns_helpers import CLIENT_ADDR, SERVER_ADDR, run
 from session_nodes import GaitSlice, NodeSession, run_node_session, write_client_config
@@ -43,7 +44,6 @@ def delayed_namespaces(veth_namespaces: tuple[str, str]) -> tuple[str, str]:
 def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces: tuple[str, str],
                                              gait_slice: GaitSlice) -> None:
     from sea_hil.protocol.zsession import free_tcp_port
-    from sea_hil.report.writer import state_to_setpoint_latency_us
     bus_ns, ctl_ns = delayed_namespaces
     config = gait_slice.config
     session = NodeSession(config=config,
@@ -72,12 +72,7 @@ def test_session_latency_contains_netem_delay(tmp_path: Path, delayed_namespaces
     latency_us = summary["timing"]["latency_us"]
     assert latency_us["min"] >= 2 * DELAY_MS * US_PER_MS, latency_us
     assert latency_us["p50"] >= 2 * DELAY_MS * US_PER_MS, latency_us
-    # one way: edge publishes state k -> controller sends the setpoint for k (uplink crossing only)
-    one_way_us = state_to_setpoint_latency_us(result.data)
-    print(f"netem delay {DELAY_MS} ms per direction: closed-loop latency [us] {latency_us}; one-way [us] min "
-          f"{one_way_us.min():.0f} median {float(np.median(one_way_us)):.0f} (n={len(one_way_us)})")
-    assert len(one_way_us) >= tx["downlink_msgs"], one_way_us   # a re-answered duplicate state counts twice
-    assert one_way_us.min() >= DELAY_MS * US_PER_MS, one_way_us
+    print(f"netem delay {DELAY_MS} ms per direction: closed-loop latency [us] {latency_us}")
 
     # the same session in one `sea-hil run --lockstep` on the virtual bus: every deterministic field equal
     assert deterministic(summary) == deterministic(gait_slice.reference)
