@@ -164,4 +164,5 @@ class RemoteController(Node):
                 "edge_restarts": self.edge_restarts, "unusable_states": self.unusable_states,
                 "trajectory_mismatches": self.trajectory_mismatches, "unanchored_states": self.core.unanchored,
                 "prediction_clamped": self.predictor.clamped if self.predictor else 0,
-                **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()}, **self.edge_epoch.as_dict()}
+                **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()},
+                "states_superseded": self.source.superseded, **self.edge_epoch.as_dict()}

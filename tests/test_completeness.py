@@ -18,6 +18,7 @@ from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_block
 from sea_hil.report.console import end_of_run_rows
 from sea_hil.report.session_summary import session_summary
 from sea_hil.report.writer import report_markdown
+from sea_hil.verdict.edge_blocks import uplink_losses
 
 PUBLISHED = range(1, 176)
 EVENTS = {20, 30, 100}
@@ -216,3 +217,13 @@ def test_a_standalone_recording_is_judged_as_the_edge_ran() -> None:
     assert "stale_setpoints" not in judged(1)
     assert "stale_setpoints" not in judged(0, {"lockstep": "True"})   # `run`'s own word
     assert "stale_setpoints" in judged(1, {"lockstep": "False"})
+
+
+def test_states_a_newer_one_replaced_are_no_loss_on_the_way() -> None:
+    """In real time the controller reads the newest state only: the ones a newer state replaced before it read them
+    arrived (`states_superseded`); only the rest of its stream-seq gaps, beyond the uplink model's own drops, are
+    states lost on the way (`link_losses.uplink_beyond_model`, the `lost_states` rule)."""
+    assert uplink_losses({"state_seq_lost": 20, "states_superseded": 5}, {"uplink_dropped": 3}) == {
+        "uplink_beyond_model": 12}
+    assert uplink_losses({"state_seq_lost": 4, "states_superseded": 4}, {}) == {"uplink_beyond_model": 0}
+    assert uplink_losses({"state_seq_lost": 7}, {"uplink_dropped": 2}) == {"uplink_beyond_model": 5}   # lockstep

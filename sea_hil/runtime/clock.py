@@ -70,7 +70,12 @@ class EdgeSync(Protocol):
 
 
 class StateSource(Protocol):
-    """The controller's incoming states: the newest only (real time) or every one in order (lockstep)."""
+    """The controller's incoming states: the newest only (real time) or every one in order (lockstep).
+    `superseded`: states a newer one replaced before the controller read them (real time; they arrived, so they are
+    no loss on the way)."""
+
+    @property
+    def superseded(self) -> int: ...
 
     def recv(self, timeout_s: float) -> bytes | None: ...
 
@@ -284,6 +289,10 @@ class RealTimeControllerSync:
 class LatestStates:
     def __init__(self, sub: LatestSubscriber) -> None:
         self.sub = sub
+
+    @property
+    def superseded(self) -> int:
+        return self.sub.overwritten
 
     def recv(self, timeout_s: float) -> bytes | None:
         sample = self.sub.recv(timeout_s)

@@ -260,6 +260,7 @@ class LockstepControllerSync:
 
 class FifoStates:
     """Every state, in order: a FIFO fed by the subscriber callback (woken on arrival, no polling)."""
+    superseded = 0   # none: every state is read
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
         self._q: queue.SimpleQueue[bytes] = queue.SimpleQueue()

@@ -52,8 +52,10 @@ def split_edge_stats(edge: dict[str, Any]) -> tuple[dict[str, Any], dict[str, An
 
 def uplink_losses(controller: dict[str, Any], edge: dict[str, Any]) -> dict[str, int] | None:
     """`link_losses`: states missing on arrival at the controller beyond the uplink model's own drops (the
-    controller's stream-seq gaps `state_seq_lost` minus the edge's `uplink_dropped`); None without the controller's
+    controller's stream-seq gaps `state_seq_lost`, less the states a newer one replaced before it read them,
+    `states_superseded`: real time, they arrived; less the edge's `uplink_dropped`); None without the controller's
     counter."""
     if "state_seq_lost" not in controller:
         return None
-    return {"uplink_beyond_model": max(0, int(controller["state_seq_lost"]) - int(edge.get("uplink_dropped", 0)))}
+    lost = int(controller["state_seq_lost"]) - int(controller.get("states_superseded", 0))
+    return {"uplink_beyond_model": max(0, lost - int(edge.get("uplink_dropped", 0)))}

@@ -197,7 +197,6 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
     with NodeGroup(out) as nodes:
         edge = nodes.start("edge", sea_hil_cmd("edge", "--can", s.can, "--lockstep", "--listen", s.endpoint,
                                                "--config", cfg, "--json", netns=s.bus_netns))
-        nodes.start("plant", sea_hil_cmd("plant", "--can", s.can, "--lockstep", "--config", cfg, netns=s.bus_netns))
         try:
             wait_for_sockets(s.port, "listening", 1, s.bus_netns, edge)   # a Zenoh client does not retry
             nodes.start("record", sea_hil_cmd("record", "--can", s.can, "--out", str(mcap), "--connect", s.endpoint,
@@ -212,6 +211,15 @@ def run_node_session(s: NodeSession, out: Path) -> NodeSessionResult:
                                                     "--lockstep", "--connect", s.endpoint, "--config", cfg,
                                                     "--timeout", str(s.timeout_s), "--json",
                                                     netns=s.controller_netns))
+        try:
+            # the plant last: no state exists before the controller's session is open, so the recorder's
+            # subscription has reached the controller (across the netem link too) before its first record; with
+            # the plant first, the controller answered the re-sent anchor state within a few ms of connecting and
+            # its INITIAL tracking record sometimes went out before that (seen twice in the guest)
+            wait_for_sockets(s.port, "established", 2, s.bus_netns, edge)
+        except AssertionError as err:
+            raise AssertionError(f"{err}\n{nodes.outputs()}") from None
+        nodes.start("plant", sea_hil_cmd("plant", "--can", s.can, "--lockstep", "--config", cfg, netns=s.bus_netns))
         try:
             status = ctl.wait(timeout=s.timeout_s + STOP_TIMEOUT_S)
         except subprocess.TimeoutExpired:
