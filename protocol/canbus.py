@@ -38,6 +38,11 @@ class CanHandle(Protocol):
 
 _CAN_LOG = logging.getLogger("can.bus")   # python-can's receive log (BusABC.recv)
 _LOG = logging.getLogger("sea_hil.canbus")
+# a node's 1 kHz loop waits at most this long per episode for an ipc member whose queue is full (one that joined and
+# is not reading yet: a starting edge), then that member's frames are dropped and counted, as a CAN controller's
+# overflowing receive buffer drops them: with IpcBus's default (1 s, for python-can users) a driver blocked in
+# send missed its ticks and latched OVERRUN|VELOCITY_LIMIT after an edge restart (test_faults, fresh-clone CI)
+NODE_SEND_TIMEOUT_S = 0.005
 SO_RCVBUFFORCE = 33          # Linux <asm-generic/socket.h>; the socket module does not define it
 RX_BUFFER_BYTES = 8 << 20   # the kernel doubles it: ~21k queued frames at ~770 B each, ~5 s of one 1 kHz limb
 
@@ -86,7 +91,7 @@ def open_bus(spec: str, *, receive_own_messages: bool = False, fd: bool = False)
         if interface == "virtual":
             return FastVirtualBus(channel=channel, **kwargs)
         if interface == "ipc":
-            return IpcBus(channel=channel, **kwargs)
+            return IpcBus(channel=channel, send_timeout_s=NODE_SEND_TIMEOUT_S, **kwargs)
         bus = can.Bus(interface=interface, channel=channel, **kwargs)
         if interface == "udp_multicast":
             enlarge_rx_buffer(bus)
