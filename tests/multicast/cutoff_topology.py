@@ -19,7 +19,7 @@ import sys
 import time
 from pathlib import Path
 
-from peer_topology import SESSION_TIMEOUT_S, STEP_TIMEOUT_S, Node, readme_commands, wait_listening
+from peer_topology import SESSION_TIMEOUT_S, STEP_TIMEOUT_S, Node, readme_commands, start_session
 
 from sea_hil.protocol.zsession import free_tcp_port
 from sea_hil.recorder.reader import read_session
@@ -52,12 +52,7 @@ def run(config: Path, out: Path, can: str) -> dict[str, object]:
     nodes: dict[str, Node] = {}
     codes: dict[str, int] = {}
     try:
-        nodes["edge"] = Node(cmds["edge"])
-        wait_listening(port, nodes["edge"].proc)
-        nodes["recorder"] = Node(cmds["recorder"])
-        nodes["recorder"].wait_ready("the recorder")
-        for name in ("plant", "controller"):
-            nodes[name] = Node(cmds[name])
+        start_session(cmds, port, nodes)
         wait_recorded(out / "session.mcap", CUT_AFTER_STATES, nodes["controller"])
         nodes["recorder"].proc.send_signal(signal.SIGKILL)
         codes["recorder"] = nodes["recorder"].end()

@@ -98,18 +98,24 @@ def wait_listening(port: int, proc: subprocess.Popen[str]) -> None:
     raise RuntimeError(f"the edge never listened on {port} (exit {proc.poll()})")
 
 
+def start_session(cmds: dict[str, list[str]], port: int, nodes: dict[str, Node]) -> None:
+    """The README's order, by events: the edge listening, the recorder subscribed, then plant and controller (each
+    added to `nodes` as it starts, so the caller's `finally` ends whatever started)."""
+    nodes["edge"] = Node(cmds["edge"])
+    wait_listening(port, nodes["edge"].proc)
+    nodes["recorder"] = Node(cmds["recorder"])
+    nodes["recorder"].wait_ready("the recorder")
+    for name in ("plant", "controller"):
+        nodes[name] = Node(cmds[name])
+
+
 def run(config: Path, out: Path, can: str) -> dict[str, object]:
     port = free_tcp_port()
     cmds = readme_commands(config, out, port, can)
     nodes: dict[str, Node] = {}
     codes: dict[str, int] = {}
     try:
-        nodes["edge"] = Node(cmds["edge"])
-        wait_listening(port, nodes["edge"].proc)
-        nodes["recorder"] = Node(cmds["recorder"])
-        nodes["recorder"].wait_ready("the recorder")
-        for name in ("plant", "controller"):
-            nodes[name] = Node(cmds[name])
+        start_session(cmds, port, nodes)
         codes["controller"] = nodes["controller"].proc.wait(timeout=SESSION_TIMEOUT_S)
         nodes["late"] = Node(cmds["late"])
         nodes["late"].wait_ready("the late recorder")
