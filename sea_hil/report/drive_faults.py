@@ -83,14 +83,22 @@ def edge_latches(data: SessionData) -> list[dict[str, Any]]:
     return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
 
 
+def cycle_origin_ns(data: SessionData) -> int | None:
+    """The sample time (drive clock) of the controller's cycle time 0: the first tracking record whose state the
+    recording has, its state's `sample_t_ns` less its `t_s` (None without such a state). The one anchor of the
+    controller's time axis on the sample clock (the session summary's phases too)."""
+    sample_ns: dict[Any, int] = {}
+    for m in data.messages.get("/zenoh/state", []):   # a state's first record (an edge restarted counts seqs anew)
+        if m.payload.get("sample_t_ns") is not None:
+            sample_ns.setdefault(m.payload.get("seq"), int(m.payload["sample_t_ns"]))
+    anchor = next((m.payload for m in data.messages.get("/tracking", [])
+                   if m.payload.get("state_seq") in sample_ns), None)
+    return None if anchor is None else sample_ns[anchor["state_seq"]] - round(anchor["t_s"] * 1e9)
+
+
 def _cycle_end_sample_ns(data: SessionData) -> int | None:
-    """The sample time (drive clock) of the last measured sample: the controller's largest cycle time `t_s` moved onto
-    the sample clock by a state that has both (None without such a state)."""
-    sample_ns = {m.payload.get("seq"): int(m.payload["sample_t_ns"]) for m in data.messages.get("/zenoh/state", [])
-                 if m.payload.get("sample_t_ns") is not None}
-    rows = [m.payload for m in data.messages.get("/tracking", [])]
-    anchor = next((r for r in rows if r.get("state_seq") in sample_ns), None)
-    if anchor is None:
-        return None
-    t0_ns = sample_ns[anchor["state_seq"]] - round(anchor["t_s"] * 1e9)
-    return t0_ns + round(max(r["t_s"] for r in rows) * 1e9)
+    """The sample time (drive clock) of the last measured sample: the controller's largest cycle time `t_s` on the
+    sample clock (None without an anchor, `cycle_origin_ns`)."""
+    t0_ns = cycle_origin_ns(data)
+    return None if t0_ns is None else \
+        t0_ns + round(max(m.payload["t_s"] for m in data.messages["/tracking"]) * 1e9)
