@@ -13,7 +13,14 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import StatePayload, decode, encode
 from sea_hil.protocol.zlatest import LatestSubscriber
-from sea_hil.protocol.zsession import LinkedPublisher, free_tcp_port, make_config, open_session, publisher
+from sea_hil.protocol.zsession import (
+    LinkedPublisher,
+    await_subscriber,
+    free_tcp_port,
+    make_config,
+    open_session,
+    publisher,
+)
 
 DEADLINE_S = 10.0
 
@@ -166,3 +173,20 @@ def test_latest_recv_times_out_and_takes_the_newest_of_what_queued(pair):
         assert _seq_of(sub.recv(1.0)) == 3 and sub.overwritten == before + 2 and sub.recv(0.0) is None
         marker.undeclare()
     sub.close()                                             # idempotent
+
+
+def test_await_subscriber_waits_for_a_subscription_declared_across_the_router():
+    """Two clients of one listening peer (the guest topology's controller and recorder): the publisher's wait ends
+    unmatched after its bound with no subscriber, and matched once the other client's subscription has reached it."""
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_session(make_config(listen=[ep]))
+    ctl, rec = (open_session(make_config(connect=[ep], mode="client")) for _ in range(2))
+    try:
+        pub = publisher(ctl, "test/limb1/event", express=False)
+        assert not await_subscriber(pub, 0.05)
+        sub = rec.declare_subscriber("test/**", zenoh.handlers.FifoChannel(4))
+        assert await_subscriber(pub, DEADLINE_S)
+        sub.undeclare()
+    finally:
+        for s in (rec, ctl, router):
+            s.close()

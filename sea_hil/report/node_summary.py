@@ -52,7 +52,7 @@ WARN_KEYS: dict[str, tuple[str, ...]] = {
              "setpoints_out_of_envelope", "bus_errors", "controller_restarts", "late_setpoints", "seq_lost",
              "epoch_old", "epoch_foreign", "uplink_dropped", "downlink_dropped"),
     "controller": ("payload_rejected", "unexpected_payloads", "edge_restarts", "trajectory_mismatches",
-                   "state_seq_lost", "epoch_old", "epoch_foreign"),
+                   "state_seq_lost", "epoch_old", "epoch_foreign", "recorder_unmatched"),
     "recorder": ("can_rejected", "can_frames_missed", "stats_rejected", "payload_rejected_total", "dropped",
                  "write_errors", "can_tap_unfinished"),
 }
