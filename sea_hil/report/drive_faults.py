@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sea_hil.drive_latches import LatchLog, latch_entry, latches_of_stats
+from sea_hil.drive_latches import LatchLog, edge_latch_entries, in_time_order, latch_entries
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_frames import Heartbeat
 from sea_hil.protocol.drive_state import DriveStateReader, drive_state_reader
@@ -62,8 +62,7 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     latches = LatchLog()
     for t_ns, hb in states:
         latches.on_heartbeat(t_ns, hb)
-    out = [latch_entry(la, t0_ns, end_ns is not None and la.t_ns > end_ns, "can") for la in latches.latches]
-    return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
+    return in_time_order(latch_entries(latches.latches, t0_ns, end_ns, "can"))
 
 
 def edge_latches(data: SessionData) -> list[dict[str, Any]]:
@@ -75,12 +74,7 @@ def edge_latches(data: SessionData) -> list[dict[str, Any]]:
     for m in data.messages.get("/stats", []):
         if m.payload.get("final") and m.payload.get("node", "edge") == "edge":
             finals[int(m.payload.get("node_id", 1))] = m.payload     # the last record per drive
-    end = _cycle_end_sample_ns(data)
-    out = []
-    for stats in finals.values():
-        latches, origin_ns = latches_of_stats(stats)
-        out += [latch_entry(la, origin_ns, end is not None and la.t_ns > end, "edge") for la in latches]
-    return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
+    return edge_latch_entries(finals.values(), _cycle_end_sample_ns(data))
 
 
 def cycle_origin_ns(data: SessionData) -> int | None:
