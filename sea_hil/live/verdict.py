@@ -119,7 +119,7 @@ class LiveVerdict:
             out["timing"]["driver"] = {"floor": self.floor}
         if len(edges) > 1:
             out["limbs"] = [self._limb_block(e) for e in edges]
-        losses = uplink_losses(self._controller_of(first, several=len(edges) > 1), first)
+        losses = uplink_losses(self._controller_of(first, several=len(edges) > 1 or len(self.limbs) > 1), first)
         if losses is not None:
             out["link_losses"] = losses
         return out
