@@ -263,6 +263,10 @@ def _finish(rec: RecorderProcess, nodes: limb_nodes.LimbNodes, recorders: list[A
     for recorder in recorders:
         recorder.join()
     limb_nodes.record_edge_finals(rec, nodes, lockstep)
+    for i, driver in enumerate(nodes.driver_processes()):   # a driver process's own result (lateness, sends, ...)
+        if driver.result is not None:
+            rec.add_metadata("sea-hil.driver" if i == 0 else f"sea-hil.driver.bus{i}",
+                             {k: str(v) for k, v in driver.result["counters"].items()})
     rec.close(final_stats={**nodes.final_stats(), **recorders[0].counters()})
 
 
