@@ -1,9 +1,10 @@
 """`sea-hil run`: a full session on one machine.
 
 This process hosts the plant (driver node) and the edge on the CAN bus (embedded `virtual` bus by default, or
-`socketcan:vcan0`), plus the recorder (real time with `[timing] driver_process`: each driver in a process of its own,
-on an `ipc:` bus in place of the embedded one, `sea_hil.session.driver_process`; lockstep never); the remote controller runs in a separate process and reaches them over Zenoh
-(this process listens on a free loopback port, the controller connects). Both use `[zenoh]` of the config (mode,
+`socketcan:vcan0`), plus the recorder (real time with `[timing] driver_process`: each driver in a process of its
+own, on an `ipc:` bus in place of the embedded one, `sea_hil.session.driver_process`; lockstep never); the remote
+controller runs in a separate process and reaches them over Zenoh (this process listens on a free loopback port,
+the controller connects). Both use `[zenoh]` of the config (mode,
 TLS, ACL); only the endpoints are the session's own (`tls/` when TLS is enabled). `secure=True` (`--secure`)
 gives each its own certificate, mutual TLS and the ACL (`sea_hil.session.secure`). When the controller has finished
 its cycles everything is stopped (`SessionBuilder`, in reverse order of creation), the MCAP file is closed and
