@@ -84,7 +84,6 @@ class ControllerCore:
         if t_ns > self.duration_ns:
             self.done = True
             return None
-        ds = self.desired(t_ns)
         sp, now = self._decide(p, t_ns, arrival)
         messages: list[tuple[str, bytes]] = []
         if sp is not None:
@@ -104,7 +103,7 @@ class ControllerCore:
         self.states += 1
         record = None
         if not self.edge_trigger:      # with the trigger at the edge, the edge records every outer sample
-            record = tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
+            record = tracking_record(t_ns, p.seq, p.theta_rad, self.desired(t_ns), sp.reason if sp else None,
                                      self.setpoint_seq if messages else 0)
         return Answer(messages, sp, record)
 
