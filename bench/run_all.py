@@ -31,7 +31,7 @@ STEPS: list[tuple[str, str, list[str], list[str], int]] = [
     ("bench_closed_loop_latency", "3", ["--runs", "5"], ["--quick"], 75),
     ("bench_driver_timing", "4", ["--duration", "60", "--edge", "--load"], ["--quick", "--edge", "--load"], 135),
     ("bench_timer_floor", "4f", ["--runs", "5", "--duration", "20"], ["--quick"], 105),   # the host's floor
-    ("bench_session_timing", "4s", ["--runs", "3"], ["--quick"], 60),   # 1-limb session tick misses (median)
+    ("bench_session_timing", "4s", ["--runs", "3", "--limbs", "1,2,4", "--loaded"], ["--quick"], 480),   # tick misses and latency beside each run's floor, idle and loaded
     ("bench_bandwidth", "5", ["--runs", "3"], ["--quick"], 55),
     ("bench_scale", "6", ["--duration", "10"], ["--quick"], 130),   # 5 counts x 2 layouts x 11 s
     ("bench_cpu_per_sample", "6c", ["--limbs", "1,2,4", "--runs", "3"], ["--quick"], 900),   # 9 sessions

@@ -101,17 +101,19 @@ def _as_limb(data: SessionData, limb: str) -> dict[str, list[RecordedMessage]]:
 
 
 def two_limbs(published2: range = PUBLISHED, edge2: dict[str, int] | None = None,
-              edge1: dict[str, int] | None = None, controller_node_ids: bool = True) -> SessionData:
+              edge1: dict[str, int] | None = None, controller_node_ids: bool = True,
+              controller2: dict[str, int] | None = None) -> SessionData:
     """A recording of two limbs (node ids 1 and 2), each with its edge's and controller's final record (the
-    controller's with its limb's `node_id`, as `sea-hil controller` writes it, or without: an outside controller);
-    limb2's recorder kept `published2` of its states."""
+    controller's with its limb's `node_id`, as `sea-hil controller` writes it, or without: an outside controller;
+    limb2's with `controller2` counters); limb2's recorder kept `published2` of its states."""
     one, two = _session(20, 170, PUBLISHED, EVENTS), _as_limb(_session(20, 170, published2, EVENTS), "limb2")
     data = SessionData(messages={t: one.messages.get(t, []) + two.get(t, []) for t in {*one.messages, *two}},
                        metadata={"sea-hil.limbs": dict(LIMBS_META)})
     data.messages["/stats"] = [
         *(_final("edge", **{"node_id": n, "uplink_msgs": len(PUBLISHED), **(extra or {})})
           for n, extra in ((1, edge1), (2, edge2))),
-        *(_final("controller", setpoints_sent=len(EVENTS), **({"node_id": n} if controller_node_ids else {}))
+        *(_final("controller", setpoints_sent=len(EVENTS), **({"node_id": n} if controller_node_ids else {}),
+                 **{"state_seq_lost": 0, **(controller2 or {} if n == 2 else {})})
           for n in (1, 2))]
     return data
 

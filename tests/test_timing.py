@@ -151,13 +151,26 @@ def test_sched_fifo_is_applied_and_undone_where_permitted() -> None:
 
 
 def test_session_timing_bench_records() -> None:
-    """bench/bench_session_timing.py (figure 4s) from rows, without a session: median of the runs, goal, A/B."""
-    rows = [{"ticks": 10_000, "tick_misses": m, "miss_pct": m / 100, "cpu_us_per_tick": 500.0, "latency_p50_us": 1e3,
-             "latency_p99_us": 3e3, "wall_s": 12.0} for m in (5, 30, 8)]
+    """bench/bench_session_timing.py (figure 4s) from rows, without a session: median of the runs, each run judged
+    beside its own floor and, at 1 limb, on latency; loaded figures are not judged; A/B."""
+    def row(m: int, floor_pct: float = 0.0, limbs: int = 1, p50: float = 400.0, p99: float = 1400.0) -> dict:
+        return {"limbs": limbs, "ticks": 10_000, "tick_misses": m, "miss_pct": m / 100, "floor_miss_pct": floor_pct,
+                "cpu_us_per_tick": 500.0, "cpu_us_per_limb_sample": 500.0 / limbs, "latency_p50_us": p50,
+                "latency_p99_us": p99, "wall_s": 12.0}
+    rows = [row(m) for m in (5, 8, 9)]
     rec = bst.default_record(rows)
     assert rec["figure"] == "4s" and rec["median"] == pytest.approx(0.08) and rec["goal_met"] is True
-    assert bst.default_record(rows[1:2])["goal_met"] is False
-    lev = bst.lever_record("fifo", [(rows[1], rows[0]), (rows[1], rows[2])])
+    assert rec["baseline"] == 0.0
+    assert bst.default_record([row(30)])["goal_met"] is False                  # 0.30 % beside a 0 % floor
+    assert bst.default_record([row(30, floor_pct=0.25)])["goal_met"] is True   # 0.05 % beyond its floor
+    assert bst.default_record([row(5, p50=600.0)])["goal_met"] is False        # latency p50 above 0.5 ms
+    assert bst.default_record([row(30, limbs=2)], limbs=2)["figure"] == "4s-2l"
+    four = bst.default_record([row(90, limbs=4, p50=2000.0, p99=2900.0)], limbs=4)
+    assert four["figure"] == "4s-4l" and four["goal_met"] is True               # <= 1 %, p99 <= 3 ms
+    assert bst.default_record([row(90, limbs=4, p99=3100.0)], limbs=4)["goal_met"] is False
+    loaded = bst.default_record([row(300)], loaded=True)
+    assert loaded["figure"] == "4s-loaded" and loaded["goal_met"] is None
+    lev = bst.lever_record("fifo", [(row(30), row(5)), (row(30), row(8))])
     assert lev["baseline"] == pytest.approx(0.30) and lev["median"] == pytest.approx(0.065)
     assert "realtime_priority = 50" in bst._toml(bst.LEVERS["fifo"]) and 'realtime_scope = "process"' in bst._toml(
         bst.LEVERS["fifo-process"])

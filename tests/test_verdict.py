@@ -356,6 +356,21 @@ def test_every_counter_rule_names_a_threshold_and_degrades_above_it() -> None:
             "status"] == "ok"
 
 
+def test_every_limbs_link_losses_are_judged() -> None:
+    """Two limbs (lockstep, the synthetic recording): only limb2's controller saw gaps in its state stream (4 states,
+    1 of them the uplink model's own drop at limb2's edge). summary.json's top-level `link_losses` is limb1's (the
+    1-limb layout), each limb entry has its own, and the verdict (and the live view's) names limb2."""
+    data = two_limbs(edge2={"uplink_dropped": 1}, controller2={"state_seq_lost": 4})
+    s = session_summary(data, "et")
+    jsonschema.validate(s, SUMMARY_SCHEMA)
+    assert s["link_losses"] == {"uplink_beyond_model": 0}
+    assert [e["link_losses"]["uplink_beyond_model"] for e in s["limbs"]] == [0, 3]
+    reasons = [(r["code"], r.get("limb"), r["value"]) for r in s["verdict"]["reasons"]]
+    assert reasons == [("lost_states", "limb2", 3)], s["verdict"]
+    assert "limb2: states lost beyond the uplink model: 3" in dict(end_of_run_rows(s))["warnings"]
+    _assert_live_agrees(s, two_limbs(edge2={"uplink_dropped": 1}, controller2={"state_seq_lost": 4}))
+
+
 def test_every_limbs_edge_counters_are_judged() -> None:
     """Two limbs (a synthetic recording, tests/test_completeness.py): limb2's edge lost 3 setpoints and rejected 2
     out of the envelope, limb1's nothing; the top-level `edge` block is limb1's, yet the verdict names limb2."""

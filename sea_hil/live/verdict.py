@@ -4,13 +4,14 @@ when it does, and the last message (`final`) says what summary.json will say of 
 
 What it judges, as summary.json does: the drives' safe-state latches from their heartbeats (`/can/raw`, the shared
 rule of sea_hil/drive_latches.py; without a heartbeat, the latches the edges counted in their `/stats`), and the
-counters of each edge's and the controller's latest `/stats` record (the nodes publish it when they stop: the
+counters of each edge's and controller's latest `/stats` record (the nodes publish it when they stop: the
 counters are judged at the end, the latches as they happen; late, lost and stale setpoints, lost states,
 envelope rejections, saturated steps, every rejection class, the cia402 SYNC misses against the host floor the
-parent measured), each limb's edge on its own, under the session's `[verdict]` thresholds and lockstep flag (the
-parent's `LiveSpec`). What only summary.json judges: the recording (the recorder's own losses, its completeness
-against the nodes' counters), the driver's tick misses (the recorder's final metadata) and a cia402 session's drive
-latches (its statusword TPDOs: the view decodes no CANopen). Pure: messages in, verdict out.
+parent measured), each limb's edge and controller on their own, under the session's `[verdict]` thresholds and
+lockstep flag (the parent's `LiveSpec`). A cia402 session's latches come from its statusword TPDOs when the view
+follows the bus's CANopen (`LiveView.follow_canopen`). What only summary.json judges: the recording (the recorder's
+own losses, its completeness against the nodes' counters) and the driver's tick misses (the recorder's final
+metadata). Pure: messages in, verdict out.
 """
 from __future__ import annotations
 
@@ -47,7 +48,7 @@ class LiveVerdict:
         self._sample_ns: dict[int, int] = {}                  # state seq -> sample time, until anchored
         self._anchor_ns: int | None = None                    # sample time of cycle time 0 (edge latches)
         self._edges: dict[int, dict[str, Any]] = {}           # node id -> the edge's latest /stats record
-        self._controller: dict[str, Any] = {}
+        self._controllers: dict[int | None, dict[str, Any]] = {}   # node id (None: none given) -> latest record
         self.status = OK
 
     # -- input ---------------------------------------------------------------------------------------------------
@@ -89,7 +90,8 @@ class LiveVerdict:
             self._edges[int(record.get("node_id", 1))] = record
         elif node == "controller":
             uplink_losses(dict(payload), {})   # ValueError / TypeError on a non-numeric state_seq_lost
-            self._controller = dict(payload)
+            node_id = payload.get("node_id")
+            self._controllers[int(node_id) if node_id is not None else None] = dict(payload)
 
     # -- the verdict ---------------------------------------------------------------------------------------------
     def _drive_faults(self) -> list[dict[str, Any]]:
@@ -121,12 +123,28 @@ class LiveVerdict:
         if self.floor is not None:
             out["timing"]["driver"] = {"floor": self.floor}
         if len(edges) > 1:
-            out["limbs"] = [{"limb": self._limb_name(e), "edge": split_edge_stats(e)[0],
-                             "rejections": rejections_blocks(e)[0]} for e in edges]
-        losses = uplink_losses(self._controller, first)
+            out["limbs"] = [self._limb_block(e) for e in edges]
+        losses = uplink_losses(self._controller_of(first, several=len(edges) > 1), first)
         if losses is not None:
             out["link_losses"] = losses
         return out
+
+    def _limb_block(self, edge: Mapping[str, Any]) -> dict[str, Any]:
+        """A `limbs` entry of several limbs: the limb's edge counters, rejections and link losses (summary.json's)."""
+        out = {"limb": self._limb_name(edge), "edge": split_edge_stats(dict(edge))[0],
+               "rejections": rejections_blocks(dict(edge))[0]}
+        losses = uplink_losses(self._controller_of(edge, several=True), dict(edge))
+        if losses is not None:
+            out["link_losses"] = losses
+        return out
+
+    def _controller_of(self, edge: Mapping[str, Any], *, several: bool) -> dict[str, Any]:
+        """The latest record of the edge's limb's controller: of its node id, else one that gives none (an outside
+        controller); with one limb, the latest of any ({} before one is seen)."""
+        node_id = int(edge.get("node_id", 1))
+        if node_id in self._controllers or several:
+            return self._controllers.get(node_id, self._controllers.get(None, {}))
+        return next(reversed(self._controllers.values()), {})
 
     def _limb_name(self, stats: Mapping[str, Any]) -> str:
         node_id = int(stats.get("node_id", 1))

@@ -8,10 +8,9 @@ verdict (`sea_hil.live.verdict`, under the session's `[verdict]` thresholds and 
 `period_s` of log time (and once more by `finish`, the verdict then `final`), with a `/live/events` line whenever
 the verdict's status changes.
 
-`/live/driver` comes from the drives' own frames: the DBC's HEARTBEAT in the sea profile; on a cia402 bus
-(`follow_canopen`, the recorder calls it when the session's config says so) every frame goes through a CANopen bus
-monitor (`protocol.cia402_decode`) and each statusword TPDO is the node's state (`protocol.cia402_drive_state`, the
-report's rule), so no TPDO is read as a DBC heartbeat.
+`/live/driver` comes from the drives' own frames, read by `protocol.drive_state` (the report's and the ROS 2
+export's reader): the DBC's HEARTBEAT in the sea profile; on a cia402 bus (`follow_canopen`, the recorder calls it
+when the session's config says so) each statusword TPDO is the node's state, so no TPDO is read as a DBC heartbeat.
 """
 from __future__ import annotations
 
@@ -22,10 +21,8 @@ from sea_hil.errors import MalformedFrame
 from sea_hil.fault_explain import LATCH_WORD
 from sea_hil.live.events import DriverWatch, event_log, log_message
 from sea_hil.live.verdict import LiveVerdict
-from sea_hil.protocol.can_codec import SeaCodec, load_database
-from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
 from sea_hil.protocol.cia402_decode import Cia402Decoder
-from sea_hil.protocol.cia402_drive_state import Cia402DriveStates
+from sea_hil.protocol.drive_state import DriveStateReader, drive_state_reader
 from sea_hil.protocol.payloads import TriggerReason
 from sea_hil.stats.histogram import LogHistogram
 from sea_hil.stats.streams import BusLoad, SlidingRate, StreamStats
@@ -61,19 +58,16 @@ class LiveView:
         self.rtt_last_s: float | None = None
         self.ignored = 0
         self._state_rx: dict[int, int] = {}
-        self._codec = SeaCodec(fd=None)
-        self._heartbeat_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
         self._driver = DriverWatch()
         self.verdict = LiveVerdict(verdict, lockstep=lockstep, floor=floor, limbs=limbs)
-        self._canopen: Cia402Decoder | None = None   # a cia402 bus (`follow_canopen`), else the DBC's heartbeats
-        self._cia402 = Cia402DriveStates()
+        self._drive_states: DriveStateReader = drive_state_reader(None)   # the sea profile's until `follow_canopen`
         self._now_ns: int | None = None
         self._next_stats_ns: int | None = None
 
     def follow_canopen(self, decoder: Cia402Decoder) -> None:
         """The bus is a cia402 session's: the drives' state from their statuswords and EMCYs (module docstring).
         `decoder` is this view's own (it follows the bus's SDO remaps as it sees them)."""
-        self._canopen = decoder
+        self._drive_states = drive_state_reader(decoder)
 
     # -- input ---------------------------------------------------------------------------------------------------
     def feed(self, topic: str, log_time_ns: int, payload: dict[str, Any]) -> list[LiveMessage]:
@@ -141,34 +135,17 @@ class LiveView:
         except MalformedFrame:
             self.ignored += 1
             return []
-        hb = self._heartbeat(can_id, dlc, ext, p) if self._canopen is None else \
-            self._canopen_state(self._canopen, can_id, ext, p)
+        try:
+            hb = self._drive_states.on_frame(can_id, bytes.fromhex(str(p.get("data_hex", ""))), dlc, extended=ext,
+                                             fd=bool(p.get("is_fd", False)))
+        except (MalformedFrame, ValueError):
+            self.ignored += 1   # a malformed heartbeat: the recording keeps it in /can/raw
+            return []
         if hb is None:
             return []
         self.verdict.on_heartbeat(t_ns, hb)
         msg, logs = self._driver.on_heartbeat(t_ns, hb)
         return [LiveMessage("/live/driver", t_ns, msg), *(LiveMessage("/live/events", t_ns, m) for m in logs)]
-
-    def _heartbeat(self, can_id: int, dlc: int, ext: bool, p: dict[str, Any]) -> Heartbeat | None:
-        """The sea profile: a DBC HEARTBEAT frame's content, else None."""
-        if ext or can_id & CMD_MASK != self._heartbeat_cmd:
-            return None
-        try:
-            hb = self._codec.decode_raw(can_id, bytes.fromhex(str(p.get("data_hex", ""))), dlc,
-                                        is_fd=bool(p.get("is_fd", False)))
-        except (MalformedFrame, ValueError):
-            self.ignored += 1   # a malformed heartbeat: the recording keeps it in /can/raw
-            return None
-        return hb if isinstance(hb, Heartbeat) else None
-
-    def _canopen_state(self, decoder: Cia402Decoder, can_id: int, ext: bool, p: dict[str, Any]) -> Heartbeat | None:
-        """A cia402 bus: the drive state a statusword TPDO reports (EMCYs set its flags), else None."""
-        try:
-            data = bytes.fromhex(str(p.get("data_hex", "")))
-        except ValueError:
-            self.ignored += 1
-            return None
-        return self._cia402.on_frame(decoder.decode(can_id, data, extended=ext))
 
     def _stats(self, t_ns: int, p: dict[str, Any]) -> list[LiveMessage]:
         try:

@@ -120,9 +120,10 @@ def _warnings(summary: Mapping[str, Any]) -> list[str]:
         sync = sync_periods(summary)
         if sync is not None and sync[0]:   # the cia402 profile's SYNC producer (the edge), like the tick misses
             out.append(f"SYNC misses: {sync[0]} of {sync[1]} periods")
-    beyond = (summary.get("link_losses") or {}).get("uplink_beyond_model", 0)
-    if beyond:
-        out.append(f"states lost beyond the uplink model: {beyond}")
+    per_limb = [(f"{e['limb']}: ", e["link_losses"]) for e in summary.get("limbs") or [] if "link_losses" in e]
+    for limb, losses in per_limb or [("", summary.get("link_losses") or {})]:   # several limbs: each its own
+        if losses.get("uplink_beyond_model", 0):
+            out.append(f"{limb}states lost beyond the uplink model: {losses['uplink_beyond_model']}")
     lost = (summary.get("recording") or {}).get("lost", 0)
     if lost:
         out.append(f"recording lost: {lost} messages")

@@ -16,9 +16,9 @@ not count it. An edge's record details its first `DETAILED` latches (`drive_latc
 
 A cia402 session (docs/cia402.md) has no DBC heartbeat: a latch is read from the nodes' statusword TPDOs instead
 (CiA 402 FAULT or FAULT REACTION ACTIVE; a statusword out of it ends the latch, as the fault reset does), its
-flags from the EMCY codes the node sent since its last statusword outside FAULT (`protocol.cia402_drive_state`, the
-live view's and the ROS 2 export's rule too), `node_id` the CANopen node's. The frames are decoded as the bus
-configured them (`protocol.cia402_decode`).
+flags from the EMCY codes the node sent since its last statusword outside FAULT, `node_id` the CANopen node's; the
+frames are decoded as the bus configured them. Both profiles are read by `protocol.drive_state` (the live view's and
+the ROS 2 export's reader too).
 """
 from __future__ import annotations
 
@@ -26,41 +26,24 @@ from typing import Any
 
 from sea_hil.drive_latches import LatchLog, latch_entry, latches_of_stats
 from sea_hil.errors import MalformedFrame
-from sea_hil.protocol.can_codec import SeaCodec, load_database
-from sea_hil.protocol.can_frames import CMD_MASK, Heartbeat
-from sea_hil.protocol.cia402_decode import Cia402Decoder
-from sea_hil.protocol.cia402_drive_state import Cia402DriveStates
+from sea_hil.protocol.can_frames import Heartbeat
+from sea_hil.protocol.drive_state import DriveStateReader, drive_state_reader
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.recorder.session_config import canopen_decoder
 
 
-def _heartbeats(data: SessionData, codec: SeaCodec, hb_cmd: int) -> list[tuple[int, Heartbeat]]:
-    out = []
-    for m in data.messages.get("/can/raw", []):
-        p = m.payload
-        if int(p.get("can_id", -1)) & CMD_MASK != hb_cmd:
-            continue
-        try:
-            frame = codec.decode_raw(int(p["can_id"]), bytes.fromhex(p["data_hex"]), int(p["dlc"]),
-                                     is_extended=bool(p.get("is_extended")), is_fd=bool(p.get("is_fd")))
-        except (MalformedFrame, KeyError, ValueError):
-            continue
-        if isinstance(frame, Heartbeat):
-            out.append((m.log_time_ns, frame))
-    return out
-
-
-def _cia402_states(raw: list[RecordedMessage], decoder: Cia402Decoder) -> list[tuple[int, Heartbeat]]:
-    """A cia402 recording's statusword TPDOs as the latch reader's (time, state) pairs (`Cia402DriveStates`)."""
+def _drive_states(raw: list[RecordedMessage], reader: DriveStateReader) -> list[tuple[int, Heartbeat]]:
+    """The recording's frames that report a drive state, as the latch reader's (time, state) pairs; a frame that is
+    not one (or is malformed) is passed over: the recording keeps it."""
     out: list[tuple[int, Heartbeat]] = []
-    states = Cia402DriveStates()
     for m in raw:
         p = m.payload
         try:
-            d = decoder.decode(int(p["can_id"]), bytes.fromhex(p["data_hex"]), extended=bool(p.get("is_extended")))
-        except (KeyError, TypeError, ValueError):
+            hb = reader.on_frame(int(p["can_id"]), bytes.fromhex(p["data_hex"]), int(p["dlc"]),
+                                 extended=bool(p.get("is_extended")), fd=bool(p.get("is_fd")))
+        except (MalformedFrame, KeyError, TypeError, ValueError):
             continue
-        if (hb := states.on_frame(d)) is not None:
+        if hb is not None:
             out.append((m.log_time_ns, hb))
     return out
 
@@ -71,12 +54,7 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     raw = data.messages.get("/can/raw", [])
     if not raw:
         return edge_latches(data)
-    decoder = canopen_decoder(data)
-    if decoder is not None:
-        states = _cia402_states(raw, decoder)
-    else:
-        hb_cmd = load_database().get_message_by_name("HEARTBEAT").frame_id & CMD_MASK
-        states = _heartbeats(data, SeaCodec(fd=None), hb_cmd)
+    states = _drive_states(raw, drive_state_reader(canopen_decoder(data)))
     t0_ns = raw[0].log_time_ns
     tracking = data.messages.get("/tracking", [])
     last = max(tracking, key=lambda m: m.payload.get("t_s", float("-inf")), default=None)

@@ -48,14 +48,17 @@ def limb_view(data: SessionData, name: str, node_id: int) -> SessionData:
     return replace(data, messages=msgs)
 
 
-def limb_entry(name: str, node_id: int, bus: str, summary: dict[str, Any], *, counters: bool = False
-               ) -> dict[str, Any]:
+def limb_entry(name: str, node_id: int, bus: str, summary: dict[str, Any], *, counters: bool = False,
+               link_losses: dict[str, int] | None = None) -> dict[str, Any]:
     """One `limbs` entry from that limb's summary; with `counters` (a session of several limbs) also the limb's own
-    edge counters and rejections, which the verdict judges per limb (the 1-limb layout has them at the top level)."""
+    edge counters, rejections and `link_losses` (when its controller's final stats are recorded), which the verdict
+    judges per limb (the 1-limb layout has them at the top level)."""
     out = {"limb": name, "node_id": node_id, "bus": bus, "transmissions": summary["transmissions"],
            "tracking": summary["tracking"], "timing": {"latency_us": summary["timing"]["latency_us"]}}
     if counters:
         out.update(edge=summary["edge"], rejections=summary["rejections"])
+        if link_losses is not None:
+            out["link_losses"] = link_losses
     return out
 
 

@@ -12,8 +12,9 @@ latency histogram, and the edge counters derived from wall-clock time (`EDGE_TIM
 in sea_hil/verdict/edge_blocks.py); the edge's other final `/stats` counters are under `edge`.
 
 Several limbs (`sea_hil.report.limbs`): the top-level blocks are the first limb's (the 1-limb layout), `limbs` has
-every limb's transmissions, tracking and latency (and, with several limbs, its own `edge` counters and `rejections`,
-which the verdict judges limb by limb), `limbs_total` the sums and the worst tracking."""
+every limb's transmissions, tracking and latency (and, with several limbs, its own `edge` counters, `rejections` and
+`link_losses` -- its controller's against its edge's -- which the verdict judges limb by limb), `limbs_total` the
+sums and the worst tracking."""
 from __future__ import annotations
 
 from collections.abc import Callable
@@ -111,7 +112,8 @@ def recording_block(data: SessionData) -> dict[str, Any] | None:
 
 
 def link_losses(data: SessionData, edge: dict[str, Any]) -> dict[str, int] | None:
-    """summary.json `link_losses` (`uplink_losses`) from the controller's final stats; None without them."""
+    """summary.json `link_losses` (`uplink_losses`) of one limb's view of the recording, from its controller's final
+    stats and its edge's counters; None without them."""
     return uplink_losses(final_edge_stats(data, "controller"), edge)
 
 
@@ -138,12 +140,12 @@ def session_summary(data: SessionData, controller: str, node_counters: NodeCount
     records it lacks, issue 32), then the `verdict` under `verdict_cfg` (None: the `[verdict]` of the recording's
     attached config)."""
     limbs = recorded_limbs(data)
-    if len(limbs) == 1:
-        per = [one_limb_summary(data, controller)]
-    else:
-        per = [one_limb_summary(limb_view(data, name, node_id), controller) for name, node_id, _ in limbs]
+    views = [data] if len(limbs) == 1 else [limb_view(data, name, node_id) for name, node_id, _ in limbs]
+    per = [one_limb_summary(view, controller) for view in views]
+    losses = [link_losses(view, s["edge"]) for view, s in zip(views, per, strict=True)]
     summary = per[0]
-    entries = [limb_entry(*limb, s, counters=len(limbs) > 1) for limb, s in zip(limbs, per, strict=True)]
+    entries = [limb_entry(*limb, s, counters=len(limbs) > 1, link_losses=loss)
+               for limb, s, loss in zip(limbs, per, losses, strict=True)]
     summary["limbs"], summary["limbs_total"] = entries, limbs_total(entries)
     driver = driver_block(data)
     if driver is not None:
@@ -155,9 +157,8 @@ def session_summary(data: SessionData, controller: str, node_counters: NodeCount
     rec = recording_block(data)
     if rec is not None:
         summary["recording"] = rec
-    losses = link_losses(data, summary["edge"])
-    if losses is not None:
-        summary["link_losses"] = losses
+    if losses[0] is not None:
+        summary["link_losses"] = losses[0]
     if recorded(data):
         summary["completeness"] = completeness_block(data, node_counters)
     cfg = verdict_cfg if verdict_cfg is not None else verdict_config_of(data.attachments.get(CONFIG_ATTACHMENT))

@@ -57,13 +57,16 @@ TIMING = _object({
     "can_bus": {"type": "object", "additionalProperties": CAN_BUS},          # [can] emulate_bitrate, per bus spec
     "rejections": {"type": "object", "additionalProperties": _COUNT},       # sessions: wall-time-derived classes
 }, required=())
+LINK_LOSSES = _object({"uplink_beyond_model": _COUNT})
 LATENCY = _object({k: _NUMBER for k in ("min", "p50", "p90", "p99", "max")})
 LIMB = _object({"limb": {"type": "string"}, "node_id": _COUNT, "bus": {"type": "string"},
                 "transmissions": TRANSMISSIONS, "tracking": TRACKING,
                 "timing": _object({"latency_us": LATENCY}),                # the limb's wall-time-derived part
-                # several limbs: the limb's own deterministic edge counters and rejections (the verdict's per limb)
+                # several limbs: the limb's own deterministic edge counters, rejections and link losses (the
+                # verdict's per limb)
                 "edge": {"type": "object", "additionalProperties": _NUMBER},
-                "rejections": {"type": "object", "additionalProperties": _COUNT}},
+                "rejections": {"type": "object", "additionalProperties": _COUNT},
+                "link_losses": LINK_LOSSES},
                required=("limb", "node_id", "bus", "transmissions", "tracking", "timing"))
 LIMBS_TOTAL = _object({"limbs": _COUNT, "buses": _COUNT, "transmissions": TRANSMISSIONS, "tracking": TRACKING})
 
@@ -87,7 +90,7 @@ SUMMARY_SCHEMA: dict[str, Any] = {
         # sessions and the offline session engine
         "drive_faults": {"type": "array", "items": DRIVE_FAULT},
         "recording": RECORDING,                                              # recorded sessions: recorder losses
-        "link_losses": _object({"uplink_beyond_model": _COUNT}),             # with the controller's final stats
+        "link_losses": LINK_LOSSES,                                          # with the controller's final stats
         # sessions only
         "lead_in": _object({"duration_s": _NUMBER, **TRANSMISSIONS["properties"], "tracking": TRACKING}),
         "uplink_outside_msgs": _COUNT,

@@ -30,10 +30,8 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import MalformedFrame
 from sea_hil.mechanics import LimbParams, limb_params, sea_geometry
 from sea_hil.protocol.can_assembly import unwrap_us
-from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import Heartbeat
 from sea_hil.protocol.cia402_decode import decoder_for
-from sea_hil.protocol.cia402_drive_state import Cia402DriveStates
+from sea_hil.protocol.drive_state import drive_state_reader
 from sea_hil.recorder.meta import META_FINAL
 from sea_hil.recorder.reader import RecordedMessage, SessionData
 from sea_hil.ros2.diagnostics import counter_status, hardware_id, heartbeat_status
@@ -128,13 +126,10 @@ class Converter:
 
     def can_frames(self) -> Iterator[BagMessage]:
         """One can_msgs/Frame (FdFrame in a CAN FD session) per `/can/raw` frame, plus one DiagnosticArray per
-        driver HEARTBEAT (decoded through the DBC); in a cia402 session per statusword TPDO instead, the node's
-        state by `protocol.cia402_drive_state` (EMCYs set its flags; no frame is read through the DBC)."""
+        driver HEARTBEAT (decoded through the DBC); in a cia402 session per statusword TPDO instead (EMCYs set its
+        flags; no frame is read through the DBC): `protocol.drive_state`, the report's and live view's reader."""
         cfg = self.config
-        canopen = decoder_for(cfg) if cfg is not None and cfg.can.profile == "cia402" else None
-        states = Cia402DriveStates()
-        codec = SeaCodec(fd=None)
-        not_heartbeat: set[int] = set()
+        reader = drive_state_reader(decoder_for(cfg) if cfg is not None and cfg.can.profile == "cia402" else None)
         for m in self.data.messages.get("/can/raw", []):
             p = m.payload
             try:
@@ -154,23 +149,12 @@ class Converter:
                 msg = {"header": header(t, CAN_FRAME_ID), "id": can_id, "is_rtr": False, "is_extended": ext,
                        "is_error": False, "dlc": dlc, "data": data[:8].ljust(8, b"\0")}
                 yield BagMessage(m.log_time_ns, f"{self.limbs.ns(limb)}/from_can_bus", CAN_FRAME, msg, m.sequence)
-            d: Heartbeat | None
-            if canopen is not None:
-                d = states.on_frame(canopen.decode(can_id, data, extended=ext))
-                if d is None:
-                    continue
-            else:
-                if can_id in not_heartbeat:
-                    continue
-                try:
-                    frame = codec.decode_raw(can_id, data, dlc, is_extended=ext, is_fd=bool(p.get("is_fd", False)))
-                except MalformedFrame:
-                    not_heartbeat.add(can_id)
-                    continue
-                if not isinstance(frame, Heartbeat):
-                    not_heartbeat.add(can_id)
-                    continue
-                d = frame
+            try:
+                d = reader.on_frame(can_id, data, dlc, extended=ext, fd=bool(p.get("is_fd", False)))
+            except MalformedFrame:
+                continue   # a malformed heartbeat: its frame above, no status
+            if d is None:
+                continue
             yield BagMessage(m.log_time_ns, "/diagnostics", DIAGNOSTICS,
                              {"header": header(t), "status": [heartbeat_status(d, self._name(limb, f"driver{d.node_id}"))]}, m.sequence)
 

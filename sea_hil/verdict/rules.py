@@ -145,16 +145,16 @@ def _sync_reason(summary: Mapping[str, Any], cfg: VerdictConfig) -> list[dict[st
                             ("sync_miss_max_pct", "sync_miss_floor_factor"), "SYNC periods")
 
 
-LIMB_SCOPED = ("edge", "rejections")   # blocks each limb has of its own (its edge's counters)
+LIMB_SCOPED = ("edge", "rejections", "link_losses")   # blocks each limb has of its own (its nodes' counters)
 
 
 def _limb_views(summary: Mapping[str, Any]) -> list[tuple[Mapping[str, Any], str | None]]:
-    """(summary as one limb sees it, the limb's name) per limb: with several limbs, each `limbs` entry's own `edge`
-    and `rejections` in place of the top-level ones (the first limb's); one limb: the summary itself, unnamed."""
+    """(summary as one limb sees it, the limb's name) per limb: with several limbs, each `limbs` entry's own `edge`,
+    `rejections` and `link_losses` (absent: its controller's stats are not recorded) in place of the top-level ones
+    (the first limb's); one limb: the summary itself, unnamed."""
     limbs = summary.get("limbs") or []
     if len(limbs) > 1 and all(isinstance(e.get("edge"), Mapping) for e in limbs):
-        return [({**summary, "edge": e["edge"], "rejections": e.get("rejections", {})}, str(e["limb"]))
-                for e in limbs]
+        return [({**summary, **{k: e.get(k, {}) for k in LIMB_SCOPED}}, str(e["limb"])) for e in limbs]
     return [(summary, None)]
 
 
