@@ -1,7 +1,8 @@
 """Stamps of the closed loop's stages, installed in every process of a `sea-hil run` by `latency_stages.py` (through a
 `sitecustomize` on PYTHONPATH), never by the product: `zenoh.open` returns a session proxy whose publishers stamp
 each `put` (before and after) and whose subscriber callbacks stamp their entry, and `PayloadCounters.try_decode`
-stamps each decode. Each stamp is (monotonic ns, kind, key, payload bytes, thread native id, thread CPU ns); the process writes its
+stamps each decode. A callback that is C code (the former newest-only subscriber's `SimpleQueue.put`) is left as it is
+(a Python frame in zenoh's thread would cost what it does not), so that stage then ends at the decode. Each stamp is (monotonic ns, kind, key, payload bytes, thread native id, thread CPU ns); the process writes its
 stamps to `$SEA_HIL_STAGES_DIR/<pid>.pkl` at exit. Payloads are matched across processes by their bytes (one host,
 one CLOCK_MONOTONIC). Works on any checkout whose sessions open Zenoh through `zenoh.open`.
 
@@ -18,6 +19,7 @@ import os
 import pickle
 import threading
 import time
+import types
 from pathlib import Path
 from typing import Any
 
@@ -55,6 +57,8 @@ def _wrap_handler(zenoh: Any, key: str, handler: Any) -> Any:
     if not _hot(key):
         return handler
     if isinstance(handler, zenoh.handlers.Callback):
+        if isinstance(handler.callback, types.BuiltinMethodType):   # C (SimpleQueue.put): no Python frame to add
+            return handler
         inner, indirect, kind = handler.callback, handler.indirect, "cb_direct" if not handler.indirect else "cb"
     elif callable(handler):
         inner, indirect, kind = handler, True, "cb"

@@ -7,7 +7,8 @@ each hot `put` (state, setpoint) before and after, each state/setpoint subscribe
 decode. Matched by payload bytes on the host's one monotonic clock, per answered state k:
   edge put       the edge's `put` of state k (the figure starts just before it: `sent_at`)
   uplink         put returned -> the controller's subscriber callback (zenoh's receiving thread)
-  wake           callback -> the controller's decode of k (its handling thread woke and took the GIL)
+  wake           callback -> the controller's decode of k (its handling thread woke and took the GIL); a C
+                 callback is not stamped: then only `uplink+wake`, put returned -> decode
   compute        decode -> `put` of the setpoint answering k (checks, the core's `on_state`, encoding)
   setpoint put   that `put`
   downlink       put returned -> the edge's setpoint callback (with `--probe`: -> zenoh's receiving thread at the
@@ -42,7 +43,7 @@ if os.environ.get("SEA_HIL_STAGES_DIR"):
     _spec.loader.exec_module(_mod)
     _mod.install(os.environ["SEA_HIL_STAGES_DIR"])
 '''
-STAGES = ("edge put", "uplink", "wake", "compute", "compute cpu", "setpoint put", "downlink", "edge hop", "total", "record")
+STAGES = ("edge put", "uplink", "wake", "uplink+wake", "compute", "compute cpu", "setpoint put", "downlink", "edge hop", "total", "record")
 
 
 def run_session(sea_hil: str, out: Path, probe: bool, wrap: list[str]) -> dict[str, Any]:
@@ -117,11 +118,13 @@ def stages(procs: list[dict[str, Any]]) -> dict[str, list[float]]:
             last_sp = p.state_seq
     out: dict[str, list[float]] = {s: [] for s in STAGES}
     for k, (sp0, sp1) in sp_put.items():
-        if k not in st_put or k not in sp_cb or k not in st_cb or k not in st_dec:
+        if k not in st_put or k not in sp_cb or k not in st_dec:
             continue
         e0, e1 = st_put[k]
-        rows = {"edge put": e1 - e0, "uplink": st_cb[k] - e1, "wake": st_dec[k] - st_cb[k],
-                "compute": sp0 - st_dec[k], "setpoint put": sp1 - sp0, "total": sp_cb[k] - e0}
+        rows = {"edge put": e1 - e0, "uplink+wake": st_dec[k] - e1, "compute": sp0 - st_dec[k],
+                "setpoint put": sp1 - sp0, "total": sp_cb[k] - e0}
+        if k in st_cb:
+            rows["uplink"], rows["wake"] = st_cb[k] - e1, st_dec[k] - st_cb[k]
         if k in after:
             rows["record"] = after[k] - sp1
         if k in comp_cpu:
