@@ -4,9 +4,8 @@ publishes a setpoint only on events (TT: every sample). With `inner="remote"` it
 the 10 ms state and publishes voltages every sample (to be tunnelled to CAN by the edge, held for 10 ms).
 
 Per handled state it publishes one JSON tracking record on the `event` key (desired vs measured, for recording and
-reports; not a control transmission), after the setpoint. How it meets the edge is its clock's part (`sync`): in real
-time the newest state only, handled on arrival in zenoh's receiving thread when nothing is behind it
-(`sea_hil.protocol.zlatest.LatestHandler`); in lockstep every state in order, each ACKed on the `control` key (`sea_hil.runtime.lockstep`). A
+reports; not a control transmission). How it meets the edge is its clock's part (`sync`): in real time the newest
+state only; in lockstep every state in order, each ACKed on the `control` key (`sea_hil.runtime.lockstep`). A
 heartbeat event is sent when no event fired for `trigger.max_inter_event_s`, so the edge keeps commanding (its
 setpoint timeout is twice that).
 
@@ -50,6 +49,7 @@ class RemoteController(Node):
         self.edge_trigger, self.trajectory_id = self.core.edge_trigger, self.core.trajectory_id
         self.trajectory_mismatches = 0
         self.sync: ControllerSync = (clock or RealTimeClock()).controller(self)
+        self.source = self.sync.state_source(session, self.keys.state)
         self.sp_pub = publisher(session, self.keys.setpoint, congestion_control=self.sync.congestion_control)
         self.v_pub = publisher(session, self.keys.voltage, congestion_control=self.sync.congestion_control)
         self.event_pub = publisher(session, self.keys.event, express=False,
@@ -61,8 +61,6 @@ class RemoteController(Node):
         self.restart_gap_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
         self._last_state_wall_ns: int | None = None
         self._pubs = {"setpoint": self.sp_pub, "voltage": self.v_pub}
-        # last: states arrive from here on (handled in `run`)
-        self.source = self.sync.state_source(session, self.keys.state, self._on_state)
 
     # ---- the core's state, read (and, by tests, set) through the node ----------------------------------------
     states = property(lambda self: self.core.states)
@@ -75,21 +73,12 @@ class RemoteController(Node):
 
     # ---- the node hooks -------------------------------------------------------------------------------------------
     def _step(self) -> bool:
-        """Handle what arrives within 50 ms (real time: states nothing is behind are handled on arrival in zenoh's
-        receiving thread, the source's `serve` handles the rest); True if a state was handled since the last step."""
-        return self.source.serve(0.05)
-
-    def _on_start(self, duration_s: float | None) -> None:
-        self.source.start()
-
-    def _on_stop(self) -> None:
-        self.source.stop()
-
-    def _on_state(self, data: bytes) -> None:
-        """The source's handler: a state while the node runs (one that arrives once it has finished or is stopping is
-        left unhandled, as it was in the source's queue)."""
-        if not self.stop_event.is_set() and not self.core.done:
-            self.handle(data)
+        """Handle the next state, if one arrives within 50 ms."""
+        data = self.source.recv(0.05)
+        if data is None:
+            return False
+        self.handle(data)
+        return True
 
     def finished(self) -> bool:
         return bool(self.done)

@@ -31,7 +31,7 @@ from sea_hil.protocol.payload_fields import U32_MAX, U64_MAX, PayloadRejected, R
 
 __all__ = ["HEADER_SIZE", "MAGIC", "PAYLOAD_SIZE", "SUPPORTED_VERSIONS", "VERSION", "AckPayload", "EventStatePayload",
            "MsgType", "Payload", "PayloadCounters", "SetpointPayload", "StatePayload", "TriggerReason",
-           "VoltagePayload", "decode", "encode", "sent_t_ns"]
+           "VoltagePayload", "decode", "encode"]
 
 _log = logging.getLogger("sea_hil.protocol")
 MAGIC = b"SH"
@@ -207,17 +207,6 @@ def encode(p: Payload) -> bytes:
     else:
         body = _BODY[mtype].pack(p.state_seq, *p.voltage_v)
     return head + body
-
-
-_T_NS = struct.Struct("<Q")
-
-
-def sent_t_ns(b: bytes) -> int | None:
-    """The header's `t_ns` of payload `b` (the sender's clock at sending) without decoding it; None if `b` is not
-    one of this layout version's payloads (shorter than the header, another magic or version)."""
-    if len(b) < HEADER_SIZE or b[:2] != MAGIC or b[2] != VERSION:
-        return None
-    return int(_T_NS.unpack_from(b, 8)[0])
 
 
 def decode(b: bytes) -> Payload:

@@ -1,8 +1,6 @@
-"""Zenoh session helpers: two peers on loopback TCP (no multicast), newest-only subscriber and handler,
-LinkedPublisher."""
+"""Zenoh session helpers: two peers on loopback TCP (no multicast), newest-only subscriber, LinkedPublisher."""
 from __future__ import annotations
 
-import threading
 import time
 from collections.abc import Iterator
 
@@ -13,8 +11,8 @@ from sea_hil.config.comms import LinkDirectionConfig, ZenohConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
-from sea_hil.protocol.payloads import StatePayload, decode, encode, sent_t_ns
-from sea_hil.protocol.zlatest import LatestHandler, LatestSubscriber
+from sea_hil.protocol.payloads import StatePayload, decode, encode
+from sea_hil.protocol.zlatest import LatestSubscriber
 from sea_hil.protocol.zsession import LinkedPublisher, free_tcp_port, make_config, open_session, publisher
 
 DEADLINE_S = 10.0
@@ -168,84 +166,3 @@ def test_latest_recv_times_out_and_takes_the_newest_of_what_queued(pair):
         assert _seq_of(sub.recv(1.0)) == 3 and sub.overwritten == before + 2 and sub.recv(0.0) is None
         marker.undeclare()
     sub.close()                                             # idempotent
-
-
-class _Handled:
-    """A `LatestHandler`'s handler: the seq and thread of every state it handled (connection probes, seq 0, not
-    kept); the handling of `hold` waits for `gate`, and `fail` raises."""
-
-    def __init__(self, hold: int | None = None, fail: int | None = None) -> None:
-        self.seqs: list[int] = []
-        self.threads: list[threading.Thread] = []
-        self.hold, self.fail = hold, fail
-        self.entered, self.gate = threading.Event(), threading.Event()
-
-    def __call__(self, data: bytes) -> None:
-        seq = decode(data).seq
-        if seq == self.fail:
-            raise ArithmeticError(f"state {seq}")
-        if seq == self.hold:
-            self.entered.set()
-            assert self.gate.wait(DEADLINE_S)
-        if seq:
-            self.seqs.append(seq)
-            self.threads.append(threading.current_thread())
-
-
-def _handler_pair(a: zenoh.Session, b: zenoh.Session, got: _Handled) -> tuple[zenoh.Publisher, LatestHandler]:
-    """A handler on b (not started: probes queue and `serve` takes them) and a matched publisher on a."""
-    h = LatestHandler(b, Keys.make("test", "limb1").state, got, sent_t_ns)
-    pub = publisher(a, h.key, congestion_control=zenoh.CongestionControl.BLOCK)
-    _until(lambda: (pub.put(_state(0)), h.serve(0.005))[1], "the handler's subscriber to match")
-    return pub, h
-
-
-def test_latest_handler_handles_on_arrival_in_the_receiving_thread_once_started(pair):
-    a, b = pair
-    got = _Handled()
-    pub, h = _handler_pair(a, b, got)
-    with h:
-        h.start()
-        for seq in (1, 2, 3):           # one by one: nothing is behind any of them
-            pub.put(_state(seq))
-            _until(lambda seq=seq: seq in got.seqs, f"seq {seq} handled")
-        assert got.seqs == [1, 2, 3] and h.inline >= 3 and h.overwritten == 0
-        assert all(t is not threading.main_thread() for t in got.threads)
-        assert h.serve(0.0) and not h.serve(0.0)    # progress since the last serve, then none
-        h.stop()                                    # queued again, for `serve` (the consumer's thread)
-        pub.put(_state(4))
-        _until(lambda: h.queued or 4 in got.seqs, "seq 4 queued")
-        assert 4 not in got.seqs and h.serve(1.0) and got.seqs[-1] == 4 and got.threads[-1] is threading.current_thread()
-
-
-def test_latest_handler_queues_what_waited_behind_a_handling_and_serves_the_newest(pair):
-    a, b = pair
-    got = _Handled(hold=7)
-    pub, h = _handler_pair(a, b, got)
-    with h:
-        h.start()
-        pub.put(_state(7))
-        assert got.entered.wait(DEADLINE_S)      # 7 is being handled in the receiving thread
-        pub.put(_state(8))                       # both sent before that handling ended: they wait behind it
-        pub.put(_state(9))
-        before = h.overwritten
-        got.gate.set()
-        _until(lambda: h.queued == 2, "8 and 9 queued")
-        assert got.seqs == [7] and h.serve(1.0)
-        assert got.seqs == [7, 9] and got.threads[-1] is threading.current_thread() and h.overwritten == before + 1
-        pub.put(_state(10))                      # sent after: handled on arrival again
-        _until(lambda: 10 in got.seqs, "seq 10 handled")
-        assert got.threads[-1] is not threading.current_thread()
-
-
-def test_latest_handler_raises_a_receiving_thread_error_in_serve(pair):
-    a, b = pair
-    got = _Handled(fail=5)
-    pub, h = _handler_pair(a, b, got)
-    with h:
-        h.start()
-        pub.put(_state(5))
-        with pytest.raises(ArithmeticError, match="state 5"):   # the next serve raises it, once
-            _until(lambda: h.serve(0.005) and False, "the handler's error")
-        pub.put(_state(6))
-        _until(lambda: 6 in got.seqs, "seq 6 handled")

@@ -6,8 +6,6 @@ stamps each decode. A callback that is C code (the former newest-only subscriber
 stamps to `$SEA_HIL_STAGES_DIR/<pid>.pkl` at exit. Payloads are matched across processes by their bytes (one host,
 one CLOCK_MONOTONIC). Works on any checkout whose sessions open Zenoh through `zenoh.open`.
 
-`SEA_HIL_STAGES_ZENOH=path=json5;...` inserts those settings into every session's config (an experiment).
-`SEA_HIL_STAGES_WRAP=module:Class.method,...` also stamps those methods' entries and exits (CPU per call).
 `SEA_HIL_STAGES_PROBE=1` also declares, per state/setpoint subscription, a probe subscriber that runs directly in
 zenoh's receiving thread (`indirect=False`): when the product's callback is indirect (a Python thread of
 zenoh-python's), the probe's stamp is the arrival in zenoh's own thread.
@@ -94,25 +92,6 @@ class _Session:
         return getattr(self._s, name)
 
 
-def _wrap_method(spec: str) -> None:
-    """`module:Class.method`: stamp the method's entry and exit (kinds `enter:Class.method`, `exit:...`)."""
-    import importlib
-
-    module, _, qual = spec.partition(":")
-    cls_name, _, meth = qual.partition(".")
-    cls = getattr(importlib.import_module(module), cls_name)
-    real = getattr(cls, meth)
-
-    def wrapped(*args: Any, **kw: Any) -> Any:
-        tid = threading.get_native_id()
-        _STAMPS.append((time.monotonic_ns(), f"enter:{qual}", "", b"", tid, time.thread_time_ns()))
-        try:
-            return real(*args, **kw)
-        finally:
-            _STAMPS.append((time.monotonic_ns(), f"exit:{qual}", "", b"", tid, time.thread_time_ns()))
-    setattr(cls, meth, wrapped)
-
-
 def install(out_dir: str) -> None:
     import zenoh
 
@@ -120,12 +99,8 @@ def install(out_dir: str) -> None:
 
     real_open = zenoh.open
 
-    settings = [kv.split("=", 1) for kv in filter(None, os.environ.get("SEA_HIL_STAGES_ZENOH", "").split(";"))]
-
-    def open_(config: Any, *args: Any, **kw: Any) -> Any:
-        for key, value in settings:
-            config.insert_json5(key, value)
-        return _Session(zenoh, real_open(config, *args, **kw))
+    def open_(*args: Any, **kw: Any) -> Any:
+        return _Session(zenoh, real_open(*args, **kw))
     zenoh.open = open_
 
     real_try = payloads.PayloadCounters.try_decode
@@ -136,9 +111,6 @@ def install(out_dir: str) -> None:
         return real_try(self, data, *args, **kw)
     counters: Any = payloads.PayloadCounters    # patched for the study only
     counters.try_decode = try_decode
-
-    for spec in filter(None, os.environ.get("SEA_HIL_STAGES_WRAP", "").split(",")):
-        _wrap_method(spec)
 
     def dump() -> None:
         Path(out_dir, f"{os.getpid()}.pkl").write_bytes(pickle.dumps(

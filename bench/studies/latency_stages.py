@@ -46,7 +46,7 @@ if os.environ.get("SEA_HIL_STAGES_DIR"):
 STAGES = ("edge put", "uplink", "wake", "uplink+wake", "compute", "compute cpu", "setpoint put", "downlink", "edge hop", "total", "record")
 
 
-def run_session(sea_hil: str, out: Path, probe: bool, wrap: list[str]) -> dict[str, Any]:
+def run_session(sea_hil: str, out: Path, probe: bool) -> dict[str, Any]:
     """One session with the probe in every process; the stamps of each process and the summary."""
     stamps_dir = out / "stamps"
     stamps_dir.mkdir(parents=True)
@@ -54,7 +54,7 @@ def run_session(sea_hil: str, out: Path, probe: bool, wrap: list[str]) -> dict[s
     site.mkdir()
     (site / "sitecustomize.py").write_text(SITE, encoding="utf-8")
     env = {**os.environ, "PYTHONPATH": str(site), "SEA_HIL_STAGES_DIR": str(stamps_dir),
-           "SEA_HIL_STAGES_PROBE": "1" if probe else "0", "SEA_HIL_STAGES_WRAP": ",".join(wrap)}
+           "SEA_HIL_STAGES_PROBE": "1" if probe else "0"}
     cmd = [sea_hil, "run", "--controller", "et", "--cycles", "1", "--out", str(out / "run"), "--quiet",
            "--no-figures"]
     done = subprocess.run(cmd, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, timeout=300, check=False)
@@ -138,20 +138,6 @@ def stages(procs: list[dict[str, Any]]) -> dict[str, list[float]]:
     return out
 
 
-def methods(procs: list[dict[str, Any]]) -> dict[str, list[float]]:
-    """CPU time (us) per call of each `--wrap` method, keyed `process: method` (outermost calls of a thread)."""
-    out: dict[str, list[float]] = {}
-    for proc in procs:
-        role = "controller" if "controller" in proc["argv"] else "host" if "run" in proc["argv"] else "other"
-        open_: dict[tuple[int, str], int] = {}
-        for _t, kind, _key, _data, tid, cpu in proc["stamps"]:
-            if kind.startswith("enter:"):
-                open_.setdefault((tid, kind[6:]), cpu)
-            elif kind.startswith("exit:") and (tid, kind[5:]) in open_:
-                out.setdefault(f"{role}: {kind[5:]}", []).append((cpu - open_.pop((tid, kind[5:]))) / 1e3)
-    return out
-
-
 def describe(label: str, pooled: dict[str, list[float]], figures: list[dict[str, float]]) -> dict[str, Any]:
     row: dict[str, Any] = {"checkout": label, "states": len(pooled["total"])}
     for name in STAGES:
@@ -170,20 +156,15 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--sea-hil", nargs="+", default=[str(Path(sys.executable).with_name("sea-hil"))])
     ap.add_argument("--probe", action="store_true", help="stamp arrivals in zenoh's receiving thread too")
-    ap.add_argument("--wrap", nargs="*", default=[], metavar="MODULE:CLASS.METHOD",
-                    help="also the CPU time per call of these methods, per process")
     ap.add_argument("--json", type=Path)
     args = ap.parse_args(argv)
     pooled: dict[str, dict[str, list[float]]] = {exe: {s: [] for s in STAGES} for exe in args.sea_hil}
     figures: dict[str, list[dict[str, float]]] = {exe: [] for exe in args.sea_hil}
-    wrapped: dict[str, dict[str, list[float]]] = {exe: {} for exe in args.sea_hil}
     with tempfile.TemporaryDirectory(prefix="latency-stages-") as tmp:
         for i in range(args.runs):
             for j, exe in enumerate(args.sea_hil):
                 load = os.getloadavg()[0]
-                got = run_session(exe, Path(tmp) / f"r{i}-{j}", args.probe, args.wrap)
-                for name, v in methods(got["procs"]).items():
-                    wrapped[exe].setdefault(name, []).extend(v)
+                got = run_session(exe, Path(tmp) / f"r{i}-{j}", args.probe)
                 per = stages(got["procs"])
                 lat = got["summary"]["timing"]["latency_us"]
                 figures[exe].append(lat)
@@ -194,9 +175,6 @@ def main(argv: list[str] | None = None) -> int:
     rows = [describe(exe, pooled[exe], figures[exe]) for exe in args.sea_hil]
     for row in rows:
         print(json.dumps(row))
-    for exe, per in wrapped.items():
-        for name, v in sorted(per.items()):
-            print(f"{exe} {name}: {len(v)} calls, CPU p50 {pct(v, 50):.1f} us, p90 {pct(v, 90):.1f} us")
     if args.json:
         args.json.write_text(json.dumps(rows, indent=1), encoding="utf-8")
     return 0

@@ -20,9 +20,9 @@ import zenoh
 
 from sea_hil.config.timing import TimingConfig
 from sea_hil.protocol.keys import KEY_PAYLOADS
-from sea_hil.protocol.payloads import AckPayload, sent_t_ns
+from sea_hil.protocol.payloads import AckPayload
 from sea_hil.protocol.sequence import SeqVerdict
-from sea_hil.protocol.zlatest import LatestHandler
+from sea_hil.protocol.zlatest import LatestSubscriber
 from sea_hil.runtime.realtime import ThreadPolicy
 
 
@@ -70,21 +70,14 @@ class EdgeSync(Protocol):
 
 
 class StateSource(Protocol):
-    """The controller's incoming states, each given to the handler of `ControllerSync.state_source`: the newest only
-    (real time) or every one in order (lockstep). `superseded`: states a newer one replaced before the controller
-    handled them (real time; they arrived, so they are no loss on the way)."""
+    """The controller's incoming states: the newest only (real time) or every one in order (lockstep).
+    `superseded`: states a newer one replaced before the controller read them (real time; they arrived, so they are
+    no loss on the way)."""
 
     @property
     def superseded(self) -> int: ...
 
-    def start(self) -> None:
-        """The controller's loop runs: states may be handled as they arrive (real time)."""
-
-    def stop(self) -> None:
-        """The loop has ended: states wait for `serve`."""
-
-    def serve(self, timeout_s: float) -> bool:
-        """Handle what arrived, waiting up to `timeout_s`; True if a state was handled since the previous call."""
+    def recv(self, timeout_s: float) -> bytes | None: ...
 
     def close(self) -> None: ...
 
@@ -94,7 +87,7 @@ class ControllerSync(Protocol):
 
     congestion_control: zenoh.CongestionControl
 
-    def state_source(self, session: zenoh.Session, key: str, handle: Callable[[bytes], object]) -> StateSource: ...
+    def state_source(self, session: zenoh.Session, key: str) -> StateSource: ...
 
     def repeat_state(self, verdict: SeqVerdict, seq: int) -> bool: ...
 
@@ -265,17 +258,16 @@ class RealTimeControllerSync:
         self.ctrl = ctrl
         self.policy: ThreadPolicy | None = None
 
-    def state_source(self, session: zenoh.Session, key: str, handle: Callable[[bytes], object]) -> LatestStates:
-        """The newest-state source (`LatestHandler`: a state is handled in zenoh's receiving thread when nothing is
-        behind it, else the newest is handled by `serve`; superseded ones are counted); with `[timing]
-        controller_priority` (set by `sea-hil run` for its controller children) this process's threads get SCHED_FIFO
-        from here on: after the start-up (imports, Zenoh), never during it; undone by `close`."""
+    def state_source(self, session: zenoh.Session, key: str) -> LatestStates:
+        """The newest-state source; with `[timing] controller_priority` (set by `sea-hil run` for its controller
+        children) this process's threads get SCHED_FIFO from here on: after the start-up (imports, Zenoh), never
+        during it; undone by `close`."""
         timing = getattr(self.ctrl.cfg, "timing", None) or TimingConfig()
         if timing.controller_priority > 0:
             self.policy = ThreadPolicy(TimingConfig(realtime_priority=timing.controller_priority,
                                                     realtime_scope="process"), "controller")
             self.policy.apply()
-        return LatestStates(session, key, handle, sent_t_ns)
+        return LatestStates(LatestSubscriber(session, key))
 
     def repeat_state(self, verdict: Any, seq: int) -> bool:
         return False
@@ -300,9 +292,17 @@ class RealTimeControllerSync:
             self.policy.undo()
 
 
-class LatestStates(LatestHandler):
-    """The real-time state source: `LatestHandler`, its overwritten samples the controller's superseded states."""
+class LatestStates:
+    def __init__(self, sub: LatestSubscriber) -> None:
+        self.sub = sub
 
     @property
     def superseded(self) -> int:
-        return self.overwritten
+        return self.sub.overwritten
+
+    def recv(self, timeout_s: float) -> bytes | None:
+        sample = self.sub.recv(timeout_s)
+        return None if sample is None else sample.payload.to_bytes()
+
+    def close(self) -> None:
+        self.sub.close()

@@ -229,8 +229,8 @@ class LockstepControllerSync:
         self.ack_pub = publisher(ctrl.session, ctrl.keys.control, congestion_control=CONGESTION)
         self._last_answer: tuple[int, list[tuple[Any, bytes]]] | None = None
 
-    def state_source(self, session: zenoh.Session, key: str, handle: Callable[[bytes], object]) -> FifoStates:
-        return FifoStates(session, key, handle)
+    def state_source(self, session: zenoh.Session, key: str) -> FifoStates:
+        return FifoStates(session, key)
 
     def repeat_state(self, verdict: SeqVerdict, seq: int) -> bool:
         """A re-sent state we answered: answer again (the same messages)."""
@@ -262,25 +262,15 @@ class FifoStates:
     """Every state, in order: a FIFO fed by the subscriber callback (woken on arrival, no polling)."""
     superseded = 0   # none: every state is read
 
-    def __init__(self, session: zenoh.Session, key: str, handle: Callable[[bytes], object]) -> None:
+    def __init__(self, session: zenoh.Session, key: str) -> None:
         self._q: queue.SimpleQueue[bytes] = queue.SimpleQueue()
-        self._handle = handle
         self._sub = session.declare_subscriber(key, lambda s: self._q.put(s.payload.to_bytes()))
 
-    def start(self) -> None:
-        """Nothing: every state is handled by `serve`, in order."""
-
-    def stop(self) -> None:
-        """Nothing (see `start`)."""
-
-    def serve(self, timeout_s: float) -> bool:
-        """Handle the next state, waiting up to `timeout_s` for it; True if one was handled."""
+    def recv(self, timeout_s: float) -> bytes | None:
         try:
-            data = timed_get(self._q, timeout_s)
+            return timed_get(self._q, timeout_s)
         except queue.Empty:
-            return False
-        self._handle(data)
-        return True
+            return None
 
     def close(self) -> None:
         self._sub.undeclare()
