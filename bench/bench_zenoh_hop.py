@@ -7,30 +7,28 @@ once, pinged in turn in blocks of 50 (so load drifts hit every mode alike):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
              53-byte pong of opaque bytes (the sizes of StatePayload and SetpointPayload);
   project    the real path: `encode_state` (the edge's encoder) + `sea_hil.protocol.zsession.publisher` (express,
-             REAL_TIME, DROP) here; the echo receives like `controller/remote.py` (`LatestHandler`, newest-only,
-             handled in zenoh's receiving thread when nothing is behind it), decodes, encodes a setpoint
-             (`encode_setpoint`, as the controller) and publishes it; this side receives like the edge
-             (`sea_hil.runtime.clock.RealTimeEdgeSync.downlink_callback`: a callback in zenoh's receiving thread),
-             stamps the arrival there and decodes;
-  blocking   the project's payloads and publishers and receive here, but the echo uses a FIFO with blocking recv();
+             REAL_TIME, DROP) here; the echo receives like `controller/remote.py` (`LatestSubscriber`, newest-only),
+             decodes, encodes a setpoint (`encode_setpoint`, as the controller) and publishes it; this side receives
+             with blocking recv() and decodes;
+  blocking   the project's payloads and publishers, but the echo uses a FIFO with blocking recv();
   tls        (`--secure` only, figure 2s) `project` over the secure profile (docs/security.md): mutual TLS with
              throwaway certificates, the ACL on both sides, pinging on the limb's `state` key as the edge's CN and
              answering on `setpoint` as the controller's CN.
 `--profile` adds one mode per difference between raw and project (docs/timing.md, "Zenoh hop"): `options` (raw +
-the project's publisher options), `latest` (raw + the echo's `LatestHandler`), `direct` (raw + this side's receive
-in zenoh's thread), `codec` (raw + the project's payloads, encoded and decoded on both sides).
+the project's publisher options), `latest` (raw + the echo's `LatestSubscriber`), `codec` (raw + the project's
+payloads, encoded and decoded on both sides).
 """
 from __future__ import annotations
 
 import argparse
-import queue
 import subprocess
 import sys
 import tempfile
 import threading
 import time
+from collections.abc import Callable
+from functools import partial
 from pathlib import Path
-from typing import Protocol
 
 import zenoh
 
@@ -46,21 +44,19 @@ from sea_hil.protocol.payloads import (
     SetpointPayload,
     StatePayload,
     TriggerReason,
-    sent_t_ns,
 )
 from sea_hil.protocol.zcerts import make_certs
-from sea_hil.protocol.zlatest import LatestHandler
+from sea_hil.protocol.zlatest import LatestSubscriber
 from sea_hil.protocol.zsecurity import security_settings
 from sea_hil.protocol.zsession import free_tcp_port, make_config, open_session, publisher
 
 MODES = ("raw", "project", "blocking")
-PROFILE_MODES = ("options", "latest", "direct", "codec")
-# mode: (echo receive: fifo | latest, publishers: default | project, payloads: opaque | project,
-#        pinger receive: fifo | direct)
-SHAPE = {"raw": ("fifo", "default", "opaque", "fifo"), "project": ("latest", "project", "project", "direct"),
-         "blocking": ("fifo", "project", "project", "direct"), "tls": ("latest", "project", "project", "direct"),
-         "options": ("fifo", "project", "opaque", "fifo"), "latest": ("latest", "default", "opaque", "fifo"),
-         "direct": ("fifo", "default", "opaque", "direct"), "codec": ("fifo", "default", "project", "fifo")}
+PROFILE_MODES = ("options", "latest", "codec")
+# mode: (echo receive: fifo | latest, publishers: default | project, payloads: opaque | project)
+SHAPE = {"raw": ("fifo", "default", "opaque"), "project": ("latest", "project", "project"),
+         "blocking": ("fifo", "project", "project"), "tls": ("latest", "project", "project"),
+         "options": ("fifo", "project", "opaque"), "latest": ("latest", "default", "opaque"),
+         "codec": ("fifo", "default", "project")}
 PING, PONG = "bench/hop/ping", "bench/hop/pong"
 PING_BYTES, PONG_BYTES = PAYLOAD_SIZE[MsgType.STATE], PAYLOAD_SIZE[MsgType.SETPOINT]
 _LIMB = Keys.make("sea", "limb1")
@@ -90,67 +86,32 @@ def _publisher(session: zenoh.Session, key: str, mode: str) -> zenoh.Publisher:
     return publisher(session, key) if SHAPE[mode][1] == "project" else session.declare_publisher(key)
 
 
-def _opaque_sent_ns(data: bytes) -> int:
-    """An opaque ping's send time (bytes 8-16, the pinger's monotonic clock), for the echo's `LatestHandler`."""
-    return int.from_bytes(data[8:16], "little")
-
-
 def echo(endpoint: str, mode: str, certs: Path | None = None) -> int:
     """Child: answer every ping on the pong key until terminated."""
     session = open_session(_config(mode, certs, "controller", connect=[endpoint]))
     counters = PayloadCounters()
     ping, pong = _keys(mode)
-    receive, _, payloads, _ = SHAPE[mode]
+    receive, _, payloads = SHAPE[mode]
+    recv: Callable[[], zenoh.Sample | None]
+    if receive == "latest":
+        recv = partial(LatestSubscriber(session, ping).recv, 1.0)
+    else:
+        recv = session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024)).recv
     pub = _publisher(session, pong, mode)
+    print("ready", flush=True)
     pad = bytes(PONG_BYTES - 4)
-
-    def answer(data: bytes) -> None:
+    while True:
+        sample = recv()
+        if sample is None:
+            continue
+        data = sample.payload.to_bytes()
         if payloads == "opaque":
             pub.put(data[:4] + pad)
-            return
+            continue
         p = counters.try_decode(data)
         if isinstance(p, StatePayload):
             pub.put(encode_setpoint(p.seq, time.monotonic_ns(), p.seq, (0.001, 0.002), (0.0, 0.0),
                                     TriggerReason.ERROR_BOUND))
-    if receive == "latest":     # as the controller: handled in zenoh's receiving thread, else by `serve`
-        handler = LatestHandler(session, ping, answer, _opaque_sent_ns if payloads == "opaque" else sent_t_ns)
-        handler.start()
-        print("ready", flush=True)
-        while True:
-            handler.serve(1.0)
-    sub = session.declare_subscriber(ping, zenoh.handlers.FifoChannel(1024))
-    print("ready", flush=True)
-    while True:
-        answer(sub.recv().payload.to_bytes())
-
-
-class _Receiver(Protocol):
-    def recv(self) -> tuple[int, bytes]: ...
-
-
-class _Fifo:
-    """The pinger's receive with zenoh-python's defaults: a FIFO and a blocking recv(), stamped when it returns."""
-
-    def __init__(self, session: zenoh.Session, key: str) -> None:
-        self._sub = session.declare_subscriber(key, zenoh.handlers.FifoChannel(1024))
-
-    def recv(self) -> tuple[int, bytes]:
-        data = self._sub.recv().payload.to_bytes()
-        return time.monotonic_ns(), data
-
-
-class _Direct:
-    """The pinger's receive as the edge's: a callback in zenoh's receiving thread stamps each pong's arrival there."""
-
-    def __init__(self, session: zenoh.Session, key: str) -> None:
-        self._queue: queue.SimpleQueue[tuple[int, bytes]] = queue.SimpleQueue()
-        self._sub = session.declare_subscriber(key, zenoh.handlers.Callback(self._on_sample, indirect=False))
-
-    def _on_sample(self, sample: zenoh.Sample) -> None:
-        self._queue.put((time.monotonic_ns(), sample.payload.to_bytes()))
-
-    def recv(self) -> tuple[int, bytes]:
-        return self._queue.get()
 
 
 class _Watchdog:
@@ -176,15 +137,15 @@ class _Watchdog:
         self._pub.undeclare()
 
 
-def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: _Receiver, counters: PayloadCounters,
+def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: zenoh.Subscriber, counters: PayloadCounters,
                dog: _Watchdog) -> int | None:
     """Hop time in ns (round trip / 2) for ping `seq`, or None if the watchdog fired first."""
-    opaque = SHAPE[mode][2] == "opaque"
+    raw_ping = seq.to_bytes(4, "little") + bytes(PING_BYTES - 4)
     t0 = time.monotonic_ns()
-    pub.put(seq.to_bytes(4, "little") + bytes(4) + t0.to_bytes(8, "little") + bytes(PING_BYTES - 16) if opaque
-            else _state(seq))
+    opaque = SHAPE[mode][2] == "opaque"
+    pub.put(raw_ping if opaque else _state(seq))
     while True:
-        t1, data = sub.recv()
+        data = sub.recv().payload.to_bytes()
         if data == SENTINEL:
             return None
         if opaque:
@@ -193,7 +154,7 @@ def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: _Receiver, counte
             p = counters.try_decode(data)
             ok = isinstance(p, SetpointPayload) and p.state_seq == seq
         if ok:
-            dog.progress_ns = t1
+            dog.progress_ns = t1 = time.monotonic_ns()
             return (t1 - t0) // 2
 
 
@@ -216,8 +177,7 @@ class Batch:
         try:
             wait_ready(self.proc)
             self.pub = _publisher(self.session, ping, mode)
-            self.sub: _Receiver = _Direct(self.session, pong) if SHAPE[mode][3] == "direct" else \
-                _Fifo(self.session, pong)
+            self.sub = self.session.declare_subscriber(pong, zenoh.handlers.FifoChannel(1024))
             self.counters = PayloadCounters()
             self.dog = _Watchdog(self.session, timeout_s=0.05, pong=pong)   # warm-up: retry every ~0.1 s
             deadline = time.monotonic() + 20.0
@@ -305,8 +265,8 @@ def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> i
                  unit="us", per_run=medians["project"], p99=pct(pooled["project"], 99) / 1e3, baseline=base,
                  baseline_label="raw zenoh-python ping-pong, same payload sizes (median of run medians)",
                  goal="ratio <= 1.3", details=details,
-                 notes="`blocking` row = project payloads, publishers and receive here with a FIFO receive at the echo: "
-                       "the gap between `project` and `blocking` is the newest-only handler (`LatestHandler`); "
+                 notes="`blocking` row = project payloads and publishers with a FIFO receive at the echo: the gap "
+                       "between `project` and `blocking` is the newest-only hand-off (`LatestSubscriber`); "
                        "`ratio_to_raw` = median of the per-run ratios (`--profile` rows: one difference each).")
     ratios = [p / r for p, r in zip(medians["project"], medians["raw"], strict=True)]
     rec["ratio"] = pct(ratios, 50)   # per-run ratios: both modes of a run share the machine's state

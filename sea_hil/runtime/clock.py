@@ -192,15 +192,9 @@ class RealTimeEdgeSync:
         self.edge = edge
 
     def downlink_callback(self, channel: str) -> Callable[[zenoh.Sample], None]:
-        """The subscriber callback of the edge's downlink key `channel` ("setpoint" | "voltage"), run in zenoh's
-        receiving thread (`indirect=False`), not handed to a Python thread of zenoh-python's first: one thread
-        wake-up less between a setpoint's arrival and the VOLTAGE_CMD it gives (docs/timing.md, "Closed loop"). It
-        holds that thread for the edge's arrival path (the edge's lock, one decode, one CAN send)."""
+        """The subscriber callback of the edge's downlink key `channel` ("setpoint" | "voltage")."""
         on_arrival = self.edge.on_arrival
-
-        def on_sample(s: zenoh.Sample) -> None:
-            on_arrival(s.payload.to_bytes(), time.monotonic_ns(), channel)
-        return zenoh.handlers.Callback(on_sample, indirect=False)
+        return lambda s: on_arrival(s.payload.to_bytes(), time.monotonic_ns(), channel)
 
     def control_callback(self) -> Callable[[zenoh.Sample], None]:
         def on_control(s: zenoh.Sample) -> None:
