@@ -97,6 +97,8 @@ def _role(cmdline: list[str]) -> str:
         return "recorder child"
     if " controller" in text:
         return "controllers"
+    if " plant " in f"{text} ":
+        return "driver process"
     return "other child"
 
 

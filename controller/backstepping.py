@@ -18,7 +18,6 @@ exactly as before.
 """
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 from sea_hil.controller.observer import Estimate
@@ -118,6 +117,3 @@ def _g_dot(q1: float, q2: float, w1: float, w2: float, p: LimbParams) -> tuple[f
     h2 = 2.0 * h
     return (gp[0] - gm[0]) / h2, (gp[1] - gm[1]) / h2, (gp[2] - gm[2]) / h2, (gp[3] - gm[3]) / h2
 
-
-def is_finite_voltage(u: tuple[float, float]) -> bool:
-    return math.isfinite(u[0]) and math.isfinite(u[1])

@@ -28,7 +28,7 @@ from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
 from sea_hil.protocol.keys import KEY_PAYLOADS, Keys
 from sea_hil.protocol.payloads import EventStatePayload, PayloadCounters, StatePayload
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
-from sea_hil.protocol.zsession import publisher
+from sea_hil.protocol.zsession import await_subscriber, publisher
 from sea_hil.runtime.clock import Clock, ControllerSync, RealTimeClock
 from sea_hil.runtime.node import Node
 
@@ -61,6 +61,10 @@ class RemoteController(Node):
         self.restart_gap_ns = int(round(2 * cfg.trigger.max_inter_event_s * 1e9))
         self._last_state_wall_ns: int | None = None
         self._pubs = {"setpoint": self.sp_pub, "voltage": self.v_pub}
+        # > 0 (`sea-hil controller --await-recorder S`): a recorder is expected; the first tracking record waits up
+        # to this long for it to match the event key (`_await_recorder`)
+        self.await_recorder_s = 0.0
+        self.recorder_unmatched = 0
 
     # ---- the core's state, read (and, by tests, set) through the node ----------------------------------------
     states = property(lambda self: self.core.states)
@@ -130,7 +134,23 @@ class RemoteController(Node):
             pub.put(msg)
         self.sync.answered(p.seq, answer)
         if ans.record is not None:
+            if self.await_recorder_s > 0:
+                self._await_recorder()
             self.event_pub.put(json.dumps(ans.record).encode())
+
+    def _await_recorder(self) -> None:
+        """Once, before the first tracking record: wait (bounded) for a subscriber of the event key. A controller
+        that joins a running session could publish its INITIAL record before the recorder's subscription has reached
+        it across a slow link; that record would be lost. A wait that ends unmatched is counted and logged."""
+        t0 = time.monotonic()
+        matched = await_subscriber(self.event_pub, self.await_recorder_s)
+        self.await_recorder_s = 0.0
+        if not matched:
+            self.recorder_unmatched += 1
+            log.warning("no recorder matched the event key %s within the wait: the first tracking record may not be "
+                        "recorded", self.keys.event)
+        else:
+            log.info("a recorder matched the event key after %.3f s", time.monotonic() - t0)
 
     def _stream_seq(self, p: StatePayload) -> int:
         """The sequence number of the state stream: `event_seq` (consecutive) with the trigger at the edge, else the
@@ -165,4 +185,5 @@ class RemoteController(Node):
                 "trajectory_mismatches": self.trajectory_mismatches, "unanchored_states": self.core.unanchored,
                 "prediction_clamped": self.predictor.clamped if self.predictor else 0,
                 **{f"state_seq_{k}": v for k, v in self.seq.as_dict().items()},
-                "states_superseded": self.source.superseded, **self.edge_epoch.as_dict()}
+                "states_superseded": self.source.superseded, "recorder_unmatched": self.recorder_unmatched,
+                **self.edge_epoch.as_dict()}

@@ -76,12 +76,8 @@ def advance(t: float, x: State, u: tuple[float, float], dt: float, substeps: int
         for i in range(substeps):
             x = rk4_step(t + i * h, x, u, h, p, dist)
         return x
-    hh = 0.5 * h
-    values: list[float] = []
-    for i in range(substeps):
-        ti = t + i * h
-        values += (*dist(ti), *dist(ti + hh), *dist(ti + h))
-    dist_values = np.array(values)   # an array: one signature for any sub-step count
+    # an array: one signature for any sub-step count
+    dist_values = np.array([v for times in substep_times(t, dt, substeps) for ti in times for v in dist(ti)])
     if type(substeps) is int and len(x) == 8 and all(type(v) is float for v in (t, dt, *x, *u)):
         out: State = _entry(kernel, p)(t, x, u, dt, substeps, p, dist_values)
     else:

@@ -247,11 +247,6 @@ def binding_of(cls: type[Frame], names: tuple[str, ...]) -> SignalBinding | None
     return None if "to_signals" in cls.__dict__ or "from_signals" in cls.__dict__ else SignalBinding(cls, names)
 
 
-def can_id_of(node_id: int, cmd_id: int) -> int:
-    """11-bit identifier of command `cmd_id` for node `node_id`."""
-    return check_node_id(node_id) << CMD_BITS | (cmd_id & CMD_MASK)
-
-
 def check_node_id(node_id: Any) -> int:
     if not isinstance(node_id, numbers.Integral) or not NODE_ID_MIN <= int(node_id) <= NODE_ID_MAX:
         raise MalformedFrame(f"node id {node_id!r} not in {NODE_ID_MIN}..{NODE_ID_MAX}")

@@ -28,7 +28,7 @@ from typing import Generic, TypeVar
 
 from pydantic import ValidationError
 
-from sea_hil.config.comms import LinkConfig, LinkDirectionConfig
+from sea_hil.config.comms import LinkDirectionConfig
 from sea_hil.errors import ConfigError
 from sea_hil.protocol.link_trace import load_trace
 
@@ -68,10 +68,6 @@ class LinkEmulator:
         self._submitted = self._dropped_random = self._dropped_burst = self._dropped_queue = 0
         self._delivered = 0
         self._added_delay_sum_ns = 0
-
-    @property
-    def in_bad_state(self) -> bool:
-        return self._bad
 
     def _jitter_ns(self) -> float:
         j = self.cfg.jitter_s
@@ -138,11 +134,6 @@ class LinkEmulator:
         mean = self._added_delay_sum_ns / self._delivered / NS_PER_S if self._delivered else 0.0
         return LinkCounters(self._submitted, self._dropped_random, self._dropped_burst, self._dropped_queue,
                             self._delivered, mean, self._dropped_trace)
-
-
-def link_pair(cfg: LinkConfig) -> tuple[LinkEmulator, LinkEmulator]:
-    """(uplink, downlink) emulators with independent streams derived from `cfg.seed`."""
-    return (LinkEmulator(cfg.uplink, f"{cfg.seed}/uplink"), LinkEmulator(cfg.downlink, f"{cfg.seed}/downlink"))
 
 
 def release_sample_ns(deliver_ns: int, period_ns: int) -> int:

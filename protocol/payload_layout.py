@@ -40,21 +40,6 @@ def load_layout(path: Path = LAYOUT_PATH) -> dict[str, Any]:
         raise ConfigError(f"cannot read payload layout {path}: {err}") from err
 
 
-def fields_format(fields: list[dict[str, Any]]) -> str:
-    """The little-endian struct format a field list describes (e.g. `<Q8d`, runs of one type merged)."""
-    out: list[tuple[int, str]] = []
-    for f in fields:
-        code = STRUCT_CODE[f["type"]]
-        n = int(f.get("count", 1))
-        if code.endswith("s"):          # bytesN is one item of N bytes
-            out.append((1, code))
-        elif out and out[-1][1] == code:
-            out[-1] = (out[-1][0] + n, code)
-        else:
-            out.append((n, code))
-    return "<" + "".join(f"{n if n > 1 else ''}{c}" for n, c in out)
-
-
 def messages(layout: dict[str, Any]) -> dict[str, dict[str, Any]]:
     """Message name -> its table (type_id, key, format, size, fields)."""
     return {m["name"]: m for m in layout["message"]}

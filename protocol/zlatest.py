@@ -18,7 +18,7 @@ __all__ = ["LatestSubscriber"]
 
 class LatestSubscriber:
     """`recv(timeout_s)` returns the newest sample that arrived since the last receive, waiting up to `timeout_s`
-    for one (None: nothing came); `try_latest()` the same without waiting. `overwritten` counts the samples a newer
+    for one (None: nothing came; 0: without waiting). `overwritten` counts the samples a newer
     one replaced before anyone read them. Samples wait in the queue only between two receives."""
 
     def __init__(self, session: zenoh.Session, key: str) -> None:
@@ -34,12 +34,6 @@ class LatestSubscriber:
             sample = q.get_nowait()
             self.overwritten += 1
         return sample
-
-    def try_latest(self) -> zenoh.Sample | None:
-        try:
-            return self._newest(self._queue.get_nowait())
-        except queue.Empty:
-            return None
 
     def recv(self, timeout_s: float) -> zenoh.Sample | None:
         try:

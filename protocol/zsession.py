@@ -10,6 +10,7 @@ from __future__ import annotations
 import json
 import re
 import socket
+import threading
 from collections.abc import Callable, Mapping
 from typing import Any, Protocol
 
@@ -81,6 +82,25 @@ def publisher(session: zenoh.Session, key: str, *, express: bool = True,
               congestion_control: zenoh.CongestionControl = zenoh.CongestionControl.DROP) -> zenoh.Publisher:
     """A publisher for control traffic: by default unbatched (express), highest priority, drop when congested."""
     return session.declare_publisher(key, express=express, priority=priority, congestion_control=congestion_control)
+
+
+def await_subscriber(pub: zenoh.Publisher, timeout_s: float) -> bool:
+    """Whether a subscriber matches `pub`'s key, waiting up to `timeout_s` for one: Zenoh's matching status, true once
+    a subscription declared elsewhere (a recorder across a slow link) has reached this session. A matching listener
+    wakes the wait (no polling)."""
+    if _matching(pub):
+        return True
+    matched = threading.Event()
+    listener = pub.declare_matching_listener(lambda status: matched.set() if status.matching else None)
+    try:
+        return _matching(pub) or matched.wait(max(0.0, timeout_s))
+    finally:
+        listener.undeclare()
+
+
+def _matching(pub: zenoh.Publisher) -> bool:
+    status: Any = pub.matching_status   # a zenoh.MatchingStatus (zenoh 1.x's stubs say bool)
+    return bool(getattr(status, "matching", status))
 
 
 class _Putter(Protocol):

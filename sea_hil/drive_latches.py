@@ -14,6 +14,7 @@ another node than the record's (a cia402 limb's knee), i from 1; `drive_latch_or
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
@@ -86,9 +87,25 @@ def latches_of_stats(stats: dict[str, Any]) -> tuple[list[Latch], int]:
     return out, int(stats.get(ORIGIN_KEY, 0))
 
 
-def latch_entry(la: Latch, t0_ns: int, after: bool, source: str) -> dict[str, Any]:
-    """summary.json's `drive_faults` entry of a latch (docs/session.md): `t_s` since `t0_ns`, `after_session`
-    `after`, `source` "can" (heartbeats) or "edge" (its stats record); the live view's running verdict too."""
-    return {"node_id": la.node_id, "t_s": (la.t_ns - t0_ns) * 1e-9, "state": la.state.name,
-            "flags": flag_names(la.flags), "in_fault_s": (la.until_t_ns - la.t_ns) * 1e-9, "cleared": la.cleared,
-            "clear_policy": clear_policy(la.state, la.flags), "after_session": after, "source": source}
+def latch_entries(latches: Iterable[Latch], t0_ns: int, end_ns: int | None, source: str) -> list[dict[str, Any]]:
+    """summary.json's `drive_faults` entries of latches (docs/session.md), the report's and the live view's running
+    verdict's: `t_s` since `t0_ns`, `after_session` when it began after `end_ns` (the last measured sample; None: not
+    known), `source` "can" (heartbeats) or "edge" (its stats record)."""
+    return [{"node_id": la.node_id, "t_s": (la.t_ns - t0_ns) * 1e-9, "state": la.state.name,
+             "flags": flag_names(la.flags), "in_fault_s": (la.until_t_ns - la.t_ns) * 1e-9, "cleared": la.cleared,
+             "clear_policy": clear_policy(la.state, la.flags), "after_session": end_ns is not None and la.t_ns > end_ns,
+             "source": source} for la in latches]
+
+
+def edge_latch_entries(records: Iterable[dict[str, Any]], end_ns: int | None) -> list[dict[str, Any]]:
+    """The latches the edges' stats records detail (`latches_of_stats`), as `latch_entries` from each record's
+    origin (`source` "edge"), in time order."""
+    out = []
+    for stats in records:
+        latches, origin_ns = latches_of_stats(stats)
+        out += latch_entries(latches, origin_ns, end_ns, "edge")
+    return in_time_order(out)
+
+
+def in_time_order(entries: list[dict[str, Any]]) -> list[dict[str, Any]]:
+    return sorted(entries, key=lambda e: (e["t_s"], e["node_id"]))

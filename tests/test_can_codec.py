@@ -30,7 +30,6 @@ from sea_hil.protocol.can_frames import (
     FeedbackJoint2,
     Heartbeat,
     VoltageCmd,
-    can_id_of,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -92,7 +91,7 @@ def test_every_frame_type_covered_and_ids_unique(codec: SeaCodec) -> None:
     assert {type(e[0]) for e in EXACT} == set(FRAME_TYPES) - {Feedback}   # Feedback: tests/test_can_fd.py
     ids = [e[1] & 0x1F for e in EXACT]
     assert len(set(ids)) == len(ids)
-    assert can_id_of(3, 0x05) == 0x65
+    assert codec.encode(EStop(3)).arbitration_id == 0x060                  # node 3 << 5 | cmd 0
 
 
 def test_dbc_meets_required_ranges_and_resolutions() -> None:

@@ -11,6 +11,7 @@ import uuid
 from collections.abc import Iterator
 
 import pytest
+import zenoh
 from paper_scheme import paper
 
 from sea_hil.config.loader import load_config
@@ -109,6 +110,32 @@ def test_the_controllers_state_key_takes_only_states(builder: SessionBuilder, sc
         ctrl.handle(one_of_each(1, trajectory_id=ctrl.trajectory_id)[genuine], now_ns=MS)
         assert ctrl.seq.last == 1                                  # the stream starts at the genuine state
     finally:
+        ctrl.close()
+
+
+def test_the_controller_waits_once_for_a_recorder_before_its_first_record(builder: SessionBuilder) -> None:
+    """`sea-hil controller --await-recorder S` (the paper's scheme: the controller records the tracking): the first
+    tracking record waits (bounded) for a subscriber of the event key; with none it goes out after the wait, counted
+    (`recorder_unmatched`), and no later record waits."""
+    cfg = load_config(overrides=paper())
+    ctrl = RemoteController(cfg, builder.zenoh(), "et", cycles=1)
+    try:
+        ctrl.await_recorder_s = 0.05
+        for seq in (1, 2):
+            ctrl.handle(one_of_each(seq)[MsgType.STATE], now_ns=seq * MS)
+        st = ctrl.stats_dict()
+        assert st["states_handled"] == 2 and st["recorder_unmatched"] == 1 and ctrl.await_recorder_s == 0.0
+    finally:
+        ctrl.close()
+    session = builder.zenoh()
+    ctrl = RemoteController(cfg, session, "et", cycles=1)
+    sub = session.declare_subscriber(ctrl.keys.event, zenoh.handlers.FifoChannel(4))   # the recorder is there
+    try:
+        ctrl.await_recorder_s = 60.0
+        ctrl.handle(one_of_each(1)[MsgType.STATE], now_ns=MS)
+        assert ctrl.stats_dict()["recorder_unmatched"] == 0 and sub.try_recv() is not None   # its INITIAL record
+    finally:
+        sub.undeclare()
         ctrl.close()
 
 

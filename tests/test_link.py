@@ -11,9 +11,9 @@ from itertools import pairwise
 
 import pytest
 
-from sea_hil.config.comms import LinkConfig, LinkDirectionConfig
+from sea_hil.config.comms import LinkDirectionConfig
 from sea_hil.errors import ConfigError
-from sea_hil.protocol.link import DelayQueue, LinkEmulator, link_pair, parse_link_spec
+from sea_hil.protocol.link import DelayQueue, LinkEmulator, parse_link_spec
 
 N = 20_000
 Z = 4.0
@@ -103,7 +103,7 @@ def test_same_seed_same_decisions_and_independent_streams():
     no_jitter = cfg.model_copy(update={"jitter_s": 0.0})
     dropped = [d is None for d in _run(cfg, seed=9, n=2000)]
     assert dropped == [d is None for d in _run(no_jitter, seed=9, n=2000)]
-    up, down = link_pair(LinkConfig(seed=5, uplink=cfg, downlink=cfg))
+    up, down = LinkEmulator(cfg, "5/up"), LinkEmulator(cfg, "5/down")   # the edge's two directions' streams
     assert [up.submit(0, 1) for _ in range(200)] != [down.submit(0, 1) for _ in range(200)]
 
 

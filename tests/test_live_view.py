@@ -108,10 +108,19 @@ def test_options_enable_the_view_and_keep_the_config_port():
         p.parse_args(["--foxglove", "70000"])
 
 
+def _message_paths(layout: dict[str, Any]) -> list[str]:
+    """Every `/topic.field` and bare `/topic` the layout's panels read."""
+    out: list[str] = []
+    for panel in layout["configById"].values():
+        out += [p["value"] for p in panel.get("paths", [])]
+        out += [panel[k] for k in ("topicPath", "topicToRender") if k in panel]
+    return out
+
+
 def test_shipped_layout_is_generated_and_reads_only_live_fields():
     shipped = (REPO / "docs" / "foxglove" / "sea-hil-layout.json").read_text(encoding="utf-8")
     assert shipped == layout.text()
-    paths = layout.message_paths(json.loads(shipped))
+    paths = _message_paths(json.loads(shipped))
     assert {p.split(".")[0] for p in paths} >= {"/live/tracking", "/live/events", "/live/link", "/live/bus"}
     for path in paths:
         topic, _, field = path.partition(".")

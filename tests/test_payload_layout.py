@@ -11,7 +11,7 @@ from typing import Any
 import pytest
 
 from sea_hil.protocol import payloads as pl
-from sea_hil.protocol.payload_layout import fields_format, load_layout, main, messages, render_tables, splice
+from sea_hil.protocol.payload_layout import STRUCT_CODE, load_layout, main, messages, render_tables, splice
 
 REPO = Path(__file__).resolve().parents[1]
 DOC = REPO / "docs" / "zenoh-protocol.md"
@@ -27,6 +27,22 @@ SAMPLES: dict[str, Any] = {
     "EVENT_STATE": pl.EventStatePayload(15, 10, 6_000_000, (0.5, -0.5), (1.0, -1.0), (2e-4, -2e-4), (0.03, -0.03),
                                         41, pl.TriggerReason.ERROR_BOUND, 0xDEADBEEF, epoch=7),
 }
+
+
+def fields_format(fields: list[dict[str, Any]]) -> str:
+    """The little-endian struct format a field list describes (e.g. `<Q8d`, runs of one type merged): the check
+    that payloads.toml's `format` strings agree with its field lists."""
+    out: list[tuple[int, str]] = []
+    for f in fields:
+        code = STRUCT_CODE[f["type"]]
+        n = int(f.get("count", 1))
+        if code.endswith("s"):          # bytesN is one item of N bytes
+            out.append((1, code))
+        elif out and out[-1][1] == code:
+            out[-1] = (out[-1][0] + n, code)
+        else:
+            out.append((n, code))
+    return "<" + "".join(f"{n if n > 1 else ''}{c}" for n, c in out)
 
 
 def _values(p: Any, fields: list[dict[str, Any]]) -> list[Any]:

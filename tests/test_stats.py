@@ -1,7 +1,6 @@
 """Statistics: histogram precision vs numpy, merge/serialise; the CAN frame length formula."""
 from __future__ import annotations
 
-import json
 import math
 
 import numpy as np
@@ -56,19 +55,6 @@ def test_histogram_merge_equals_histogram_of_union() -> None:
     assert ha.to_dict() == pytest.approx(hab.to_dict())
     with pytest.raises(MalformedPayload):
         ha.merge(LogHistogram(precision=0.02))
-
-
-def test_histogram_compact_form_roundtrips_through_json() -> None:
-    h = _filled(np.random.default_rng(3).uniform(1e-5, 1.0, 500))
-    back = LogHistogram.from_compact(json.loads(json.dumps(h.to_compact())))
-    assert back.to_dict() == h.to_dict() and back._counts == h._counts
-    assert LogHistogram.from_compact(LogHistogram().to_compact()).count == 0
-    bad = h.to_compact()
-    bad["n"] += 1
-    with pytest.raises(MalformedPayload):
-        LogHistogram.from_compact(bad)
-    with pytest.raises(MalformedPayload):
-        LogHistogram.from_compact({"v": 1})
 
 
 def test_can_frame_bits_formula() -> None:

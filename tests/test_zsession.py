@@ -13,7 +13,14 @@ from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.link import LinkEmulator
 from sea_hil.protocol.payloads import StatePayload, decode, encode
 from sea_hil.protocol.zlatest import LatestSubscriber
-from sea_hil.protocol.zsession import LinkedPublisher, free_tcp_port, make_config, open_session, publisher
+from sea_hil.protocol.zsession import (
+    LinkedPublisher,
+    await_subscriber,
+    free_tcp_port,
+    make_config,
+    open_session,
+    publisher,
+)
 
 DEADLINE_S = 10.0
 
@@ -72,7 +79,7 @@ def test_exchange_state_payload(pair):
         got = _until(lambda: (s := sub.recv(0.05)) is not None and _seq_of(s) == 42 and s, "seq 42")
         p = decode(got.payload.to_bytes())
         assert p.seq == 42 and p.theta_rad == (0.1, 0.2)
-        assert sub.try_latest() is None  # taken
+        assert sub.recv(0.0) is None  # taken
 
 
 def test_ring_subscriber_keeps_only_newest(pair):
@@ -84,7 +91,7 @@ def test_ring_subscriber_keeps_only_newest(pair):
         _connect(pub, ring)
         # the marker's subscription propagates on its own (CI once put the marker before `a` knew of it): probe it too
         _until(lambda: (a.put(keys.control, b"probe"), marker.try_recv())[1], "the marker subscriber to match")
-        ring.try_latest()
+        ring.recv(0.0)
         for seq in range(1, 101):
             pub.put(_state(seq))
         # Same session, priority and transport: the marker is delivered after all 100 states.
@@ -92,9 +99,9 @@ def test_ring_subscriber_keeps_only_newest(pair):
               congestion_control=zenoh.CongestionControl.BLOCK)
         _until(lambda: (m := marker.try_recv()) is not None and m.payload.to_bytes() == b"burst-done",
                "the burst marker")          # late probes may come first
-        newest = ring.try_latest()
+        newest = ring.recv(0.0)
         assert newest is not None and decode(newest.payload.to_bytes()).seq == 100
-        assert ring.try_latest() is None
+        assert ring.recv(0.0) is None
         marker.undeclare()
 
 
@@ -151,12 +158,12 @@ def test_latest_recv_times_out_and_takes_the_newest_of_what_queued(pair):
     a, b = pair
     keys = Keys.make("test", "limb1")
     with LatestSubscriber(b, keys.state) as sub:
-        assert sub.recv(0.01) is None and sub.try_latest() is None     # nothing came
+        assert sub.recv(0.01) is None and sub.recv(0.0) is None     # nothing came
         marker = b.declare_subscriber(keys.control, zenoh.handlers.FifoChannel(16))
         pub = publisher(a, keys.state, congestion_control=zenoh.CongestionControl.BLOCK)
         _connect(pub, sub)
         _until(lambda: (a.put(keys.control, b"probe"), marker.try_recv())[1], "the marker subscriber")
-        sub.try_latest()
+        sub.recv(0.0)
         for seq in (1, 2, 3):
             pub.put(_state(seq))
         a.put(keys.control, b"after-3", priority=zenoh.Priority.REAL_TIME, express=True,
@@ -166,3 +173,20 @@ def test_latest_recv_times_out_and_takes_the_newest_of_what_queued(pair):
         assert _seq_of(sub.recv(1.0)) == 3 and sub.overwritten == before + 2 and sub.recv(0.0) is None
         marker.undeclare()
     sub.close()                                             # idempotent
+
+
+def test_await_subscriber_waits_for_a_subscription_declared_across_the_router():
+    """Two clients of one listening peer (the guest topology's controller and recorder): the publisher's wait ends
+    unmatched after its bound with no subscriber, and matched once the other client's subscription has reached it."""
+    ep = f"tcp/127.0.0.1:{free_tcp_port()}"
+    router = open_session(make_config(listen=[ep]))
+    ctl, rec = (open_session(make_config(connect=[ep], mode="client")) for _ in range(2))
+    try:
+        pub = publisher(ctl, "test/limb1/event", express=False)
+        assert not await_subscriber(pub, 0.05)
+        sub = rec.declare_subscriber("test/**", zenoh.handlers.FifoChannel(4))
+        assert await_subscriber(pub, DEADLINE_S)
+        sub.undeclare()
+    finally:
+        for s in (rec, ctl, router):
+            s.close()

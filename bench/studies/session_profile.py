@@ -15,7 +15,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import re
 import subprocess
 import sys
 import tempfile
@@ -27,7 +26,7 @@ from typing import Any
 
 import psutil
 
-PYSPY_THREAD = re.compile(r'^Thread (\d+) \([^)]*\): "([^"]*)"', re.M)
+from bench.cpu_window import thread_names
 
 
 def _role(cmdline: list[str]) -> str:
@@ -77,24 +76,7 @@ class TreeSampler:
             self.sample()
             k += 1
             if k % 15 == 0:   # every 3 s: name the threads alive now (py-spy), so short-lived ones are named too
-                self.names.update(thread_names(self.root.pid))
-
-
-def thread_names(pid: int) -> dict[int, str]:
-    """tid -> Python thread name (py-spy), else the OS thread name."""
-    names: dict[int, str] = {}
-    for task in Path(f"/proc/{pid}/task").glob("*"):
-        try:
-            names[int(task.name)] = (task / "comm").read_text().strip()
-        except OSError:
-            continue
-    try:
-        out = subprocess.run([str(Path(sys.executable).with_name("py-spy")), "dump", "--pid", str(pid)],
-                             capture_output=True, text=True, timeout=30)
-        names.update({int(tid): name for tid, name in PYSPY_THREAD.findall(out.stdout)})
-    except (OSError, subprocess.TimeoutExpired):
-        pass
-    return names
+                self.names.update(thread_names(self.root.pid)[0])
 
 
 def profile(limbs: int, cycles: int, out: Path, extra: list[str]) -> dict[str, Any]:

@@ -82,14 +82,5 @@ def text() -> str:
     return json.dumps(build(), indent=2) + "\n"
 
 
-def message_paths(layout: dict[str, Any]) -> list[str]:
-    """Every `/topic.field` and bare `/topic` the layout's panels read."""
-    out: list[str] = []
-    for panel in layout["configById"].values():
-        out += [p["value"] for p in panel.get("paths", [])]
-        out += [panel[k] for k in ("topicPath", "topicToRender") if k in panel]
-    return out
-
-
 if __name__ == "__main__":
     Path(sys.argv[1]).write_text(text(), encoding="utf-8")

@@ -19,7 +19,7 @@ from collections.abc import Mapping
 from typing import Any
 
 from sea_hil.config.verdict import VerdictConfig
-from sea_hil.drive_latches import LatchLog, latch_entry, latches_of_stats
+from sea_hil.drive_latches import LatchLog, edge_latch_entries, in_time_order, latch_entries, latches_of_stats
 from sea_hil.protocol.can_frames import Heartbeat
 from sea_hil.verdict.edge_blocks import rejections_blocks, split_edge_stats, uplink_losses
 from sea_hil.verdict.rules import OK, verdict
@@ -100,15 +100,10 @@ class LiveVerdict:
         if self.heartbeats:
             end = self._last_tracking[1] if self._last_tracking is not None else None
             t0 = self._first_can_ns or 0
-            out = [latch_entry(la, t0, end is not None and la.t_ns > end, "can") for la in self.latches.latches]
-        else:
-            end = None if self._anchor_ns is None or self._last_tracking is None else \
-                self._anchor_ns + round(self._last_tracking[0] * 1e9)
-            out = []
-            for stats in self._edges.values():
-                latches, origin_ns = latches_of_stats(stats)
-                out += [latch_entry(la, origin_ns, end is not None and la.t_ns > end, "edge") for la in latches]
-        return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
+            return in_time_order(latch_entries(self.latches.latches, t0, end, "can"))
+        end = None if self._anchor_ns is None or self._last_tracking is None else \
+            self._anchor_ns + round(self._last_tracking[0] * 1e9)
+        return edge_latch_entries(self._edges.values(), end)
 
     def summary(self) -> dict[str, Any]:
         """The summary.json blocks the live view can fill (the rest absent: the rules give no reason for them)."""
@@ -124,7 +119,7 @@ class LiveVerdict:
             out["timing"]["driver"] = {"floor": self.floor}
         if len(edges) > 1:
             out["limbs"] = [self._limb_block(e) for e in edges]
-        losses = uplink_losses(self._controller_of(first, several=len(edges) > 1), first)
+        losses = uplink_losses(self._controller_of(first, several=len(edges) > 1 or len(self.limbs) > 1), first)
         if losses is not None:
             out["link_losses"] = losses
         return out

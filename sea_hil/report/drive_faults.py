@@ -24,7 +24,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from sea_hil.drive_latches import LatchLog, latch_entry, latches_of_stats
+from sea_hil.drive_latches import LatchLog, edge_latch_entries, in_time_order, latch_entries
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_frames import Heartbeat
 from sea_hil.protocol.drive_state import DriveStateReader, drive_state_reader
@@ -62,8 +62,7 @@ def drive_faults(data: SessionData) -> list[dict[str, Any]]:
     latches = LatchLog()
     for t_ns, hb in states:
         latches.on_heartbeat(t_ns, hb)
-    out = [latch_entry(la, t0_ns, end_ns is not None and la.t_ns > end_ns, "can") for la in latches.latches]
-    return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
+    return in_time_order(latch_entries(latches.latches, t0_ns, end_ns, "can"))
 
 
 def edge_latches(data: SessionData) -> list[dict[str, Any]]:
@@ -75,22 +74,25 @@ def edge_latches(data: SessionData) -> list[dict[str, Any]]:
     for m in data.messages.get("/stats", []):
         if m.payload.get("final") and m.payload.get("node", "edge") == "edge":
             finals[int(m.payload.get("node_id", 1))] = m.payload     # the last record per drive
-    end = _cycle_end_sample_ns(data)
-    out = []
-    for stats in finals.values():
-        latches, origin_ns = latches_of_stats(stats)
-        out += [latch_entry(la, origin_ns, end is not None and la.t_ns > end, "edge") for la in latches]
-    return sorted(out, key=lambda e: (e["t_s"], e["node_id"]))
+    return edge_latch_entries(finals.values(), _cycle_end_sample_ns(data))
+
+
+def cycle_origin_ns(data: SessionData) -> int | None:
+    """The sample time (drive clock) of the controller's cycle time 0: the first tracking record whose state the
+    recording has, its state's `sample_t_ns` less its `t_s` (None without such a state). The one anchor of the
+    controller's time axis on the sample clock (the session summary's phases too)."""
+    sample_ns: dict[Any, int] = {}
+    for m in data.messages.get("/zenoh/state", []):   # a state's first record (an edge restarted counts seqs anew)
+        if m.payload.get("sample_t_ns") is not None:
+            sample_ns.setdefault(m.payload.get("seq"), int(m.payload["sample_t_ns"]))
+    anchor = next((m.payload for m in data.messages.get("/tracking", [])
+                   if m.payload.get("state_seq") in sample_ns), None)
+    return None if anchor is None else sample_ns[anchor["state_seq"]] - round(anchor["t_s"] * 1e9)
 
 
 def _cycle_end_sample_ns(data: SessionData) -> int | None:
-    """The sample time (drive clock) of the last measured sample: the controller's largest cycle time `t_s` moved onto
-    the sample clock by a state that has both (None without such a state)."""
-    sample_ns = {m.payload.get("seq"): int(m.payload["sample_t_ns"]) for m in data.messages.get("/zenoh/state", [])
-                 if m.payload.get("sample_t_ns") is not None}
-    rows = [m.payload for m in data.messages.get("/tracking", [])]
-    anchor = next((r for r in rows if r.get("state_seq") in sample_ns), None)
-    if anchor is None:
-        return None
-    t0_ns = sample_ns[anchor["state_seq"]] - round(anchor["t_s"] * 1e9)
-    return t0_ns + round(max(r["t_s"] for r in rows) * 1e9)
+    """The sample time (drive clock) of the last measured sample: the controller's largest cycle time `t_s` on the
+    sample clock (None without an anchor, `cycle_origin_ns`)."""
+    t0_ns = cycle_origin_ns(data)
+    return None if t0_ns is None else \
+        t0_ns + round(max(m.payload["t_s"] for m in data.messages["/tracking"]) * 1e9)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 from pathlib import Path
+from typing import Any
 
 import matplotlib
 
@@ -24,9 +25,7 @@ def tracking_figure(path: Path, t_s: np.ndarray, theta_rad: np.ndarray, desired_
     for ax in (ax1, ax2):
         ax.grid(True, alpha=0.3)
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def inter_event_figure(path: Path, event_t_s: np.ndarray, title: str) -> None:
@@ -36,9 +35,7 @@ def inter_event_figure(path: Path, event_t_s: np.ndarray, title: str) -> None:
         ax.stem(event_t_s[1:], np.diff(event_t_s), basefmt=" ")
     ax.set(xlabel="time [s]", ylabel="inter-event time [s]", title=f"{title}: inter-event times")
     ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def histogram_cdf_figure(path: Path, values: np.ndarray, xlabel: str, title: str) -> None:
@@ -51,9 +48,7 @@ def histogram_cdf_figure(path: Path, values: np.ndarray, xlabel: str, title: str
     ax2.set(xlabel=xlabel, ylabel="CDF", title=f"{title}: CDF")
     for ax in (ax1, ax2):
         ax.grid(True, alpha=0.3)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _save(fig, path)
 
 
 def series_figure(path: Path, t_s: np.ndarray, series: dict[str, np.ndarray], ylabel: str, title: str) -> None:
@@ -64,6 +59,10 @@ def series_figure(path: Path, t_s: np.ndarray, series: dict[str, np.ndarray], yl
     ax.grid(True, alpha=0.3)
     if series:
         ax.legend(fontsize=8)
+    _save(fig, path)
+
+
+def _save(fig: Any, path: Path) -> None:
     fig.tight_layout()
     fig.savefig(path, dpi=110)
     plt.close(fig)

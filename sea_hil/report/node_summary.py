@@ -17,11 +17,11 @@ from rich.table import Table
 
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_lines
 
-KINDS = ("edge", "controller", "recorder")
+KINDS = ("plant", "edge", "controller", "recorder")
 _NUMBER = {"type": "number"}
 NODE_SUMMARY_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "title": "sea-hil node summary (sea-hil edge | controller | record --json)",
+    "title": "sea-hil node summary (sea-hil plant | edge | controller | record --json)",
     "type": "object", "additionalProperties": False,
     "required": ["node", "finished", "counters", "warnings"],
     "properties": {
@@ -52,7 +52,7 @@ WARN_KEYS: dict[str, tuple[str, ...]] = {
              "setpoints_out_of_envelope", "bus_errors", "controller_restarts", "late_setpoints", "seq_lost",
              "epoch_old", "epoch_foreign", "uplink_dropped", "downlink_dropped"),
     "controller": ("payload_rejected", "unexpected_payloads", "edge_restarts", "trajectory_mismatches",
-                   "state_seq_lost", "epoch_old", "epoch_foreign"),
+                   "state_seq_lost", "epoch_old", "epoch_foreign", "recorder_unmatched"),
     "recorder": ("can_rejected", "can_frames_missed", "stats_rejected", "payload_rejected_total", "dropped",
                  "write_errors", "can_tap_unfinished"),
 }

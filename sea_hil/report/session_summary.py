@@ -26,7 +26,7 @@ from sea_hil.config.verdict import VerdictConfig
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, ENGINE_SOURCE, META_SESSION
 from sea_hil.recorder.reader import SessionData
 from sea_hil.report.completeness import NodeCounters, completeness_block
-from sea_hil.report.drive_faults import drive_faults
+from sea_hil.report.drive_faults import cycle_origin_ns, drive_faults
 from sea_hil.report.limbs import driver_block, limb_entry, limb_view, limbs_total, recorded_limbs, sync_block
 from sea_hil.report.summary import TIMING_KEY, inter_event_block, tracking_block, transmissions_block
 from sea_hil.verdict.edge_blocks import rejections_blocks, split_edge_stats, uplink_losses
@@ -56,13 +56,13 @@ def tracking_arrays(data: SessionData) -> dict[str, np.ndarray]:
 
 
 def _phase_of(data: SessionData, rows: list[dict[str, Any]]) -> Callable[[int], str]:
-    """state seq -> "cycle" | "lead_in" | "outside", from the state's sample time and the controller's time axis."""
+    """state seq -> "cycle" | "lead_in" | "outside", from the state's sample time and the controller's time axis
+    (`cycle_origin_ns`)."""
+    t0_ns = cycle_origin_ns(data)
+    if t0_ns is None:
+        return lambda seq: "cycle"
     sample_ns = {p["seq"]: p["sample_t_ns"] for p in _unique(data.messages.get("/zenoh/state", []))}
     t_of = {r["state_seq"]: round(r["t_s"] * 1e9) for r in rows}
-    anchor = next((r for r in rows if r["state_seq"] in sample_ns), None)
-    if anchor is None:
-        return lambda seq: "cycle"
-    t0_ns = sample_ns[anchor["state_seq"]] - t_of[anchor["state_seq"]]
     first_ns, last_ns = min(t_of.values()), max(t_of.values())
 
     def phase(seq: int) -> str:

@@ -1,7 +1,6 @@
 """`sea-hil report RUN.mcap --out DIR`: figures and report.md from any session recording."""
 from __future__ import annotations
 
-import json
 import shutil
 from pathlib import Path
 from typing import Any
@@ -211,6 +210,3 @@ def run_report(path: Path, out: Path, node_counters: NodeCounters | None = None)
     (out / "report.md").write_text(report_markdown(summary, data), encoding="utf-8")
     return summary
 
-
-def load_summary(path: Path) -> dict[str, Any]:
-    return json.loads(path.read_text(encoding="utf-8"))

@@ -10,11 +10,8 @@ exact and clamp every reported percentile. Memory is fixed by the layout (1853 c
 from __future__ import annotations
 
 import math
-from typing import Any
 
 from sea_hil.errors import MalformedPayload
-
-COMPACT_VERSION = 1
 
 
 class LogHistogram:
@@ -104,31 +101,3 @@ class LogHistogram:
         return {"count": self.count, "min": num(self.min), "mean": num(self.mean),
                 "p50": num(self.percentile(50)), "p90": num(self.percentile(90)),
                 "p99": num(self.percentile(99)), "p999": num(self.percentile(99.9)), "max": num(self.max)}
-
-    # -- serialisation ---------------------------------------------------------------------------------------
-    def to_compact(self) -> dict[str, Any]:
-        """JSON-serialisable form: layout, exact aggregates and sparse ``[[bucket, count], ...]``."""
-        return {"v": COMPACT_VERSION, "lo": self.lowest, "hi": self.highest, "prec": self.precision,
-                "n": self.count, "rej": self.rejected, "sum": self.sum,
-                "min": self.min if self.count else None, "max": self.max if self.count else None,
-                "b": [[i, c] for i, c in enumerate(self._counts) if c]}
-
-    @classmethod
-    def from_compact(cls, data: dict[str, Any]) -> LogHistogram:
-        """Inverse of `to_compact`; raises `MalformedPayload` on anything inconsistent."""
-        try:
-            if data["v"] != COMPACT_VERSION:
-                raise MalformedPayload(f"unsupported histogram version {data['v']}")
-            h = cls(float(data["lo"]), float(data["hi"]), float(data["prec"]))
-            for i, c in data["b"]:
-                if not (isinstance(i, int) and isinstance(c, int) and 0 <= i < len(h._counts) and c > 0):
-                    raise MalformedPayload(f"bad histogram bucket {i}:{c}")
-                h._counts[i] += c
-            h.count, h.rejected, h.sum = int(data["n"]), int(data["rej"]), float(data["sum"])
-            if h.count:
-                h.min, h.max = float(data["min"]), float(data["max"])
-        except (KeyError, TypeError, ValueError) as err:
-            raise MalformedPayload(f"bad compact histogram: {err}") from err
-        if sum(h._counts) != h.count:
-            raise MalformedPayload("histogram bucket counts do not add up to n")
-        return h
