@@ -19,7 +19,7 @@ from sea_hil.errors import RecordingError
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import Feedback, FeedbackAngle, VoltageCmd
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
+from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter
 from sea_hil.recorder.meta import META_FINAL
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
@@ -41,12 +41,11 @@ def _frames() -> list[RawFrame]:
 
 
 def _in_process(path: Path, frames: list[RawFrame]) -> None:
-    codec = SeaCodec()
     with SessionRecorder.from_config(path, CFG) as rec:
+        tap = CanTap()
         for f in frames:
-            seq = getattr(can_records(codec, f)[2], "seq", 0)
-            for topic, payload in can_records(codec, f)[0]:
-                rec.record(topic, f.t_ns, f.t_ns, payload, seq)
+            for r in tap.records(f):   # the decoded payloads, validated and encoded again by `record`
+                rec.record(*r)
 
 
 def test_child_writes_exactly_what_the_in_process_recorder_writes(tmp_path: Path) -> None:

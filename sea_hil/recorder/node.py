@@ -198,8 +198,8 @@ class RecorderNode(Node):
             self.can_forwarded += 1
             self.rec.submit_can(frame)    # decoded (rejects and gaps counted) by the recorder process
             return
-        for r in self.tap.records(frame):
-            self.rec.submit(*r)
+        for m in self.tap.encode((frame,)):
+            self.rec.submit_encoded(*m)
 
     def counters(self) -> dict[str, Any]:
         """Final-stats counters; with a `RecorderProcess` its child's CAN counts replace these in the file."""

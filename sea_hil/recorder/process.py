@@ -3,9 +3,9 @@
 `RecorderProcess(path, cfg)` starts ``python -m sea_hil.recorder.process PATH RECORD_CONFIG_JSON`` and offers the
 recorder interface the recorder node and `sea-hil run` use (`submit`, `record`, `add_metadata`, `add_attachment`,
 `write_session_header`, `close`) plus `submit_can(raw_frame)` and `submit_can_batch(frames)`: raw frames are shipped
-as plain tuples (10x cheaper to pickle than `RawFrame`s: 0.2 vs 1.5 us per frame) and decoded in the child
-(`sea_hil.recorder.can_tap.can_records`, exactly what the in-process recorder writes), which writes each batch's
-messages in one `SessionRecorder.record_batch` call. Operations are batched (`batch_ops` frames or messages) into
+as plain tuples (10x cheaper to pickle than `RawFrame`s: 0.2 vs 1.5 us per frame) and decoded and encoded in the
+child (`sea_hil.recorder.can_tap.CanTap.encode`, exactly what the in-process recorder writes), which writes each
+batch's messages in one `SessionRecorder.write_encoded` call. Operations are batched (`batch_ops` frames or messages) into
 length-prefixed pickles on the child's stdin (a private pipe between two processes of
 the same program). `time_base` (`sea_hil.recorder.clock`) is the log-time clock of the child's CAN tap. A child that
 dies is reported by `close` (`RecordingError`); operations that could not be
@@ -29,10 +29,10 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
 from sea_hil.live.feed import LiveSpec, start_live_feed
 from sea_hil.live.link import live_child_argv
-from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.can_tap import CanTap, Encoded, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, write_session_header
-from sea_hil.recorder.schemas import validate_payload
+from sea_hil.recorder.schemas import message_bytes, message_payload, validate_payload
 from sea_hil.recorder.writer import SessionRecorder
 
 if TYPE_CHECKING:
@@ -193,31 +193,34 @@ class RecorderProcess:
 
 def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: LiveFeed | None = None) -> bool:
     """Apply one batch in the child; True when the batch closed the recording. `live` sees what was written.
-    Messages (decoded frames, records) are collected and written in one `record_batch` per run of them."""
-    batch: list[tuple[Any, ...]] = []   # (topic, log time, publish time, payload, sequence)
+    Messages (encoded frames, records) are collected and written in one `write_encoded` per run of them."""
+    batch: list[Encoded] = []   # (topic, log time, publish time, encoded data, sequence)
 
     def write() -> None:
         try:
-            rec.record_batch(batch)
+            rec.write_encoded(batch)
         except RecordingError as err:   # written after close: counted, as one bad message is
             rec.write_errors += 1
             rec.last_error = str(err)
         if live is not None:
-            for r in batch:
-                live.feed(r[0], r[1], r[3])
+            for topic, log_time_ns, _, data, _ in batch:
+                live.feed(topic, log_time_ns, message_payload(topic, data))
         batch.clear()
 
     for op in ops:
         kind = op[0]
-        if kind == CAN:
-            batch.extend(tap.records(RawFrame(*op[1])))
-            continue
         if kind == CANS:
-            for f in op[1]:
-                batch.extend(tap.records(RawFrame(*f)))
+            batch += tap.encode(op[1])
+            continue
+        if kind == CAN:
+            batch += tap.encode((op[1],))
             continue
         if kind == RECORD:
-            batch.append(op[1:])
+            try:   # checked by the parent (`submit`): the encoding
+                batch.append((op[1], op[2], op[3], message_bytes(op[1], op[4]), op[5]))
+            except RecordingError as err:
+                rec.write_errors += 1
+                rec.last_error = str(err)
             continue
         if batch:
             write()
