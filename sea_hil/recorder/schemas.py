@@ -115,6 +115,12 @@ def message_bytes(topic: str, payload: Mapping[str, Any]) -> bytes:
     return encode_payload(payload)
 
 
+def encoded_payload(topic: str, payload: Mapping[str, Any]) -> bytes:
+    """`message_bytes` of a payload `validate_payload` has already passed (the recorder process encodes what its
+    parent checked): the encoding alone."""
+    return binary.encode(topic, payload) if topic in binary.BINARY_TOPICS else encode_payload(payload)
+
+
 def message_payload(topic: str, data: bytes) -> dict[str, Any]:
     """The payload dict of one encoded message of `topic` (`message_bytes` read back, as the reader decodes it);
     `RecordingError` if `data` is not one."""
