@@ -5,10 +5,10 @@ The input is what a real-time `sea-hil run` ships to its recorder child (`sea_hi
 deterministically: the session's config attachment first (so, as in a session, a drive's latch would be explained
 from the measured values the tap keeps), then per 10 ms tap wake-up (`tap_batch_s`) one `CANS` operation with
 that wake-up's frames of every limb (per sample FEEDBACK_ANGLE, FEEDBACK_JOINT1, FEEDBACK_JOINT2 and a VOLTAGE_CMD;
-a HEARTBEAT every 100 samples; values varying per sample) and the Zenoh messages the taps submit at the rates of a
-1-limb ET session (per 1000 samples ~100 `/tracking`, ~28 each of `/zenoh/state`, `/joint_states`,
-`/log/events`, `/zenoh/setpoint`), batched into length-prefixed pickles of >= 512 operations as `RecorderProcess`
-sends them. `child_main` applies the stream from memory into a zstd recording in a temporary directory, in this
+a HEARTBEAT every 100 samples; values varying per sample) and the Zenoh messages the tap takes at the rates of a
+1-limb ET session (per 1000 samples 100 tracking records, 28 trigger events: a state, its tracking record, a
+setpoint), as the checkout's tap submits them (as they came, or the records it makes of them), batched into
+length-prefixed pickles of >= 512 operations as `RecorderProcess` sends them. `child_main` applies the stream from memory into a zstd recording in a temporary directory, in this
 one process, so the figure is the child's own work without the session around it (no pipe, no wake-ups, no
 SCHED_IDLE preemption; the real session's child costs more: bench/bench_cpu_per_sample.py). Printed: CPU us per
 limb-sample (min over runs) and per CAN frame. Process CPU time, not wall time: on a shared host it still inflates
@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import argparse
 import io
+import json
 import os
 import pickle
 import struct
@@ -32,6 +33,7 @@ from typing import Any
 
 from bench.benchlib import bench_args, emit, record
 from sea_hil.config.loader import config_to_toml, load_config
+from sea_hil.protocol import payloads
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import (
     T_US_MODULUS,
@@ -43,7 +45,10 @@ from sea_hil.protocol.can_frames import (
     Heartbeat,
     VoltageCmd,
 )
+from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, TriggerReason
+from sea_hil.recorder import process
 from sea_hil.recorder.process import ATTACHMENT, CANS, CLOSE, RECORD, child_main
+from sea_hil.recorder.zenoh_tap import ZenohTap
 
 WAKE_SAMPLES = 10        # samples per tap wake-up (tap_batch_s = 10 ms at 1 kHz)
 BATCH_OPS = 512          # RecorderProcess.batch_ops
@@ -51,43 +56,37 @@ T0_NS = 1_700_000_000 * 10**9
 _LEN = struct.Struct("<I")
 
 
-def _zenoh_ops(k: int, t_ns: int) -> list[tuple[Any, ...]]:
-    """The Zenoh messages the taps submit around sample `k` of limb 1 (a trigger event every 36 samples)."""
+def _zenoh_messages(k: int, t_ns: int) -> list[tuple[str, bytes, int]]:
+    """The Zenoh messages (key, payload, receive time) the recorder takes around sample `k` of limb 1: a tracking
+    record every 10 samples, a trigger event (its state, its tracking record, the setpoint) every 36."""
     x = (k % 1000) / 1000
-    ops: list[tuple[Any, ...]] = []
+    out: list[tuple[str, bytes, int]] = []
     if k % 10 == 0:
-        ops.append((RECORD, "/tracking", t_ns, t_ns, {"t_s": k * 1e-3, "state_seq": k, "theta1_rad": 0.3 * x,
-                                                      "theta2_rad": -0.2 * x, "theta1_d_rad": 0.3 * x + 1e-3,
-                                                      "theta2_d_rad": -0.2 * x, "e1_rad": 1e-3, "e2_rad": 0.0,
-                                                      "key": "sea/limb1/tracking"}, k))
+        out.append(("sea/limb1/event", json.dumps(
+            {"t_s": k * 1e-3, "state_seq": k, "theta1_rad": 0.3 * x, "theta2_rad": -0.2 * x,
+             "theta1_d_rad": 0.3 * x + 1e-3, "theta2_d_rad": -0.2 * x, "e1_rad": 1e-3, "e2_rad": 0.0}).encode(), t_ns))
     if k % 36 == 0:
         ev = k // 36
-        ops += [(RECORD, "/zenoh/state", t_ns, t_ns, {"key": "sea/limb1/state", "seq": k, "sent_t_ns": t_ns,
-                                                      "payload_bytes": 105, "sample_t_ns": k * 10**6,
-                                                      "theta1_rad": 0.3 * x, "theta2_rad": -0.2 * x,
-                                                      "omega1_rad_s": x, "omega2_rad_s": -x, "delta1_m": 1e-4 * x,
-                                                      "delta2_m": -1e-4 * x, "nut_vel1_m_s": 1e-3 * x,
-                                                      "nut_vel2_m_s": 0.0, "event_seq": ev, "reason": "ERROR",
-                                                      "trajectory_id": 3298795889}, k),
-                (RECORD, "/joint_states", t_ns, t_ns, {
-                    "timestamp": {"sec": t_ns // 10**9, "nsec": t_ns % 10**9},
-                    "joints": [{"name": "hip", "position": 0.3 * x, "velocity": x},
-                               {"name": "knee", "position": -0.2 * x, "velocity": -x},
-                               {"name": "hip_sea_spring", "position": 1e-4 * x},
-                               {"name": "knee_sea_spring", "position": -1e-4 * x}]}, k),
-                (RECORD, "/tracking", t_ns, t_ns, {"t_s": k * 1e-3, "state_seq": k, "theta1_rad": 0.3 * x,
-                                                   "theta2_rad": -0.2 * x, "theta1_d_rad": 0.3 * x,
-                                                   "theta2_d_rad": -0.2 * x, "event": True, "reason": "ERROR",
-                                                   "setpoint_seq": ev, "key": "sea/limb1/event"}, k),
-                (RECORD, "/log/events", t_ns, t_ns, {
-                    "timestamp": {"sec": t_ns // 10**9, "nsec": t_ns % 10**9}, "level": 2,
-                    "message": f"trigger event ERROR at t = {k * 1e-3:.3f} s (state {k}, setpoint {ev})",
-                    "name": "controller", "file": "", "line": 0}, k),
-                (RECORD, "/zenoh/setpoint", t_ns, t_ns, {"key": "sea/limb1/setpoint", "seq": ev, "sent_t_ns": t_ns,
-                                                         "payload_bytes": 61, "state_seq": k,
-                                                         "delta1_ref_m": 1e-4 * x, "delta2_ref_m": -1e-4 * x,
-                                                         "s1": 1e-5, "s2": -1e-5, "reason": "ERROR"}, ev)]
-    return ops
+        reason = list(TriggerReason)[-1]
+        out += [("sea/limb1/state", payloads.encode(EventStatePayload(
+                    k, t_ns, k * 10**6, (0.3 * x, -0.2 * x), (x, -x), (1e-4 * x, -1e-4 * x), (1e-3 * x, 0.0),
+                    event_seq=ev, reason=reason, trajectory_id=3298795889)), t_ns),
+                ("sea/limb1/event", json.dumps(
+                    {"t_s": k * 1e-3, "state_seq": k, "theta1_rad": 0.3 * x, "theta2_rad": -0.2 * x,
+                     "theta1_d_rad": 0.3 * x, "theta2_d_rad": -0.2 * x, "event": True, "reason": reason.name,
+                     "setpoint_seq": ev}).encode(), t_ns + 1000),
+                ("sea/limb1/setpoint", payloads.encode(SetpointPayload(
+                    ev + 1, t_ns, k, (1e-4 * x, -1e-4 * x), (1e-5, -1e-5), reason)), t_ns + 300_000)]
+    return out
+
+
+def _zenoh_ops(messages: list[tuple[str, bytes, int]], tap: ZenohTap) -> list[tuple[Any, ...]]:
+    """What the session's Zenoh tap submits for `messages`: each as it came (`ZENOH`, decoded by the child) where
+    this checkout's recorder process takes them so, else the records the tap makes of them (`RECORD`)."""
+    zenoh_op = getattr(process, "ZENOH", None)
+    if zenoh_op is not None:
+        return [(zenoh_op, key, data, t) for key, data, t in messages]
+    return [(RECORD, *r) for key, data, t in messages for r in tap.records(key, data, t)]
 
 
 def stream(samples: int, limbs: int = 1) -> tuple[bytes, int]:
@@ -95,7 +94,7 @@ def stream(samples: int, limbs: int = 1) -> tuple[bytes, int]:
     codec = SeaCodec(fd=None)
     cfg = load_config()
     ops: list[tuple[Any, ...]] = [(ATTACHMENT, "config.toml", config_to_toml(cfg).encode(), "text/plain", 0)]
-    n_frames = 0
+    n_frames, ztap = 0, ZenohTap()
     for w in range(0, samples, WAKE_SAMPLES):
         frames: list[tuple[Any, ...]] = []
         zenoh: list[tuple[Any, ...]] = []
@@ -112,7 +111,7 @@ def stream(samples: int, limbs: int = 1) -> tuple[bytes, int]:
                     m = codec.encode(obj)
                     frames.append((t_ns + 1000 * i, m.arbitration_id, m.dlc, bytes(m.data), False, False, False,
                                    False))
-            zenoh += _zenoh_ops(k, t_ns + 500_000)
+            zenoh += _zenoh_ops(_zenoh_messages(k, t_ns + 500_000), ztap)
         ops += [(CANS, frames), *zenoh]
         n_frames += len(frames)
     ops.append((CLOSE, {}))

@@ -54,6 +54,15 @@ class WindowResult:
                 + abs(r["commands_sent"] - r["/can/command"]) + abs(3 * (self.ticks + 1) - r["/can/feedback"])
                 + abs(r["can_frames"] - r["/can/raw"]))
 
+    def child_session_us(self) -> float | None:
+        """The recorder child's CPU per limb-sample over the whole session, by its own count (`recorder_cpu_s`: from
+        its first message to its close, so also what it caught up on after the window; a SCHED_IDLE child on a
+        loaded host gets little CPU in the window), per classic-CAN limb-sample (3 `/can/feedback` messages)."""
+        r = self.recorded
+        if not r or "recorder_cpu_us" not in r or not r["/can/feedback"]:
+            return None
+        return r["recorder_cpu_us"] / (r["/can/feedback"] / 3)
+
     def per_sample_us(self, group: str) -> float:
         return 1e6 * self.cpu_s.get(group, 0.0) / max(self.samples, 1)
 
@@ -72,6 +81,8 @@ def recorded_counts(path: Path) -> dict[str, int]:
     out = {k: int(final.get(k, 0)) for k in ("can_frames", "can_frames_missed", "can_rejected",
                                                 "recorder_dropped_ops", "dropped", "write_errors")}
     out.update({t: int(final.get(f"messages.{t}", 0)) for t in ("/can/raw", "/can/feedback", "/can/command")})
+    if "recorder_cpu_s" in final:   # the recorder child's own CPU count, start-up excluded (sea_hil/recorder/process.py)
+        out["recorder_cpu_us"] = round(1e6 * float(final["recorder_cpu_s"]))
     edge = meta.get("sea-hil.edge")
     if edge and "commands_sent" in edge:
         out["commands_sent"] = int(edge["commands_sent"]) + int(edge.get("arrival_commands", 0))
