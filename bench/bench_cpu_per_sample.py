@@ -73,6 +73,8 @@ def report(limbs: int, runs: list[WindowResult], label: str = "",
     lost = [r.lost() for r in runs]
     print(f"  recorder (child + taps): {_span(rec).strip()} us per limb-sample; frames lost (recording vs sent, "
           f"whole session): {', '.join('-' if x is None else str(x) for x in lost)}")
+    print(f"  recording complete (summary.json completeness, every limb): "
+          f"{', '.join('-' if r.complete is None else 'yes' if r.complete else 'NO' for r in runs)}")
     whole = [r.child_session_us() for r in runs]
     if any(w is not None for w in whole):
         print(f"  recorder child over the whole session (its own CPU count): "

@@ -37,6 +37,7 @@ class WindowResult:
     misses: int = 0
     hot: str = ""
     recorded: dict[str, int] | None = None   # whole session: what the recording holds vs what was sent
+    complete: bool | None = None   # whole session: summary.json `completeness.complete` (every limb's channels)
 
     def recorder_us(self) -> float:
         """CPU per limb-sample of the recorder: its child process plus the session's recorder tap threads."""
@@ -307,4 +308,4 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
     drv = summary["timing"]["driver"]
     samples = int(round((sim_b - sim_a) * FEEDBACK_RATE_HZ)) * limbs
     return WindowResult(limbs, load, samples, dict(groups), dict(system), drv.get("ticks", 0), drv.get("tick_misses", 0), hot,
-                        recorded)
+                        recorded, summary.get("completeness", {}).get("complete"))

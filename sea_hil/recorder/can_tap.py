@@ -290,6 +290,11 @@ class CanTap:
     def _log(add: _Add, t_ns: int, seq: int, level: LogLevel, who: str, text: str) -> None:
         add(("/log/faults", t_ns, t_ns, message_bytes("/log/faults", log_message(t_ns, level, who, text)), seq))
 
+    @property
+    def restamps(self) -> bool:
+        """Whether `stamp` changes a frame's time (a cia402 session on the sample time base)."""
+        return self.canopen is not None and self.time_base != "wall"
+
     def stamp(self, t_ns: int, can_id: int, is_extended: bool = False) -> int:
         """The log time of a frame received at `t_ns` on this tap's bus: `t_ns`, except in a cia402 session on the
         sample time base: the bus's SYNCs so far (this one included) times the SYNC period. Called by the recorder

@@ -175,13 +175,21 @@ class RecorderNode(Node):
                 self.on_can(msg)
                 n += 1
             return n
-        frames, now_ns, stamp = [], time.time_ns, self.tap.stamp
-        while (msg := bus.recv(timeout=0)) is not None:
-            t = msg.timestamp
-            frames.append((stamp(round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.is_extended_id),
-                           msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
-                           bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
-                           bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
+        frames, now_ns, recv = [], time.time_ns, bus.recv
+        if self.tap.restamps:   # a cia402 bus on the sample time base: the tap's SYNC count times each frame
+            stamp = self.tap.stamp
+            while (msg := recv(timeout=0)) is not None:
+                t = msg.timestamp
+                frames.append((stamp(round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.is_extended_id),
+                               msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
+                               bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
+                               bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
+        else:                   # (`stamp` would return the bus time as it is)
+            while (msg := recv(timeout=0)) is not None:
+                t = msg.timestamp
+                frames.append((round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.dlc,
+                               bytes(msg.data or b""), bool(msg.is_extended_id), bool(msg.is_error_frame),
+                               bool(msg.is_remote_frame), bool(msg.is_fd)))
         self.can_forwarded += len(frames)
         self.rec.submit_can_batch(frames)
         return len(frames)
