@@ -4,7 +4,7 @@ Binary payloads are decoded (rejects counted, raw size kept); JSON stats/trackin
 their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/feedback` / `/can/command`
 (`sea_hil.recorder.can_tap`). With an in-process `SessionRecorder` the node decodes and the recorder's writer thread
 writes (bounded queue: a recorder that falls behind drops and counts); with a `RecorderProcess` the node only
-forwards raw frames and the child process decodes and writes.
+forwards raw frames and Zenoh messages as they came, and the child process decodes, counts and writes.
 
 On SocketCAN (and udp_multicast) the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
 large receive buffer (`sea_hil.protocol.canbus.enlarge_rx_buffer`; on udp_multicast too) and the frames that were missed anyway are counted from seq gaps
