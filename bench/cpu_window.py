@@ -266,7 +266,10 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
         cmd = [sea_hil or str(Path(sys.executable).with_name("sea-hil")), "run", "--limbs", str(limbs), "--cycles", "1",
                "--out", str(out), *extra]
         load = os.getloadavg()[0]
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        # run in the temporary directory: the session's children (`python -m sea_hil...`: controllers, the recorder
+        # process) put their working directory first on sys.path, and from a checkout's root an A/B's other
+        # checkout would run this checkout's children
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp)
         try:
             root = psutil.Process(proc.pid)
             prog = _Progress(proc.stderr)
