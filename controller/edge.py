@@ -33,7 +33,7 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.controller.edge_core import CommandFrames, EdgeCore
 from sea_hil.errors import BusError, ConfigError
 from sea_hil.protocol.can_frames import Feedback
-from sea_hil.protocol.canbus import CanHandle, send_with_retry
+from sea_hil.protocol.canbus import CanHandle, recv_pending, rx_monotonic_ns, send_with_retry
 from sea_hil.protocol.keys import Keys
 from sea_hil.protocol.zsession import publisher
 from sea_hil.runtime.clock import Clock, EdgeSync, RealTimeClock
@@ -74,11 +74,10 @@ class EdgeNode(Node):
 
     # ---- the node hooks -------------------------------------------------------------------------------------------
     def _step(self) -> bool:
-        got = receive_stamped(self.bus, self.stop_event, self._bus_error)
-        if got is None:
-            return False
-        self.on_can(*got)
-        return True
+        got = receive_all_stamped(self.bus, self.stop_event, self._bus_error)
+        for msg, rx_ns in got:
+            self.on_can(msg, rx_ns)
+        return bool(got)
 
     def _bus_error(self, err: Exception) -> None:
         self.core.counters.bus_errors += 1
@@ -154,15 +153,6 @@ class EdgeNode(Node):
         return self.core.take_downlink(now)
 
 
-def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int, *,
-                    max_age_ns: int = 10**10) -> int:
-    """The monotonic time at which a frame stamped `frame_timestamp_s` (python-can: wall clock, set by the sender on
-    the virtual bus, by the kernel on SocketCAN) arrived, so queueing and wake-up count in the loop time; `mono_now_ns`
-    when the stamp is missing or implausible (in the future or older than `max_age_ns`)."""
-    age_ns = wall_now_ns - int(frame_timestamp_s * 1e9)
-    return mono_now_ns - age_ns if 0 <= age_ns <= max_age_ns else mono_now_ns
-
-
 def receive_stamped(bus: Any, stop_event: Any, on_error: Callable[[Exception], None],
                     timeout_s: float = 0.05) -> tuple[Any, int] | None:
     """One frame from `bus` and its monotonic arrival time (`rx_monotonic_ns`), or None after `timeout_s` without
@@ -177,3 +167,25 @@ def receive_stamped(bus: Any, stop_event: Any, on_error: Callable[[Exception], N
     if msg is None:
         return None
     return msg, rx_monotonic_ns(msg.timestamp, time.monotonic_ns(), time.time_ns())
+
+
+def receive_all_stamped(bus: Any, stop_event: Any, on_error: Callable[[Exception], None],
+                        timeout_s: float = 0.05) -> list[tuple[Any, int]]:
+    """`receive_stamped`, then every frame queued behind the first (`canbus.recv_pending`) in the same wake, all
+    stamped from one pair of clock reads: a node wakes once per batch (a driver tick's frames of every limb), not
+    once per frame. [] after `timeout_s` without a frame or on a receive error (as `receive_stamped`: counted,
+    backed off). A simulated (lockstep bus-timing) handle gives one frame per call: its reads move simulated time."""
+    got = receive_stamped(bus, stop_event, on_error, timeout_s)
+    if got is None:
+        return []
+    if getattr(bus, "simulated", False):
+        return [got]
+    try:
+        more = recv_pending(bus)
+    except (can.CanError, OSError) as err:
+        on_error(err)
+        return [got]
+    if not more:
+        return [got]
+    mono_now_ns, wall_now_ns = time.monotonic_ns(), time.time_ns()
+    return [got, *((m, rx_monotonic_ns(m.timestamp, mono_now_ns, wall_now_ns)) for m in more)]

@@ -6,8 +6,8 @@ its shell its Zenoh keys; their commands go out on the shared bus handle.
 Frames for no served node: well-formed ones (another device's traffic on a shared bus) are counted
 (`foreign_frames`) and dropped, as a drive's acceptance filter would; malformed ones go to the first core, which
 rejects and counts them (`rejected_frames`) as a lone edge does. Real time (`workers=False`): the bus reader calls
-the core itself, one thread wakes per frame instead of one per limb, and the python-can `virtual` bus copies each
-frame to one reader instead of N. Lockstep (`workers=True`): a core blocks in its sync until its controller has
+the core itself, one thread wakes per batch of frames (a driver tick's frames of every limb, read in one pass)
+instead of one per limb, and the python-can `virtual` bus copies each frame to one reader instead of N. Lockstep (`workers=True`): a core blocks in its sync until its controller has
 answered, so each core runs in a worker thread of its own fed by a queue; otherwise one limb whose controller has
 finished its cycles (and answers no more) would stall the other limbs of its bus.
 """
@@ -21,7 +21,7 @@ from typing import Any
 
 import can
 
-from sea_hil.controller.edge import EdgeNode, receive_stamped
+from sea_hil.controller.edge import EdgeNode, receive_all_stamped
 from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import CMD_BITS
@@ -68,11 +68,10 @@ class EdgeMux(Node):
             edge.on_can(msg, rx_ns)
 
     def _step(self) -> bool:
-        got = receive_stamped(self.bus, self.stop_event, self._bus_error)
-        if got is None:
-            return False
-        self.dispatch(*got)
-        return True
+        got = receive_all_stamped(self.bus, self.stop_event, self._bus_error)   # every limb's frames in one pass
+        for msg, rx_ns in got:
+            self.dispatch(msg, rx_ns)
+        return bool(got)
 
     def _bus_error(self, err: Exception) -> None:
         self.bus_errors += 1

@@ -3,9 +3,11 @@ on the schedule of its clock (`sea_hil.runtime`), and sends heartbeats. Malforme
 logged; well-formed ids of nodes it does not serve are ignored like drive firmware's acceptance filter does
 (`is_foreign`, counted in `TickStats.foreign_frames`).
 
-Real-time clock: one tick per feedback period on a drift-free schedule (absolute deadlines); waiting for the next
-deadline is done in `bus.recv(timeout)` so commands are handled as they arrive and act from their arrival time
-within the period (`DriverCore`); lateness is recorded, a tick later than one period is an overrun. Lockstep clock
+Real-time clock: one tick per feedback period on a drift-free schedule (absolute deadlines), one wake per tick: the
+driver sleeps to the deadline, then handles every frame queued meanwhile (`take_pending`), each at its arrival time
+(its bus stamp), so a command acts from its arrival within the period (`DriverCore`) as if handled when it came; all
+limbs are integrated in one step and all the tick's frames leave in one send (`publish_samples`). Lateness is
+recorded, a tick later than one period is an overrun. Lockstep clock
 (`sea_hil.runtime.lockstep`): a sample is integrated once every served node's command for it has arrived.
 """
 from __future__ import annotations
@@ -27,7 +29,7 @@ from sea_hil.plant_emulator.integrator import prepare_advance
 from sea_hil.plant_emulator.soft_limits import DriveLimits
 from sea_hil.protocol.can_codec import SeaCodec, load_database
 from sea_hil.protocol.can_frames import CMD_BITS, CMD_MASK, NODE_ID_MAX, NODE_ID_MIN, ErrorFlags, Feedback
-from sea_hil.protocol.canbus import CanHandle, send_with_retry
+from sea_hil.protocol.canbus import CanHandle, batches, recv_pending, rx_monotonic_ns, send_all, send_with_retry
 from sea_hil.protocol.timed_bus import TimedBus
 from sea_hil.runtime.clock import Clock, Pacer, RealTimeClock
 from sea_hil.runtime.node import Node
@@ -139,10 +141,51 @@ class PlantNode(Node):
         for m in msgs:
             self._send(m)
 
-    def publish_sample(self, drv: DriverCore, feedback: Feedback) -> None:
-        """Real time: the new period starts when its sample's feedback leaves (commands act from their arrival)."""
-        drv.period_start_ns = time.monotonic_ns()
-        self.publish(drv, feedback)
+    def publish_samples(self, samples: list[tuple[DriverCore, Feedback]], heartbeats: bool = False) -> None:
+        """Real time: every limb's new sample (and with `heartbeats` each drive's HEARTBEAT) in one send of all the
+        tick's frames (`canbus.send_all`: one wake of each reader where the bus batches); the new periods start
+        when they leave. Frame by frame, each with its retries, on other buses."""
+        frames = []
+        for drv, feedback in samples:
+            try:
+                frames += self.codec.encode_feedback(feedback, saturate=True)
+            except MalformedFrame as err:   # e.g. a diverged (NaN) model: report, keep the node alive
+                self.stats.send_failures += 1
+                log.error("node %d: feedback not encodable: %s", drv.node_id, err)
+        if heartbeats:
+            frames += [self.codec.encode(drv.heartbeat()) for drv in self.drivers.values()]
+        start_ns = time.monotonic_ns()
+        for drv, _ in samples:
+            drv.period_start_ns = start_ns
+        if not batches(self.bus):
+            for m in frames:
+                self._send(m)
+            return
+        try:
+            send_all(self.bus, frames)
+        except (can.CanError, OSError) as err:
+            self.stats.send_failures += 1
+            self._bus_error(f"CAN send failed: {err}")
+
+    def wait_until(self, deadline_ns: int) -> None:
+        """Real time: sleep until `deadline_ns` (monotonic); no frame wakes the driver (`take_pending` reads them)."""
+        remaining = deadline_ns - time.monotonic_ns()
+        if remaining > 0:
+            time.sleep(remaining * 1e-9)
+
+    def take_pending(self, mono_now_ns: int) -> None:
+        """Real time: handle every frame queued since the last tick, each at its arrival time (its bus stamp,
+        `canbus.rx_monotonic_ns`), so a command acts from its arrival within the period as if it had been handled
+        then (`DriverCore`): one pass per tick instead of one wake per frame."""
+        try:
+            msgs = recv_pending(self.bus)
+        except (can.CanError, OSError) as err:   # e.g. interface down: flag, count, keep the schedule
+            self._bus_error(f"CAN receive failed: {err}")
+            return
+        if msgs:
+            wall_now_ns = time.time_ns()
+            for msg in msgs:
+                self._on_message(msg, rx_monotonic_ns(msg.timestamp, mono_now_ns, wall_now_ns))
 
     def heartbeats(self) -> None:
         if self.sim is not None:

@@ -10,12 +10,13 @@ the kernel drops datagrams silently when the buffer is full, so the readers coun
 """
 from __future__ import annotations
 
+import collections
 import errno
 import logging
 import queue
 import socket
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any, Protocol
 
 import can
@@ -116,35 +117,148 @@ class FastVirtualBus(VirtualBus):
                 i = next(i for i, q in enumerate(self.channel) if q is self.queue)
                 self.queue = self.channel[i] = queue.SimpleQueue()  # type: ignore[assignment,call-overload]
 
+        self._ready: collections.deque[can.Message] = collections.deque()   # the rest of a received `FrameBatch`
+
+    @property
+    def batches(self) -> bool:
+        """`send_batch` never fills a queue: every queue on the channel is unbounded (`canbus.batches`)."""
+        queues: list[Any] = self.channel
+        return all(type(q) is queue.SimpleQueue for q in queues)
+
     def recv(self, timeout: float | None = None) -> can.Message | None:
         """`BusABC.recv` without its generic filter loop when no filters are set (a plain queue read)."""
         if self._filters or not isinstance(self.queue, queue.SimpleQueue):
             return super().recv(timeout)
         self._check_if_open()
-        try:
-            msg: can.Message = timed_get(self.queue, timeout)   # not `get(timeout=)`: it can hang (sea_hil.queues)
-        except queue.Empty:
-            return None
+        if self._ready:
+            msg = self._ready.popleft()
+        else:
+            try:
+                item = timed_get(self.queue, timeout)   # not `get(timeout=)`: it can hang (sea_hil.queues)
+            except queue.Empty:
+                return None
+            msg = unbatch(item, self._ready)
         if _CAN_LOG.isEnabledFor(self.RECV_LOGGING_LEVEL):
             _CAN_LOG.log(self.RECV_LOGGING_LEVEL, "Received: %s", msg)
         return msg
 
+    def _recv_internal(self, timeout: float | None) -> tuple[can.Message | None, bool]:
+        """python-can's filtered `recv` path: a `FrameBatch` on the queue is handed out frame by frame."""
+        if self._ready:
+            return self._ready.popleft(), False
+        msg, filtered = super()._recv_internal(timeout)
+        return (None if msg is None else unbatch(msg, self._ready)), filtered
+
+    def recv_pending(self) -> list[can.Message]:
+        """Every frame queued now, in order, without waiting (one pass, no exception per empty read)."""
+        if self._filters or not isinstance(self.queue, queue.SimpleQueue):
+            return _recv_each(self)
+        self._check_if_open()
+        out = take_queued(self.queue, self._ready)
+        if out and _CAN_LOG.isEnabledFor(self.RECV_LOGGING_LEVEL):
+            for msg in out:
+                _CAN_LOG.log(self.RECV_LOGGING_LEVEL, "Received: %s", msg)
+        return out
+
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         """`VirtualBus.send`: a copy to every other bus on the channel (to this one too with
         `receive_own_messages`), stamped with the send time unless `preserve_timestamps`."""
+        self.send_batch((msg,), timeout)
+
+    def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> None:
+        """`send` of each of `msgs` in order, stamped with one send time, each receiver's copies put on its queue at
+        once: a `FrameBatch` (one queue item, so a waiting reader wakes once for all) on the queues of this class and
+        of `MergedBus`, frame by frame on other queues (plain python-can `VirtualBus` handles)."""
         self._check_if_open()
-        timestamp = msg.timestamp if self.preserve_timestamps else time.time()
+        now = time.time()
         all_sent = True
-        for bus_queue in self.channel:
+        queues: list[Any] = self.channel
+        for bus_queue in queues:
             if bus_queue is self.queue and not self.receive_own_messages:
                 continue
-            copy = received_copy(msg, timestamp, self.channel_id, bus_queue is not self.queue)
+            is_rx = bus_queue is not self.queue
+            copies = [received_copy(m, m.timestamp if self.preserve_timestamps else now, self.channel_id, is_rx)
+                      for m in msgs]
             try:
-                bus_queue.put(copy, block=True, timeout=timeout)
+                if type(bus_queue) is queue.SimpleQueue:   # unbounded: never Full
+                    bus_queue.put(copies[0] if len(copies) == 1 else FrameBatch(copies))
+                else:
+                    for c in copies:
+                        bus_queue.put(c, block=True, timeout=timeout)
             except queue.Full:
                 all_sent = False
         if not all_sent:
             raise can.CanOperationError("Could not send message to one or more recipients")
+
+
+class FrameBatch(list[can.Message]):
+    """Several frames put on a receiver's queue as one item by `FastVirtualBus.send_batch`; every reader of such a
+    queue (`FastVirtualBus`, `MergedBus`) hands them out one by one (`unbatch`)."""
+
+
+def unbatch(item: Any, ready: collections.deque[can.Message]) -> can.Message:
+    """The frame `item` is, or the first of a `FrameBatch` (the others appended to `ready`)."""
+    if type(item) is FrameBatch:
+        ready.extend(item[1:])
+        item = item[0]
+    msg: can.Message = item
+    return msg
+
+
+def take_queued(q: Any, ready: collections.deque[can.Message]) -> list[can.Message]:
+    """The frames in `ready` (the rest of a batch already read), then every frame on the queue `q` now, unbatched,
+    in order; `ready` is emptied. One consumer per queue: what `empty` saw is still there to get."""
+    out = list(ready)
+    ready.clear()
+    while not q.empty():
+        item = q.get_nowait()
+        if type(item) is FrameBatch:
+            out += item
+        else:
+            out.append(item)
+    return out
+
+
+def _recv_each(bus: Any) -> list[can.Message]:
+    out = []
+    while (msg := bus.recv(timeout=0)) is not None:
+        out.append(msg)
+    return out
+
+
+def recv_pending(bus: Any) -> list[can.Message]:
+    """Every frame queued on `bus` now, without waiting: one pass (`recv_pending`) on the buses that have one
+    (`FastVirtualBus`, `MergedBus`), else `recv(timeout=0)` until none. The exact type is checked, not the attribute:
+    a `TimedBus` forwards unknown attributes to its raw bus, whose queue it must not bypass."""
+    if type(bus) is FastVirtualBus or getattr(type(bus), "recv_pending", None) is not None:
+        out: list[can.Message] = bus.recv_pending()
+        return out
+    return _recv_each(bus)
+
+
+def batches(bus: Any) -> bool:
+    """Does `bus` send a tick's frames in one `send_batch` that cannot fill up (`FastVirtualBus` with unbounded
+    queues, a `MergedBus` of them)? The type is asked first, as in `recv_pending`."""
+    return getattr(type(bus), "send_batch", None) is not None and bool(bus.batches)
+
+
+def send_all(bus: Any, msgs: Sequence[can.Message]) -> None:
+    """Send `msgs` in order: in one `send_batch` where the bus `batches` (one wake of each reader), else frame by
+    frame."""
+    if batches(bus):
+        bus.send_batch(msgs)
+    else:
+        for m in msgs:
+            bus.send(m)
+
+
+def rx_monotonic_ns(frame_timestamp_s: float, mono_now_ns: int, wall_now_ns: int, *,
+                    max_age_ns: int = 10**10) -> int:
+    """The monotonic time at which a frame stamped `frame_timestamp_s` (python-can: wall clock, set by the sender on
+    the virtual bus, by the kernel on SocketCAN) arrived, so queueing and wake-up count in the loop time; `mono_now_ns`
+    when the stamp is missing or implausible (in the future or older than `max_age_ns`)."""
+    age_ns = wall_now_ns - int(frame_timestamp_s * 1e9)
+    return mono_now_ns - age_ns if 0 <= age_ns <= max_age_ns else mono_now_ns
 
 
 _new_message = object.__new__

@@ -10,7 +10,7 @@ Layout (little endian, 16-byte header then the data bytes):
 ``magic u8 (0xC1: format 1) | flags u8 | dlc u8 | data length u8 | arbitration id u32 | send time i64 ns``.
 flags: bit 0 extended id, 1 remote, 2 error, 3 FD, 4 bitrate switch, 5 error state indicator; other bits 0.
 The send time is the sender's wall clock (`time.time_ns()`): the frame's python-can timestamp, the moment it went
-on the bus, like the kernel's stamp on SocketCAN (the edge counts queueing from it, `controller.edge.rx_monotonic_ns`).
+on the bus, like the kernel's stamp on SocketCAN (the edge counts queueing from it, `protocol.canbus.rx_monotonic_ns`).
 """
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ from __future__ import annotations
 import collections
 import queue
 import select
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import can
@@ -25,7 +25,7 @@ from can.interfaces.virtual import channels_lock
 
 from sea_hil.errors import BusError
 from sea_hil.protocol.can_frames import CMD_BITS
-from sea_hil.protocol.canbus import FastVirtualBus
+from sea_hil.protocol.canbus import FastVirtualBus, send_all, take_queued, unbatch
 from sea_hil.queues import timed_get
 
 
@@ -81,8 +81,10 @@ class MergedBus:
 
     def recv(self, timeout: float | None = None) -> can.Message | None:
         if self._queue is not None:
+            if self._ready:
+                return self._ready.popleft()
             try:
-                return timed_get(self._queue, timeout)
+                return unbatch(timed_get(self._queue, timeout), self._ready)
             except queue.Empty:
                 return None
         if not self._ready:
@@ -93,12 +95,39 @@ class MergedBus:
                     self._ready.append(msg)
         return self._ready.popleft() if self._ready else None
 
+    def recv_pending(self) -> list[can.Message]:
+        """Every frame queued now on any of the buses, in order, without waiting (`canbus.recv_pending`)."""
+        if self._queue is not None:
+            return take_queued(self._queue, self._ready)
+        out = list(self._ready)
+        self._ready.clear()
+        for bus in self.buses:
+            while (msg := bus.recv(0)) is not None:
+                out.append(msg)
+        return out
+
     def send(self, msg: can.Message, timeout: float | None = None) -> None:
         bus = self.routes.get(msg.arbitration_id >> CMD_BITS)
         if bus is None:
             raise can.CanOperationError(f"no bus for node {msg.arbitration_id >> CMD_BITS} (CAN id "
                                         f"0x{msg.arbitration_id:X}) on this merged bus")
         bus.send(msg, timeout=timeout)
+
+    @property
+    def batches(self) -> bool:
+        """Merged virtual buses batch (`canbus.batches`); buses with a file descriptor send frame by frame."""
+        return self._queue is not None and all(b.batches for b in self.buses)
+
+    def send_batch(self, msgs: Sequence[can.Message], timeout: float | None = None) -> None:
+        """`send` of each of `msgs`, in one `send_all` per bus (frames of one bus keep their order)."""
+        by_bus: dict[int, tuple[Any, list[can.Message]]] = {}
+        for msg in msgs:
+            bus = self.routes.get(msg.arbitration_id >> CMD_BITS)
+            if bus is None:
+                self.send(msg, timeout)   # raises: no bus for that node
+            by_bus.setdefault(id(bus), (bus, []))[1].append(msg)
+        for bus, group in by_bus.values():
+            send_all(bus, group)
 
     def shutdown(self) -> None:
         """Nothing to release: the merged buses are shut down by their owner."""

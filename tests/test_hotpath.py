@@ -183,3 +183,4 @@ def test_new_message_equals_the_constructors_message(is_fd: bool, brs: bool) -> 
     slots = [s for s in can.Message.__slots__ if s != "__weakref__"]
     assert {s: getattr(fast, s) for s in slots} == {s: getattr(slow, s) for s in slots}
     assert fast.data is data
+

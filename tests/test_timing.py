@@ -54,7 +54,7 @@ class _StubNode:
         self.period_ns, self.heartbeat_every, self.drivers = 1_000_000, 10**9, {}
         self.lateness = SimpleNamespace(record=lambda _v: None)
         self.stats = SimpleNamespace(overruns=0, ticks=0)
-        self.clock, self.waits, self.exits = clock, [], []
+        self.clock, self.waits, self.exits, self.taken = clock, [], [], []
 
     def prepare_kernels(self) -> None:
         pass
@@ -65,9 +65,15 @@ class _StubNode:
     def step_drivers(self) -> list:
         return []                                   # no limbs: the pacer's schedule alone
 
-    def drain_until(self, deadline_ns: int) -> None:
+    def publish_samples(self, samples: list, heartbeats: bool = False) -> None:
+        pass
+
+    def wait_until(self, deadline_ns: int) -> None:
         self.waits.append(deadline_ns)
         self.clock[0] = max(self.clock[0], deadline_ns)
+
+    def take_pending(self, mono_now_ns: int) -> None:
+        self.taken.append(mono_now_ns)
 
 
 def test_pacer_waits_for_each_absolute_deadline(monkeypatch) -> None:
@@ -80,6 +86,7 @@ def test_pacer_waits_for_each_absolute_deadline(monkeypatch) -> None:
     pacer.tick()
     pacer.tick()
     assert node.waits == [10**9 + 1_000_000, 10**9 + 2_000_000]   # absolute deadlines: start + k periods
+    assert node.taken == node.waits                 # one pass over the frames queued, at each wake
     assert node.stats.overruns == 0 and node.stats.ticks == 2
     for undo in node.exits:
         undo()

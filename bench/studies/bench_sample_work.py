@@ -49,8 +49,7 @@ def parts(limbs: int) -> dict[str, Callable[[], None]]:
         now = time.monotonic_ns()
         for drv in node.drivers.values():
             drv.check_watchdog(now)
-        for drv, fb in node.step_drivers():
-            node.publish_sample(drv, fb)
+        node.publish_samples(node.step_drivers())
 
     def edge() -> None:
         while (msg := edge_bus.recv(0)) is not None:

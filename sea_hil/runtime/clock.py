@@ -129,9 +129,10 @@ class RealTimeClock(Clock):
 
 
 class RealTimePacer:
-    """The driver's real-time schedule: one tick per feedback period; waiting for the next deadline is done in the
-    bus receive, so commands act from their arrival time. Lateness of each tick is recorded; a tick later than one
-    period is an overrun (the schedule skips ahead, never bunches up)."""
+    """The driver's real-time schedule: one tick per feedback period, one wake per tick (a sleep to the deadline;
+    the frames that came meanwhile are handled then, each at its arrival time, so commands act from their arrival).
+    Lateness of each tick is recorded; a tick later than one period is an overrun (the schedule skips ahead, never
+    bunches up)."""
 
     def __init__(self, node: Any) -> None:
         self.node = node
@@ -151,15 +152,18 @@ class RealTimePacer:
         self.end_ns = None if duration_s is None else self.start_ns + int(duration_s * 1e9)
         for drv in n.drivers.values():
             drv.last_cmd_ns = self.start_ns
-            n.publish_sample(drv, drv.feedback())
+        n.publish_samples([(drv, drv.feedback()) for drv in n.drivers.values()])
         self.k, self.next_heartbeat_k, self.done = 0, n.heartbeat_every, False
 
     def tick(self) -> None:
+        """One wake per tick: sleep to the deadline, handle the frames that arrived meanwhile (each at its arrival
+        time), integrate every limb, send all the tick's frames at once."""
         n = self.node
         self.k += 1
         deadline = self.start_ns + self.k * n.period_ns
-        n.drain_until(deadline)
+        n.wait_until(deadline)
         now = time.monotonic_ns()
+        n.take_pending(now)
         late = now - deadline
         n.lateness.record(max(late, 0) * 1e-9 + 1e-7)
         missed = late // n.period_ns if late > n.period_ns else 0
@@ -170,10 +174,9 @@ class RealTimePacer:
             if missed:
                 drv.note_overruns(missed)
             drv.check_watchdog(now)
-        for drv, feedback in n.step_drivers():   # all limbs of the bus in one compiled step
-            n.publish_sample(drv, feedback)
-        if self.k >= self.next_heartbeat_k:  # skipped ticks must not skip the heartbeat
-            n.heartbeats()
+        heartbeat = self.k >= self.next_heartbeat_k   # skipped ticks must not skip the heartbeat
+        n.publish_samples(n.step_drivers(), heartbeat)   # all limbs of the bus in one compiled step, one send
+        if heartbeat:
             self.policy.refresh()   # [timing] realtime_scope = "process": threads started since
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
         if self.end_ns is not None and now >= self.end_ns:

@@ -1,0 +1,86 @@
+"""One wake per tick (issue 33): the virtual bus's batch send and one-pass read (`FastVirtualBus.send_batch`,
+`canbus.recv_pending`), and the driver handling the frames queued in a period at their arrival times. In-process,
+milliseconds."""
+from __future__ import annotations
+
+import time
+
+import can
+
+from sea_hil.config.loader import load_config
+from sea_hil.plant_emulator.node import PlantNode
+from sea_hil.protocol.can_codec import SeaCodec
+from sea_hil.protocol.can_frames import CMD_BITS, VoltageCmd
+from sea_hil.protocol.canbus import FastVirtualBus, batches, open_bus, recv_pending, send_all
+from sea_hil.protocol.merged_bus import MergedBus
+
+
+def test_a_batch_reaches_every_reader_once_in_order_and_a_pending_read_takes_all() -> None:
+    """`send_batch` (a driver tick's frames): one queue item per fast reader, unbatched by `recv` and
+    `recv_pending`; a plain python-can reader on the channel gets the frames one by one; a `TimedBus` is read
+    through its own `recv`, never its raw bus's `recv_pending` (canbus.recv_pending asks the type)."""
+    a, b, c = (open_bus("virtual:hotpath-batch") for _ in range(3))
+    plain = can.Bus(interface="virtual", channel="hotpath-batch")
+    try:
+        assert batches(a) is False                       # a bounded python-can queue on the channel: frame by frame
+        plain.shutdown()
+        assert batches(a)
+        frames = [can.Message(arbitration_id=i, data=bytes([i]), is_extended_id=False) for i in range(4)]
+        send_all(a, frames[:3])
+        assert b.queue.qsize() == 1                      # one item: the reader wakes once for the batch
+        send_all(a, frames[3:])
+        assert [m.arbitration_id for m in recv_pending(b)] == [0, 1, 2, 3] and recv_pending(b) == []
+        got = [c.recv(0) for _ in range(5)]
+        assert [m.arbitration_id for m in got[:4]] == [0, 1, 2, 3] and got[4] is None
+        assert len({m.timestamp for m in got[:3]}) == 1 and got[0] is not frames[0]   # one send time, copies
+        assert recv_pending(a) == []                     # not its own messages
+    finally:
+        for bus in (a, b, c, plain):
+            bus.shutdown()
+
+
+
+def test_the_driver_takes_a_command_at_its_arrival_time_not_at_its_wake() -> None:
+    """`PlantNode.take_pending` at the tick's wake: a VOLTAGE_CMD that arrived 0.3 ms into the period acts from that
+    offset (its bus stamp), as if it had been handled when it came; the period's feedback left in one send."""
+    cfg = load_config()
+    bus = open_bus("virtual:hotpath-take")
+    edge = FastVirtualBus(channel="hotpath-take", preserve_timestamps=True)
+    node = PlantNode(cfg, bus, (1,))
+    try:
+        drv = node.drivers[1]
+        node.publish_samples([(drv, drv.feedback())])
+        assert drv.period_start_ns is not None and len(recv_pending(edge)) == 3   # 3 classic feedback frames, at once
+        drv.period_start_ns = time.monotonic_ns() - 800_000   # the period began 0.8 ms ago ...
+        cmd = SeaCodec.for_bus(cfg.can).encode(VoltageCmd(1, (1.0, -1.0), 0))
+        cmd.timestamp = (time.time_ns() - 500_000) * 1e-9      # ... the command came 0.5 ms ago: 0.3 ms in
+        edge.send(cmd)
+        node.take_pending(time.monotonic_ns())
+        (offset, u), = drv._changes
+        assert u == (1.0, -1.0) and drv.counters.commands == 1
+        assert abs(offset - 300_000) < 100_000           # the arrival, not the (later) wake
+    finally:
+        bus.shutdown()
+        edge.shutdown()
+
+
+def test_a_merged_bus_reads_batches_and_sends_each_bus_its_frames() -> None:
+    names = [f"virtual:tick-merged-{i}" for i in range(2)]
+    mine, peers = [open_bus(n) for n in names], [open_bus(n) for n in names]
+    merged = MergedBus({1: mine[0], 2: mine[1]})
+    try:
+        assert batches(merged)
+        send_all(peers[0], [_frame(1, b"a"), _frame(1, b"b")])
+        send_all(peers[1], [_frame(2, b"c")])
+        assert bytes(merged.recv(0.1).data) == b"a"      # the first of a batch; its rest stays in order
+        assert [bytes(m.data) for m in recv_pending(merged)] == [b"b", b"c"] and merged.recv(0) is None
+        send_all(merged, [_frame(2, b"x"), _frame(1, b"y"), _frame(2, b"z")])
+        assert [bytes(m.data) for m in recv_pending(peers[1])] == [b"x", b"z"]   # node 2's bus only, in order
+        assert [bytes(m.data) for m in recv_pending(peers[0])] == [b"y"]
+    finally:
+        for bus in (*mine, *peers):
+            bus.shutdown()
+
+
+def _frame(node_id: int, data: bytes) -> can.Message:
+    return can.Message(arbitration_id=(node_id << CMD_BITS) | 1, data=data, is_extended_id=False)
