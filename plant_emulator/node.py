@@ -6,7 +6,7 @@ logged; well-formed ids of nodes it does not serve are ignored like drive firmwa
 Real-time clock: one tick per feedback period on a drift-free schedule (absolute deadlines), one wake per tick: the
 driver sleeps to the deadline, then handles every frame queued meanwhile (`take_pending`), each at its arrival time
 (its bus stamp), so a command acts from its arrival within the period (`DriverCore`) as if handled when it came; all
-limbs are integrated in one step and all the tick's frames leave in one send (`publish_samples`). Lateness is
+limbs are integrated in one step and all the tick's frames leave in one send right before the driver sleeps (`publish_samples`, `wait_until`). Lateness is
 recorded, a tick later than one period is an overrun. Lockstep clock
 (`sea_hil.runtime.lockstep`): a sample is integrated once every served node's command for it has arrived.
 """
@@ -87,6 +87,8 @@ class PlantNode(Node):
         self.heartbeat_every = max(1, int(round(cc.feedback_rate_hz / cc.heartbeat_rate_hz)))
         self.lateness = LogHistogram()
         self.stats = TickStats()
+        self._outbox: list[can.Message] = []        # real time: the tick's frames, sent by `send_pending`
+        self._starting: list[DriverCore] = []       # the drivers whose new period starts when they leave
         self.pacer: Pacer = (clock or RealTimeClock()).plant(self)
 
     # ---- frames -------------------------------------------------------------------------------------------------
@@ -142,21 +144,29 @@ class PlantNode(Node):
             self._send(m)
 
     def publish_samples(self, samples: list[tuple[DriverCore, Feedback]], heartbeats: bool = False) -> None:
-        """Real time: every limb's new sample (and with `heartbeats` each drive's HEARTBEAT) in one send of all the
-        tick's frames (`canbus.send_all`: one wake of each reader where the bus batches); the new periods start
-        when they leave. Frame by frame, each with its retries, on other buses."""
-        frames = []
+        """Real time: every limb's new sample (and with `heartbeats` each drive's HEARTBEAT) encoded for one send of
+        all the tick's frames, which `send_pending` makes (`wait_until` just before it sleeps)."""
+        frames = self._outbox
         for drv, feedback in samples:
             try:
                 frames += self.codec.encode_feedback(feedback, saturate=True)
             except MalformedFrame as err:   # e.g. a diverged (NaN) model: report, keep the node alive
                 self.stats.send_failures += 1
                 log.error("node %d: feedback not encodable: %s", drv.node_id, err)
+            self._starting.append(drv)
         if heartbeats:
             frames += [self.codec.encode(drv.heartbeat()) for drv in self.drivers.values()]
+
+    def send_pending(self) -> None:
+        """Send the frames `publish_samples` encoded, in one `canbus.send_all` (one wake of each reader where the bus
+        batches; frame by frame, each with its retries, on other buses); the new periods start as they leave."""
+        frames, self._outbox = self._outbox, []
         start_ns = time.monotonic_ns()
-        for drv, _ in samples:
+        for drv in self._starting:
             drv.period_start_ns = start_ns
+        self._starting = []
+        if not frames:
+            return
         if not batches(self.bus):
             for m in frames:
                 self._send(m)
@@ -168,7 +178,9 @@ class PlantNode(Node):
             self._bus_error(f"CAN send failed: {err}")
 
     def wait_until(self, deadline_ns: int) -> None:
-        """Real time: sleep until `deadline_ns` (monotonic); no frame wakes the driver (`take_pending` reads them)."""
+        """Real time: send the tick's frames (`send_pending`), then sleep until `deadline_ns` (monotonic) at once, so
+        a reader woken by them finds the GIL free; no frame wakes the driver (`take_pending` reads them)."""
+        self.send_pending()
         remaining = deadline_ns - time.monotonic_ns()
         if remaining > 0:
             time.sleep(remaining * 1e-9)
@@ -230,6 +242,9 @@ class PlantNode(Node):
     def _step(self) -> bool:
         self.pacer.tick()
         return True
+
+    def _on_stop(self) -> None:
+        self.send_pending()   # real time: the last tick's frames (nothing is pending in lockstep)
 
     def finished(self) -> bool:
         return bool(self.pacer.done)

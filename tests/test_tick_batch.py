@@ -50,6 +50,8 @@ def test_the_driver_takes_a_command_at_its_arrival_time_not_at_its_wake() -> Non
     try:
         drv = node.drivers[1]
         node.publish_samples([(drv, drv.feedback())])
+        assert drv.period_start_ns is None and recv_pending(edge) == []   # encoded, not sent: sent as it sleeps
+        node.wait_until(0)
         assert drv.period_start_ns is not None and len(recv_pending(edge)) == 3   # 3 classic feedback frames, at once
         drv.period_start_ns = time.monotonic_ns() - 800_000   # the period began 0.8 ms ago ...
         cmd = SeaCodec.for_bus(cfg.can).encode(VoltageCmd(1, (1.0, -1.0), 0))

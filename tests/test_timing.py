@@ -68,6 +68,9 @@ class _StubNode:
     def publish_samples(self, samples: list, heartbeats: bool = False) -> None:
         pass
 
+    def send_pending(self) -> None:
+        pass
+
     def wait_until(self, deadline_ns: int) -> None:
         self.waits.append(deadline_ns)
         self.clock[0] = max(self.clock[0], deadline_ns)

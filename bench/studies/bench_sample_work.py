@@ -50,6 +50,7 @@ def parts(limbs: int) -> dict[str, Callable[[], None]]:
         for drv in node.drivers.values():
             drv.check_watchdog(now)
         node.publish_samples(node.step_drivers())
+        node.send_pending()
 
     def edge() -> None:
         while (msg := edge_bus.recv(0)) is not None:

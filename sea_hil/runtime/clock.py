@@ -156,8 +156,8 @@ class RealTimePacer:
         self.k, self.next_heartbeat_k, self.done = 0, n.heartbeat_every, False
 
     def tick(self) -> None:
-        """One wake per tick: sleep to the deadline, handle the frames that arrived meanwhile (each at its arrival
-        time), integrate every limb, send all the tick's frames at once."""
+        """One wake per tick: send the last tick's frames and sleep to the deadline at once (`PlantNode.wait_until`),
+        handle the frames that arrived meanwhile (each at its arrival time), integrate every limb."""
         n = self.node
         self.k += 1
         deadline = self.start_ns + self.k * n.period_ns
@@ -175,12 +175,13 @@ class RealTimePacer:
                 drv.note_overruns(missed)
             drv.check_watchdog(now)
         heartbeat = self.k >= self.next_heartbeat_k   # skipped ticks must not skip the heartbeat
-        n.publish_samples(n.step_drivers(), heartbeat)   # all limbs of the bus in one compiled step, one send
+        n.publish_samples(n.step_drivers(), heartbeat)   # all limbs in one compiled step; sent by the next wait
         if heartbeat:
             self.policy.refresh()   # [timing] realtime_scope = "process": threads started since
             self.next_heartbeat_k = (self.k // n.heartbeat_every + 1) * n.heartbeat_every
         if self.end_ns is not None and now >= self.end_ns:
             self.done = True
+            n.send_pending()
 
     def on_command(self, frame: object, drv: Any) -> None:
         """A command the driver accepted: nothing to wait for in real time."""
