@@ -6,7 +6,7 @@ One `PlantNode` on a `virtual` bus with two more handles on the channel (the edg
 `sea-hil run`. Per part, thread CPU time (`time.thread_time`) per limb-sample, best of `--repeat` rounds of
 `--number` samples (the least disturbed round; on a loaded machine the spread is printed too):
 - driver tick: VOLTAGE_CMD handled (decode + `DriverCore.handle`), lateness recorded, watchdog, one period
-  integrated for every limb (`step_drivers`), each limb's feedback encoded and sent (3 classic frames);
+  integrated for every limb (`step_drivers`), each limb's feedback encoded (3 classic frames) and sent in one batch;
 - edge CAN side: the feedback frames decoded and assembled (`FeedbackAssembler`), the sample time unwrapped, the
   loop time recorded (`LogHistogram`), a VOLTAGE_CMD encoded and sent;
 - recorder tap: each frame turned into a `RawFrame`.
