@@ -28,6 +28,7 @@ from sea_hil.errors import ConfigError, MalformedFrame
 from sea_hil.protocol.can_frames import (
     CMD_BITS,
     CMD_MASK,
+    FEEDBACK_PARTS,
     NODE_ID_MAX,
     NODE_ID_MIN,
     ROLLING,
@@ -112,6 +113,19 @@ def _built_layout(cls: type[Frame], name: str) -> _Layout:
                    frame, binding_of(cls, frame.names))
 
 
+# the sample's signals in one flat list (FEEDBACK_FD's names: every classic part's signal is one of them)
+_FEEDBACK_NAMES = tuple(sig for _, g in Feedback.FIELDS for sig in (g if isinstance(g, tuple) else (g,)))
+_FEEDBACK_BINDING = SignalBinding(Feedback, _FEEDBACK_NAMES)
+
+
+@functools.cache
+def _parts_plan() -> tuple[tuple[_Layout, tuple[int, ...]], ...]:
+    """Per classic feedback part (angle, joint 1, joint 2): its layout and where its plan's signals sit in
+    `_FEEDBACK_BINDING.values(fb)`."""
+    layouts = [_layout(cls, name) for cls, name in profile_messages(False).items() if cls in FEEDBACK_PARTS]
+    return tuple((lay, tuple(_FEEDBACK_NAMES.index(n) for n in lay.frame.names)) for lay in layouts)
+
+
 class SeaCodec:
     """Dataclass <-> `can.Message` for the sea-hil protocol; `node_ids` restricts which nodes decode accepts, `fd`
     picks the profile (None: decode both, encode classic), `bitrate_switch` the BRS bit of the FD frames sent."""
@@ -168,9 +182,25 @@ class SeaCodec:
             raise MalformedFrame(f"cannot encode {lay.message.name} for node {node_id}: {err}") from err
 
     def encode_feedback(self, fb: Feedback, *, saturate: bool = False) -> list[can.Message]:
-        """The frames of one sample: one FEEDBACK_FD (CAN FD profile) or the three classic parts."""
+        """The frames of one sample: one FEEDBACK_FD (CAN FD profile) or the three classic parts. Classic: the
+        parts' values are taken from `fb` at once (`_parts_plan`: each part's signals are the sample's), packed by
+        the parts' plans; anything not plain (out of range, not a number) goes through `encode` of `fb.parts()`."""
         if Feedback in self._by_cls:
             return [self.encode(fb, saturate=saturate)]
+        node_id = fb.node_id
+        if type(node_id) is int and NODE_ID_MIN <= node_id <= NODE_ID_MAX:
+            try:
+                values = _FEEDBACK_BINDING.values(fb)
+                out = []
+                for lay, index in _parts_plan():
+                    data = lay.frame.pack_plain([values[i] for i in index])
+                    if data is None:
+                        break
+                    out.append(new_message(node_id << CMD_BITS | lay.cmd_id, data, False, False))
+                else:
+                    return out
+            except (TypeError, ValueError):
+                pass   # e.g. not a pair: the general path says what is wrong
         return [self.encode(p, saturate=saturate) for p in fb.parts()]
 
     def decode(self, msg: can.Message) -> Frame:

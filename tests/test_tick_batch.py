@@ -4,13 +4,17 @@ milliseconds."""
 from __future__ import annotations
 
 import time
+from typing import Any
 
 import can
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from sea_hil.config.loader import load_config
+from sea_hil.errors import MalformedFrame
 from sea_hil.plant_emulator.node import PlantNode
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import CMD_BITS, VoltageCmd
+from sea_hil.protocol.can_frames import CMD_BITS, Feedback, VoltageCmd
 from sea_hil.protocol.canbus import FastVirtualBus, batches, open_bus, recv_pending, send_all
 from sea_hil.protocol.merged_bus import MergedBus
 
@@ -86,3 +90,24 @@ def test_a_merged_bus_reads_batches_and_sends_each_bus_its_frames() -> None:
 
 def _frame(node_id: int, data: bytes) -> can.Message:
     return can.Message(arbitration_id=(node_id << CMD_BITS) | 1, data=data, is_extended_id=False)
+
+
+@settings(max_examples=300, deadline=None)
+@given(values=st.lists(st.one_of(st.floats(-20, 20), st.floats(allow_nan=True, allow_infinity=True)), min_size=8,
+                       max_size=8),
+       seq=st.integers(-1, 300), t_us=st.integers(-1, 70000), saturate=st.booleans())
+def test_the_direct_feedback_encoding_is_the_parts_encoding(values: list[float], seq: int, t_us: int,
+                                                           saturate: bool) -> None:
+    """`SeaCodec.encode_feedback` (classic) packs the parts' values straight from the sample: the same frames, or
+    the same error, as encoding `fb.parts()` one by one, in range or not."""
+    codec = SeaCodec()
+    v = values
+    fb = Feedback(3, seq, t_us, (v[0], v[1]), (v[2], v[3]), (v[4] * 1e-3, v[5] * 1e-3), (v[6], v[7]))
+
+    def outcome(encode: Any) -> Any:
+        try:
+            return [(m.arbitration_id, bytes(m.data), m.is_fd, m.bitrate_switch, m.dlc) for m in encode()]
+        except MalformedFrame as err:
+            return str(err)
+    assert outcome(lambda: codec.encode_feedback(fb, saturate=saturate)) == \
+        outcome(lambda: [codec.encode(p, saturate=saturate) for p in fb.parts()])
