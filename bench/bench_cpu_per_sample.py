@@ -73,12 +73,18 @@ def report(limbs: int, runs: list[WindowResult], label: str = "",
     lost = [r.lost() for r in runs]
     print(f"  recorder (child + taps): {_span(rec).strip()} us per limb-sample; frames lost (recording vs sent, "
           f"whole session): {', '.join('-' if x is None else str(x) for x in lost)}")
+    print(f"  recording complete (summary.json completeness, every limb): "
+          f"{', '.join('-' if r.complete is None else 'yes' if r.complete else 'NO' for r in runs)}")
+    whole = [r.child_session_us() for r in runs]
+    if any(w is not None for w in whole):
+        print(f"  recorder child over the whole session (its own CPU count): "
+              f"{', '.join('-' if w is None else f'{w:.1f}' for w in whole)} us per limb-sample")
     for r in runs:
         if r.recorded:
             print(f"    recorded: {r.recorded}")
     return {"label": label, "limbs": limbs, "us_per_limb_sample": table, "samples": [r.samples for r in runs],
             "load_avg": [r.load_avg for r in runs], "misses": misses, "floor_pct": floors or [None] * len(runs), "recorder_us": rec, "lost": lost,
-            "recorded": [r.recorded for r in runs]}
+            "recorded": [r.recorded for r in runs], "child_session_us": whole}
 
 
 def as_record(k: int, row: dict[str, Any], warm_s: float, window_s: float) -> dict[str, Any]:

@@ -2,7 +2,8 @@
 
 Run: python -m bench.bench_zenoh_hop [--runs 5] [--pings 2000] [--secure] [--profile] [--json OUT]
 This process listens on a free loopback TCP port; an echo child process (this script with `--echo`) connects.
-One hop = round trip / 2, on this process's monotonic clock, in three modes, interleaved per run (fresh echo each):
+One hop = round trip / 2, on this process's monotonic clock, in three modes; per run a fresh echo each, all open at
+once, pinged in turn in blocks of 50 (so load drifts hit every mode alike):
   raw        zenoh-python defaults: declare_publisher(key), default FIFO handler with blocking recv(); 88-byte ping,
              53-byte pong of opaque bytes (the sizes of StatePayload and SetpointPayload);
   project    the real path: `encode_state` (the edge's encoder) + `sea_hil.protocol.zsession.publisher` (express,
@@ -157,40 +158,58 @@ def _ping_once(mode: str, seq: int, pub: zenoh.Publisher, sub: zenoh.Subscriber,
             return (t1 - t0) // 2
 
 
-def batch(mode: str, pings: int, certs: Path | None = None) -> tuple[list[int], int]:
-    """One echo child in `mode`: warm up, then `pings` timed ping-pongs. Returns (hop ns list, lost count)."""
-    endpoint = f"{'tls' if mode == 'tls' else 'tcp'}/127.0.0.1:{free_tcp_port()}"
-    session = open_session(_config(mode, certs, "edge", listen=[endpoint]))
-    cert_args = ["--certs", str(certs)] if mode == "tls" and certs is not None else []
-    proc = subprocess.Popen([sys.executable, "-m", "bench.bench_zenoh_hop", "--echo", endpoint, "--mode", mode,
-                             *cert_args], cwd=REPO, stdout=subprocess.PIPE)
-    ping, pong = _keys(mode)
-    dog = None
-    try:
-        wait_ready(proc)
-        pub = _publisher(session, ping, mode)
-        sub = session.declare_subscriber(pong, zenoh.handlers.FifoChannel(1024))
-        counters = PayloadCounters()
-        dog = _Watchdog(session, timeout_s=0.05, pong=pong)   # warm-up: retry every ~0.1 s until the echo answers
-        deadline = time.monotonic() + 20.0
-        while _ping_once(mode, 0, pub, sub, counters, dog) is None:
-            if time.monotonic() > deadline:
-                raise SeaHilError(f"no answer from the {mode} echo")
-        dog.close()
-        dog = _Watchdog(session, timeout_s=1.0, pong=pong)
-        hops, lost = [], 0
-        for seq in range(1, pings + 1):
-            h = _ping_once(mode, seq, pub, sub, counters, dog)
+class Batch:
+    """One echo child in `mode`, warmed up; `ping(n)` times n more ping-pongs (`hops` in ns, `lost`). `close()` ends
+    it. Several stay open at once, so a run can alternate its modes in blocks (`_measure`)."""
+
+    def __init__(self, mode: str, certs: Path | None = None) -> None:
+        self.mode = mode
+        endpoint = f"{'tls' if mode == 'tls' else 'tcp'}/127.0.0.1:{free_tcp_port()}"
+        self.session = open_session(_config(mode, certs, "edge", listen=[endpoint]))
+        cert_args = ["--certs", str(certs)] if mode == "tls" and certs is not None else []
+        self.proc = subprocess.Popen([sys.executable, "-m", "bench.bench_zenoh_hop", "--echo", endpoint, "--mode",
+                                      mode, *cert_args], cwd=REPO, stdout=subprocess.PIPE)
+        ping, pong = _keys(mode)
+        self.dog: _Watchdog | None = None
+        self.hops: list[int] = []
+        self.lost = 0
+        self.seq = 0
+        try:
+            wait_ready(self.proc)
+            self.pub = _publisher(self.session, ping, mode)
+            self.sub = self.session.declare_subscriber(pong, zenoh.handlers.FifoChannel(1024))
+            self.counters = PayloadCounters()
+            self.dog = _Watchdog(self.session, timeout_s=0.05, pong=pong)   # warm-up: retry every ~0.1 s
+            deadline = time.monotonic() + 20.0
+            while _ping_once(mode, 0, self.pub, self.sub, self.counters, self.dog) is None:
+                if time.monotonic() > deadline:
+                    raise SeaHilError(f"no answer from the {mode} echo")
+            self.dog.close()
+            self.dog = _Watchdog(self.session, timeout_s=1.0, pong=pong)
+        except BaseException:
+            self.close()
+            raise
+
+    def ping(self, n: int) -> None:
+        dog = self.dog
+        assert dog is not None, "closed"
+        for _ in range(n):
+            self.seq += 1
+            h = _ping_once(self.mode, self.seq, self.pub, self.sub, self.counters, dog)
             if h is None:
-                lost += 1
+                self.lost += 1
             else:
-                hops.append(h)
-        return hops, lost
-    finally:
-        if dog is not None:
-            dog.close()
-        stop_process(proc)
-        session.close()
+                self.hops.append(h)
+
+    def close(self) -> None:
+        if self.dog is not None:
+            self.dog.close()
+            self.dog = None
+        stop_process(self.proc)
+        self.session.close()
+
+
+BLOCK = 50      # pings per mode before the next mode's turn
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -220,13 +239,22 @@ def _measure(args: argparse.Namespace, modes: tuple[str, ...], certs: Path) -> i
     medians: dict[str, list[float]] = {m: [] for m in modes}
     lost: dict[str, int] = {m: 0 for m in modes}
     for i in range(runs):
-        for mode in modes:
-            hops, n_lost = batch(mode, pings, certs)
-            pooled[mode] += hops
-            medians[mode].append(pct(hops, 50) / 1e3)
-            lost[mode] += n_lost
-            print(f"run {i + 1}/{runs} {mode:8s}: median {medians[mode][-1]:.1f} us  p99 {pct(hops, 99) / 1e3:.1f} us"
-                  f"  lost {n_lost}", flush=True)
+        batches: list[Batch] = []
+        try:
+            for mode in modes:
+                batches.append(Batch(mode, certs))
+            for done in range(0, pings, BLOCK):      # the modes in turn, BLOCK pings each: the same load for all
+                for b in batches:
+                    b.ping(min(BLOCK, pings - done))
+        finally:
+            for b in batches:
+                b.close()
+        for b in batches:
+            pooled[b.mode] += b.hops
+            medians[b.mode].append(pct(b.hops, 50) / 1e3)
+            lost[b.mode] += b.lost
+            print(f"run {i + 1}/{runs} {b.mode:8s}: median {medians[b.mode][-1]:.1f} us  p99 "
+                  f"{pct(b.hops, 99) / 1e3:.1f} us  lost {b.lost}", flush=True)
     details = [{"mode": m, "hops": len(pooled[m]), "lost": lost[m], "median_us": pct(pooled[m], 50) / 1e3,
                 "p99_us": pct(pooled[m], 99) / 1e3, "min_us": min(pooled[m], default=0) / 1e3,
                 "max_us": max(pooled[m], default=0) / 1e3,

@@ -37,6 +37,7 @@ class WindowResult:
     misses: int = 0
     hot: str = ""
     recorded: dict[str, int] | None = None   # whole session: what the recording holds vs what was sent
+    complete: bool | None = None   # whole session: summary.json `completeness.complete` (every limb's channels)
 
     def recorder_us(self) -> float:
         """CPU per limb-sample of the recorder: its child process plus the session's recorder tap threads."""
@@ -53,6 +54,15 @@ class WindowResult:
         return (r["recorder_dropped_ops"] + r["dropped"] + r["write_errors"] + r["can_rejected"]
                 + abs(r["commands_sent"] - r["/can/command"]) + abs(3 * (self.ticks + 1) - r["/can/feedback"])
                 + abs(r["can_frames"] - r["/can/raw"]))
+
+    def child_session_us(self) -> float | None:
+        """The recorder child's CPU per limb-sample over the whole session, by its own count (`recorder_cpu_s`: from
+        its first message to its close, so also what it caught up on after the window; a SCHED_IDLE child on a
+        loaded host gets little CPU in the window), per classic-CAN limb-sample (3 `/can/feedback` messages)."""
+        r = self.recorded
+        if not r or "recorder_cpu_us" not in r or not r["/can/feedback"]:
+            return None
+        return r["recorder_cpu_us"] / (r["/can/feedback"] / 3)
 
     def per_sample_us(self, group: str) -> float:
         return 1e6 * self.cpu_s.get(group, 0.0) / max(self.samples, 1)
@@ -72,6 +82,8 @@ def recorded_counts(path: Path) -> dict[str, int]:
     out = {k: int(final.get(k, 0)) for k in ("can_frames", "can_frames_missed", "can_rejected",
                                                 "recorder_dropped_ops", "dropped", "write_errors")}
     out.update({t: int(final.get(f"messages.{t}", 0)) for t in ("/can/raw", "/can/feedback", "/can/command")})
+    if "recorder_cpu_s" in final:   # the recorder child's own CPU count, start-up excluded (sea_hil/recorder/process.py)
+        out["recorder_cpu_us"] = round(1e6 * float(final["recorder_cpu_s"]))
     edge = meta.get("sea-hil.edge")
     if edge and "commands_sent" in edge:
         out["commands_sent"] = int(edge["commands_sent"]) + int(edge.get("arrival_commands", 0))
@@ -97,6 +109,8 @@ def _role(cmdline: list[str]) -> str:
         return "recorder child"
     if " controller" in text:
         return "controllers"
+    if " plant " in f"{text} ":
+        return "driver process"
     return "other child"
 
 
@@ -252,7 +266,10 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
         cmd = [sea_hil or str(Path(sys.executable).with_name("sea-hil")), "run", "--limbs", str(limbs), "--cycles", "1",
                "--out", str(out), *extra]
         load = os.getloadavg()[0]
-        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
+        # run in the temporary directory: the session's children (`python -m sea_hil...`: controllers, the recorder
+        # process) put their working directory first on sys.path, and from a checkout's root an A/B's other
+        # checkout would run this checkout's children
+        proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, cwd=tmp)
         try:
             root = psutil.Process(proc.pid)
             prog = _Progress(proc.stderr)
@@ -294,4 +311,4 @@ def _measure(limbs: int, warm_s: float, window_s: float, extra: list[str], profi
     drv = summary["timing"]["driver"]
     samples = int(round((sim_b - sim_a) * FEEDBACK_RATE_HZ)) * limbs
     return WindowResult(limbs, load, samples, dict(groups), dict(system), drv.get("ticks", 0), drv.get("tick_misses", 0), hot,
-                        recorded)
+                        recorded, summary.get("completeness", {}).get("complete"))

@@ -7,16 +7,14 @@ from typing import Any
 
 # Why a goal may be missed and what to try next; shown only for records with goal_met == False.
 LEVERS = {
-    "2": "The project path's newest-only receive now wakes the controller's thread directly (`LatestSubscriber`: "
-         "zenoh's thread puts into a SimpleQueue) and STATE / SETPOINT go through one struct call each way; what "
-         "is left over raw is the decode and validation of real payloads on both ends (docs/timing.md, 'Zenoh "
-         "hop'). The ratio is near the bound and varies run to run on this VM.",
-    "3": "The p99 meets its bound; the median does not on the Intel Xeon VM: 1.29-1.37 ms, minimum 0.78-1.0 ms, "
-         "with the code before session 9's hop changes too (56de948, A/B, 2 runs each: p50 1.31-1.37 against "
-         "1.29-1.32 ms), against 0.50-0.79 ms on the AMD host of 2026-11-25 (older code). Part of it is by design: "
-         "the edge applies a setpoint at its next 1 kHz feedback sample (up to 1 ms later). Not split further yet: "
-         "the controller's processing and the wake-ups on a VM ~1.7x slower per core. Next lever: measure the "
-         "parts (state publish -> controller receive -> setpoint publish -> edge arrival -> apply).",
+    "2": "The project path's newest-only receive wakes the controller's thread directly (`LatestSubscriber`: "
+         "zenoh's thread puts into a SimpleQueue) and STATE / EVENT_STATE / SETPOINT go through one struct call each "
+         "way; what is left over raw is the decode and validation of real payloads on both ends (docs/timing.md, "
+         "'Zenoh hop'). The ratio varies run to run on this VM (each run now pings all modes in turn).",
+    "3": "Issue 33's goal (p50 <= 0.5 ms, p99 <= 1.5 ms). Per stage (bench/studies/latency_stages.py, "
+         "docs/timing.md 'Closed loop'): each process wakes cold for every state, so each stage costs several times "
+         "its hot price. What is left: zenoh's own hops (uplink, downlink, 200-300 us each under load) and the "
+         "controller's cold compute (~200 us CPU per state); handling in zenoh's threads saved nothing measurable.",
     "5": "ET's event count is now below 1/3 of TT's in every real-time run (setpoints are applied on arrival and "
          "the cycles start on the trajectory after the lead-in, docs/deviations.md section 8). What fails is the "
          "error bound: in steady state ET's knee error (held v_x between events) is ~1.5x TT's in this model, "

@@ -50,15 +50,13 @@ from sea_hil.protocol.epoch import EpochVerdict, PeerEpoch, new_epoch
 from sea_hil.protocol.keys import KEY_PAYLOADS
 from sea_hil.protocol.link import DelayQueue, LinkEmulator
 from sea_hil.protocol.payload_fields import RejectReason
-from sea_hil.protocol.payload_hot import encode_state
+from sea_hil.protocol.payload_hot import encode_event_state, encode_state
 from sea_hil.protocol.payloads import (
     PAYLOAD_SIZE,
-    EventStatePayload,
     MsgType,
     PayloadCounters,
     SetpointPayload,
     VoltagePayload,
-    encode,
 )
 from sea_hil.protocol.sequence import SequenceTracker, SeqVerdict
 from sea_hil.protocol.wire_size import estimate_wire_bytes
@@ -144,9 +142,9 @@ class StatePublisher:
         """Publish the event state `seq` (the sample index + 1) the edge's trigger chose."""
         self.seq = seq
         return self._put(seq, sample_t_ns, PAYLOAD_SIZE[MsgType.EVENT_STATE],
-                         lambda t: encode(EventStatePayload(seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s,
-                                                            fb.delta_m, fb.nut_vel_m_s, event_seq, reason,
-                                                            trajectory_id, epoch=self.epoch)))
+                         lambda t: encode_event_state(seq, t, sample_t_ns, fb.theta_rad, fb.omega_rad_s, fb.delta_m,
+                                                      fb.nut_vel_m_s, event_seq, reason, trajectory_id,
+                                                      epoch=self.epoch))
 
     def _put(self, seq: int, sample_t_ns: int, size: int, make: Callable[[int], bytes]
              ) -> tuple[int, bytes, int | None]:

@@ -151,10 +151,11 @@ class EdgeEventGenerator:
                model: Callable[[int], JointState] | None) -> tuple[JointState, int, DesiredSample]:
         """The state one smoothed round trip ahead (when the answer to an event now would act), extrapolated with the
         measured velocity and a smoothed acceleration (finite differences of the 1 kHz or outer samples)."""
-        if self._prev is not None and sample_ns > self._prev[0]:
-            dt = (sample_ns - self._prev[0]) * 1e-9
-            a = tuple((w - w0) / dt for w, w0 in zip(js.omega_rad_s, self._prev[1], strict=True))
-            self._alpha = (0.8 * self._alpha[0] + 0.2 * a[0], 0.8 * self._alpha[1] + 0.2 * a[1])
+        prev = self._prev
+        if prev is not None and sample_ns > prev[0]:
+            dt = (sample_ns - prev[0]) * 1e-9
+            (w1, w2), (p1, p2), (al1, al2) = js.omega_rad_s, prev[1], self._alpha
+            self._alpha = (0.8 * al1 + 0.2 * ((w1 - p1) / dt), 0.8 * al2 + 0.2 * ((w2 - p2) / dt))
         self._prev = (sample_ns, js.omega_rad_s)
         if not self.lookahead or not self.rtt_ns:
             return js, t_ns, ds

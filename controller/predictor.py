@@ -122,29 +122,35 @@ class Predictor:
         if until_ns - sample_ns > MAX_HORIZON_NS:
             self.clamped += count
             until_ns = sample_ns + MAX_HORIZON_NS
-        p = self.params
-        len1, len2, _, _, _, _ = sea_geometry(q1, q2, p)
-        x = tuple(map(float, (q1, q2, w1, w2, len1 - p.l_ref[0] - d1, len2 - p.l_ref[1] - d2, nv1, nv2)))
-        k, k_end = sample_ns // self.period_ns, until_ns // self.period_ns
+        period_ns = self.period_ns
+        k, k_end = sample_ns // period_ns, until_ns // period_ns
         if k_end <= k:
             return JointState((q1, q2), (w1, w2))
         self.predictions += count
-        held: tuple[Pair, Pair] | None = None
-        for apply_ns, vx, s in self.schedule:
-            if apply_ns <= sample_ns:
-                held = (vx, s)
-        due: list[tuple[int, Pair | None, Pair | None]] = [e for e in self.schedule if sample_ns < e[0] < until_ns]
-        for apply_ns, next_vx, next_s in [*due, (until_ns, None, None)]:
-            k_next = min(apply_ns // self.period_ns, k_end)
+        p = self.params
+        len1, len2, _, _, _, _ = sea_geometry(q1, q2, p)
+        x = (float(q1), float(q2), float(w1), float(w2), float(len1 - p.l_ref[0] - d1), float(len2 - p.l_ref[1] - d2),
+             float(nv1), float(nv2))
+        held: tuple[Pair, Pair] | None = None       # the setpoint acting at sample_ns (the newest applied by then)
+        due: list[tuple[int, Pair | None, Pair | None]] = []    # those applied in (sample_ns, until_ns), in order
+        for e in self.schedule:
+            if e[0] <= sample_ns:
+                held = (e[1], e[2])
+            elif e[0] < until_ns:
+                due.append(e)
+        due.append((until_ns, None, None))
+        call = self._call
+        for apply_ns, next_vx, next_s in due:
+            k_next = min(apply_ns // period_ns, k_end)
             if k_next > k:
                 hv, hs = held if held is not None else ((0.0, 0.0), (0.0, 0.0))
                 # the nominal closed loop without the edge's observer (it has no model of the disturbance)
                 # plain floats and ints: the types the entry point was made for
-                args = (x, int(k), int(k_next - k), self.period_ns, self.substeps, (float(hv[0]), float(hv[1])),
+                args = (x, int(k), int(k_next - k), period_ns, self.substeps, (float(hv[0]), float(hv[1])),
                         (float(hs[0]), float(hs[1])), held is None, p, self._gains, OBSERVER_UNSTARTED, self.dt_s)
-                if self._call is None:
-                    self._call = entry(self.kernel, args)
-                x = self._call(*args)
+                if call is None:
+                    call = self._call = entry(self.kernel, args)
+                x = call(*args)
                 k = k_next
             if next_vx is not None and next_s is not None:
                 held = (next_vx, next_s)

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property, partial
 from typing import Any
 
 from sea_hil.config.root import SeaHilConfig
@@ -31,8 +32,13 @@ from sea_hil.protocol.payloads import StatePayload, TriggerReason, VoltagePayloa
 class Answer:
     messages: list[tuple[str, bytes]]     # ("setpoint" | "voltage", encoded payload), in order
     setpoint: Setpoint | None
-    record: dict[str, Any] | None         # the tracking record (the node publishes it as JSON), None with the
-                                          # trigger at the edge
+    make_record: Callable[[], dict[str, Any]] | None = None   # see `record`
+
+    @cached_property
+    def record(self) -> dict[str, Any] | None:
+        """The tracking record (the node publishes it as JSON), None with the trigger at the edge. Made when first
+        read, so a node sends the setpoint first: the desired motion of the record is not on the answer's path."""
+        return None if self.make_record is None else self.make_record()
 
 
 class ControllerCore:
@@ -84,7 +90,6 @@ class ControllerCore:
         if t_ns > self.duration_ns:
             self.done = True
             return None
-        ds = self.desired(t_ns)
         sp, now = self._decide(p, t_ns, arrival)
         messages: list[tuple[str, bytes]] = []
         if sp is not None:
@@ -102,11 +107,14 @@ class ControllerCore:
             messages.append(("voltage", encode(VoltagePayload(self.setpoint_seq, wall_ns(), p.seq, u,
                                                               epoch=self.epoch))))
         self.states += 1
-        record = None
-        if not self.edge_trigger:      # with the trigger at the edge, the edge records every outer sample
-            record = tracking_record(t_ns, p.seq, p.theta_rad, ds, sp.reason if sp else None,
-                                     self.setpoint_seq if messages else 0)
-        return Answer(messages, sp, record)
+        if self.edge_trigger:          # with the trigger at the edge, the edge records every outer sample
+            return Answer(messages, sp)
+        return Answer(messages, sp, partial(self._record, t_ns, p.seq, p.theta_rad, sp.reason if sp else None,
+                                            self.setpoint_seq if messages else 0))
+
+    def _record(self, t_ns: int, seq: int, theta_rad: tuple[float, float], reason: Any, setpoint_seq: int
+                ) -> dict[str, Any]:
+        return tracking_record(t_ns, seq, theta_rad, self.desired(t_ns), reason, setpoint_seq)
 
     def _anchor(self, p: StatePayload) -> None:
         """t = -lead_in at state p, the lead-in from its measured state; stretched when the limb is far from the

@@ -4,15 +4,15 @@ The law returns v_x, the desired spring deflection of each SEA (metres). Pure fu
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from typing import NamedTuple
 
 from sea_hil.controller.trajectory import DesiredSample
 from sea_hil.mechanics import LimbParams, mass_matrix, n_terms, sea_geometry
 
 
-@dataclass(frozen=True, slots=True)
-class JointState:
-    """What the outer loop needs of a measurement: joint angles and velocities."""
+class JointState(NamedTuple):
+    """What the outer loop needs of a measurement: joint angles and velocities (a NamedTuple: made several times per
+    outer sample, a third of a frozen dataclass's construction time)."""
     theta_rad: tuple[float, float]
     omega_rad_s: tuple[float, float]
 

@@ -12,9 +12,8 @@ from __future__ import annotations
 import csv
 import hashlib
 import math
-from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -26,8 +25,9 @@ _HIP = (0.05, ((0.35, 1, 0.0), (0.05, 2, 0.0)))
 _KNEE = (0.55, ((0.40, 1, -0.5 * math.pi - 0.5), (0.10, 2, 1.0)))
 
 
-@dataclass(frozen=True)
-class DesiredSample:
+class DesiredSample(NamedTuple):
+    """x_d, xdot_d, xddot_d of both joints at one time (a NamedTuple: sampled several times per outer sample, a third
+    of a frozen dataclass's construction time)."""
     theta_rad: tuple[float, float]
     omega_rad_s: tuple[float, float]
     alpha_rad_s2: tuple[float, float]
@@ -39,7 +39,8 @@ def gait_joint(spec: tuple[Any, ...], w: float, t: float) -> tuple[float, float,
     q, qd, qdd = offset, 0.0, 0.0
     for amp, k, phase in harmonics:
         wk = k * w
-        s, c = math.sin(wk * t + phase), math.cos(wk * t + phase)
+        arg = wk * t + phase
+        s, c = math.sin(arg), math.cos(arg)
         q += amp * s
         qd += amp * wk * c
         qdd -= amp * wk * wk * s

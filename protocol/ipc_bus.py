@@ -54,6 +54,7 @@ RETRY_S = 0.001                   # a waiting sender tries again this often (the
                                   # queue is down to a quarter: a slow reader frees room long before)
 SCAN_SETTLE_NS = 100_000_000      # a directory listing made this soon after its mtime may miss a change in the
                                   # same coarse filesystem tick (a few ms): list again on the next send
+_FD_SETSIZE = 1024                # select's descriptor limit (above it: epoll's millisecond wait)
 SUN_PATH_MAX = 107                # sockaddr_un.sun_path (108) minus the NUL
 _SUFFIX = ".sock"
 _GONE = (errno.EPIPE, errno.ECONNRESET, errno.ENOTCONN, errno.ECONNREFUSED, errno.ENOENT)
@@ -291,10 +292,19 @@ class IpcBus(can.BusABC):
                 events = self._epoll.poll(-1)
             else:
                 remaining = deadline - time.monotonic()
-                events = self._epoll.poll(max(0.0, remaining))
+                events = self._wait(max(0.0, remaining))
                 if not events and remaining <= 0:
                     return None, False
             self._ready.extend(fd for fd, _ in events)
+
+    def _wait(self, timeout_s: float) -> list[tuple[int, int]]:
+        """epoll's events within `timeout_s`. epoll_wait counts whole milliseconds (CPython rounds up: a 0.3 ms wait
+        lasts 1 ms, which made a 1 kHz driver on this bus late by up to a period), so the wait is a `select` on
+        the epoll descriptor (microseconds) where its number fits select's set."""
+        if self._epoll.fileno() >= _FD_SETSIZE:
+            return self._epoll.poll(timeout_s)
+        readable, _, _ = select.select([self._epoll.fileno()], [], [], timeout_s)
+        return self._epoll.poll(0) if readable else []
 
     def _read_ready(self) -> can.Message | None:
         """The next valid frame from the connections epoll said were readable (each read once in turn), None when

@@ -180,10 +180,13 @@ _BODY = {
 _TYPE_OF = {StatePayload: MsgType.STATE, SetpointPayload: MsgType.SETPOINT, VoltagePayload: MsgType.VOLTAGE,
             AckPayload: MsgType.ACK, EventStatePayload: MsgType.EVENT_STATE}
 PAYLOAD_SIZE = {t: HEADER_SIZE + s.size for t, s in _BODY.items()}
-# header and body in one struct, for the hot messages (STATE up, SETPOINT down): keyed by their first four bytes
-WHOLE = {t: struct.Struct(_HEADER.format + _BODY[t].format[1:]) for t in (MsgType.STATE, MsgType.SETPOINT)}
+# header and body in one struct, for the hot messages (STATE or EVENT_STATE up, SETPOINT down): keyed by their first
+# four bytes
+WHOLE = {t: struct.Struct(_HEADER.format + _BODY[t].format[1:])
+         for t in (MsgType.STATE, MsgType.SETPOINT, MsgType.EVENT_STATE)}
 _HOT = {MAGIC + bytes((VERSION, t)): s for t, s in WHOLE.items()}
-_HOT_CLASS = {MsgType.STATE: StatePayload, MsgType.SETPOINT: SetpointPayload}
+_HOT_CLASS = {MsgType.STATE: StatePayload, MsgType.SETPOINT: SetpointPayload,
+              MsgType.EVENT_STATE: EventStatePayload}
 
 
 def encode(p: Payload) -> bytes:
@@ -245,16 +248,22 @@ def decode(b: bytes) -> Payload:
 
 
 def _hot(f: tuple[Any, ...]) -> Payload | None:
-    """A STATE or SETPOINT from its whole-message unpack `f` without re-running the constructors' checks, when they
-    cannot fail: `struct` gives in-range unsigned integers, and one `isfinite` of the floats' sum is true only if
-    every float is finite (an overflowing sum of finite floats is false: the constructor then decides). None: take
-    the general path (whose constructor raises the exact rejection)."""
-    obj: StatePayload | SetpointPayload = object.__new__(_HOT_CLASS[f[2]])
-    if f[2] == MsgType.STATE:
+    """A STATE, EVENT_STATE or SETPOINT from its whole-message unpack `f` without re-running the constructors'
+    checks, when they cannot fail: `struct` gives in-range unsigned integers, and one `isfinite` of the floats' sum
+    is true only if every float is finite (an overflowing sum of finite floats is false: the constructor then
+    decides); a reason byte must be a known `TriggerReason`. None: take the general path (whose constructor raises
+    the exact rejection)."""
+    obj: StatePayload | EventStatePayload | SetpointPayload = object.__new__(_HOT_CLASS[f[2]])
+    if f[2] != MsgType.SETPOINT:
         if not isfinite(sum(f[7:15])):
             return None
         obj.__dict__.update(seq=f[3], t_ns=f[4], epoch=f[5], sample_t_ns=f[6], theta_rad=f[7:9],
                             omega_rad_s=f[9:11], delta_m=f[11:13], nut_vel_m_s=f[13:15])
+        if f[2] == MsgType.EVENT_STATE:
+            reason = _REASONS.get(f[16])
+            if reason is None:
+                return None
+            obj.__dict__.update(event_seq=f[15], reason=reason, trajectory_id=f[17])
         return obj
     reason = _REASONS.get(f[11])
     if reason is None or not isfinite(sum(f[7:11])):

@@ -153,7 +153,8 @@ class Session:
         self._tmp = tempfile.TemporaryDirectory(prefix="sea-hil-session-") if out is None else None
         self.out = Path(out) if out is not None else Path(self._tmp.name) if self._tmp is not None else Path()
         self._opts = RunOptions(controller=controller, cycles=cycles, out=self.out, lockstep=lockstep, can=can,
-                                progress=progress, on_nodes=self._on_nodes, join_timeout_s=join_timeout_s)
+                                progress=progress, on_nodes=self._on_nodes, join_timeout_s=join_timeout_s,
+                                driver_process=False)   # `snapshot` reads the drivers: in this process
         self.summary: dict[str, Any] | None = None
         self.error: BaseException | None = None
         self._parts: tuple[Any, Any, Any] | None = None

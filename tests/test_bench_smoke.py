@@ -125,13 +125,14 @@ def test_bandwidth_and_latency_records():
     _check_shape([rec])
     assert rec["median"] == 300 and rec["baseline"] == 1000 and rec["ratio"] == pytest.approx(0.3)
     assert rec["goal_met"] is True
-    def lat(p99_us: float) -> dict:
+    def lat(p99_us: float, p50_us: float = 400.0) -> dict:     # issue 33's goal: p50 <= 500 us, p99 <= 1500 us
         return bench_closed_loop_latency.latency_record(
-            [{"p50_us": 900.0, "p99_us": p99_us}, {"p50_us": 1100.0, "p99_us": p99_us}], "et", "python -m bench.l")
-    ok, bad = lat(2500.0), lat(3500.0)
-    _check_shape([ok, bad])
-    assert (ok["median"], ok["min"], ok["max"], ok["p99"]) == (1000.0, 900.0, 1100.0, 2500.0)
-    assert ok["goal_met"] is True and bad["goal_met"] is False
+            [{"p50_us": p50_us, "p99_us": p99_us}, {"p50_us": p50_us + 200.0, "p99_us": p99_us}], "et",
+            "python -m bench.l")
+    ok, bad, slow = lat(1500.0), lat(1600.0), lat(1000.0, 401.0)
+    _check_shape([ok, bad, slow])
+    assert (ok["median"], ok["min"], ok["max"], ok["p99"]) == (500.0, 400.0, 600.0, 1500.0)
+    assert ok["goal_met"] is True and bad["goal_met"] is False and slow["goal_met"] is False
 
 
 def test_run_all_parsers_and_render():

@@ -1,5 +1,5 @@
-"""The hot encoders (`encode_state`, `encode_setpoint`) give the bytes and the verdicts of the payload constructors,
-and the one-call decode of STATE / SETPOINT gives the general path's payloads."""
+"""The hot encoders (`encode_state`, `encode_event_state`, `encode_setpoint`) give the bytes and the verdicts of the
+payload constructors, and the one-call decode of STATE / EVENT_STATE / SETPOINT gives the general path's payloads."""
 from __future__ import annotations
 
 import math
@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from sea_hil.protocol.payload_fields import PayloadRejected
-from sea_hil.protocol.payload_hot import encode_setpoint, encode_state
+from sea_hil.protocol.payload_hot import encode_event_state, encode_setpoint, encode_state
 from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, TriggerReason, decode, encode
 
 GOOD = (0.1, -0.2)
@@ -56,6 +56,48 @@ def test_encode_setpoint_matches_the_constructor(pair: object, reason: object) -
     for value in INTS:
         args = (5, value, 7, GOOD, GOOD, reason)
         assert _outcome(encode_setpoint, *args) == _outcome(lambda args=args: encode(SetpointPayload(*args)))
+
+
+@pytest.mark.parametrize("slot", range(4))
+@pytest.mark.parametrize("pair", PAIRS, ids=repr)
+def test_encode_event_state_matches_the_constructor_for_every_pair(slot: int, pair: object) -> None:
+    pairs = [GOOD] * 4
+    pairs[slot] = pair
+    args = (1, 2, 3, *pairs, 5, TriggerReason.ERROR_BOUND, 6)
+    assert _outcome(encode_event_state, *args, epoch=4) == \
+        _outcome(lambda: encode(EventStatePayload(*args, epoch=4)))
+
+
+@pytest.mark.parametrize("field", ["seq", "t_ns", "sample_t_ns", "event_seq", "trajectory_id", "epoch"])
+@pytest.mark.parametrize("value", INTS, ids=repr)
+def test_encode_event_state_matches_the_constructor_for_every_integer(field: str, value: object) -> None:
+    ints = {"seq": 1, "t_ns": 2, "sample_t_ns": 3, "event_seq": 5, "trajectory_id": 6, "epoch": 4, field: value}
+    args = (ints["seq"], ints["t_ns"], ints["sample_t_ns"], GOOD, GOOD, GOOD, GOOD, ints["event_seq"],
+            TriggerReason.TIME, ints["trajectory_id"])
+    hot = _outcome(encode_event_state, *args, epoch=ints["epoch"])
+    assert hot == _outcome(lambda: encode(EventStatePayload(*args, epoch=ints["epoch"])))
+
+
+@pytest.mark.parametrize("reason", [*TriggerReason, 1, 9, "x", None], ids=repr)
+def test_encode_event_state_matches_the_constructor_for_every_reason(reason: object) -> None:
+    args = (1, 2, 3, GOOD, GOOD, GOOD, GOOD, 5, reason, 6)
+    assert _outcome(encode_event_state, *args) == _outcome(lambda: encode(EventStatePayload(*args)))
+
+
+def test_one_call_decode_of_an_event_state_keeps_the_general_verdicts() -> None:
+    ev = EventStatePayload(4, 5, 6, (0.1, 0.2), (0.3, 0.4), (0.5, 0.6), (0.7, 0.8), 3, TriggerReason.INITIAL, 11,
+                           epoch=2)
+    raw = bytearray(encode(ev))
+    assert type(decode(bytes(raw))) is EventStatePayload
+    raw[-5] = 9                                    # an unknown reason byte: the enum verdict
+    with pytest.raises(PayloadRejected) as err:
+        decode(bytes(raw))
+    assert err.value.reason.value == "enum"
+    raw = bytearray(encode(ev))
+    raw[32:40] = struct.pack("<d", math.nan)       # theta[0] not finite
+    with pytest.raises(PayloadRejected) as err:
+        decode(bytes(raw))
+    assert err.value.reason.value == "nonfinite"
 
 
 def test_one_call_decode_equals_the_general_payloads() -> None:

@@ -2,6 +2,7 @@
 counters (rejects, frames missed by seq gaps) both paths put into the final stats."""
 from __future__ import annotations
 
+import json
 import os
 import subprocess
 import sys
@@ -19,12 +20,15 @@ from sea_hil.errors import RecordingError
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import Feedback, FeedbackAngle, VoltageCmd
 from sea_hil.protocol.canbus import open_bus
-from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter, can_records
+from sea_hil.protocol.payloads import SetpointPayload, StatePayload, TriggerReason, encode
+from sea_hil.recorder.can_tap import CanTap, RawFrame, SeqGapCounter
 from sea_hil.recorder.meta import META_FINAL
 from sea_hil.recorder.node import RecorderNode
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.reader import read_session
 from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.recorder.zenoh_tap import ZenohTap
+from sea_hil.stats.schema import stats_record
 
 CFG = load_config().record
 CAN_TOPICS = ("/can/raw", "/can/feedback", "/can/command")
@@ -41,12 +45,11 @@ def _frames() -> list[RawFrame]:
 
 
 def _in_process(path: Path, frames: list[RawFrame]) -> None:
-    codec = SeaCodec()
     with SessionRecorder.from_config(path, CFG) as rec:
+        tap = CanTap()
         for f in frames:
-            seq = getattr(can_records(codec, f)[2], "seq", 0)
-            for topic, payload in can_records(codec, f)[0]:
-                rec.record(topic, f.t_ns, f.t_ns, payload, seq)
+            for r in tap.records(f):   # the decoded payloads, validated and encoded again by `record`
+                rec.record(*r)
 
 
 def test_child_writes_exactly_what_the_in_process_recorder_writes(tmp_path: Path) -> None:
@@ -210,3 +213,33 @@ def test_idle_child_runs_on_idle_cpu_time_only(tmp_path: Path) -> None:
     finally:
         rec.close()
     assert read_session(tmp_path / "idle.mcap").complete
+
+
+def test_zenoh_messages_are_decoded_and_counted_by_the_child(tmp_path: Path) -> None:
+    """Zenoh messages go to the child as they came (`submit_zenoh`): the file holds what the in-process Zenoh tap
+    makes of them, in submission order among the frames, and the child's Zenoh counts are the final stats'."""
+    state = encode(StatePayload(5, 10**12, 5_000_000, (0.1, 0.2), (0.3, 0.4), (1e-3, 2e-3), (0.01, 0.02)))
+    setpoint = encode(SetpointPayload(3, 10**12, 5, (1e-4, 2e-4), (0.1, 0.2), next(iter(TriggerReason))))
+    event = b'{"t_s": 0.5, "state_seq": 5, "theta1_rad": 0.1, "event": true, "reason": "TIME"}'
+    good_stats = json.dumps(stats_record("edge", {"ticks": 3}, final=True, t_ns=7)).encode()
+    msgs = [("sea/limb1/state", state, 100), ("sea/limb1/setpoint", setpoint, 101), ("sea/limb1/event", event, 102),
+            ("sea/limb1/stats", good_stats, 103), ("sea/limb1/stats", b'{"node": 1}', 104),   # breaks the schema
+            ("sea/limb1/state", b"\x00garbage", 105)]                                          # undecodable
+    proc = RecorderProcess(tmp_path / "z.mcap", CFG, batch_ops=3)
+    node = RecorderNode(proc, None, "sea")
+    proc.submit_can(_frames()[0])
+    for key, data, t in msgs:
+        proc.submit_zenoh(key, data, t)
+    proc.close(final_stats=node.counters())
+    got = read_session(tmp_path / "z.mcap")
+    tap = ZenohTap()
+    want = [r for key, data, t in msgs for r in tap.take(key, data, t)]
+    assert tap.stats_rejected == 1 and tap.msgs == 4
+    for topic in {r.topic for r in want}:
+        assert [(m.log_time_ns, m.payload) for m in got.messages[topic]] == \
+            [(r.log_time_ns, r.payload) for r in want if r.topic == topic], topic
+    final = got.metadata[META_FINAL]
+    assert {k: final[k] for k in ("zenoh_msgs", "stats_rejected", "can_frames")} == \
+        {"zenoh_msgs": "4", "stats_rejected": "1", "can_frames": "1"}
+    assert final["payload_accepted"] == str(tap.payloads.as_dict()["accepted"]) != "0"
+    assert float(final["recorder_cpu_s"]) > 0

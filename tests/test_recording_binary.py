@@ -17,9 +17,9 @@ from mcap.writer import CompressionType, Writer
 from sea_hil.config.loader import load_config
 from sea_hil.errors import RecordingError
 from sea_hil.protocol.can_codec import SeaCodec
-from sea_hil.protocol.can_frames import FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd
+from sea_hil.protocol.can_frames import Feedback, FeedbackAngle, FeedbackJoint1, FeedbackJoint2, VoltageCmd
 from sea_hil.recorder import binary
-from sea_hil.recorder.can_tap import CanTap, RawFrame, can_records
+from sea_hil.recorder.can_tap import CanTap, RawFrame
 from sea_hil.recorder.mcap_bulk import BulkWriter
 from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.reader import read_session
@@ -58,16 +58,39 @@ def test_bulk_writer_writes_the_librarys_bytes(compression: CompressionType) -> 
 
 def _frames() -> list[RawFrame]:
     """Frames of every recorded kind, as the driver and the edge send them (plus one the DBC refuses)."""
+    return [f for f, _ in _frames_and_expected()]
+
+
+def _frames_and_expected() -> list[tuple[RawFrame, dict[str, dict]]]:
+    """Each frame with the messages its binary channels must hold (topic -> payload), written out here from the
+    frame's decoded values (the schema's fields, docs/recording.md), not through the recorder's own mapping."""
     codec = SeaCodec(fd=None)
-    out: list[RawFrame] = []
+    out: list[tuple[RawFrame, dict[str, dict]]] = []
     for k in range(40):
-        for obj in (FeedbackAngle(1, k % 256, 1000 * k, (0.01 * k, -0.02 * k)),
-                    FeedbackJoint1(1, k % 256, 0.1 * k, 1e-4 * k, -1e-3 * k),
-                    FeedbackJoint2(1, k % 256, -0.1 * k, -1e-4 * k, 1e-3 * k),
-                    VoltageCmd(1, (0.5 * k - 10, 12.0 - 0.25 * k), k % 256)):
+        q = k % 256
+        for obj in (FeedbackAngle(1, q, 1000 * k, (0.01 * k, -0.02 * k)),
+                    FeedbackJoint1(1, q, 0.1 * k, 1e-4 * k, -1e-3 * k),
+                    FeedbackJoint2(1, q, -0.1 * k, -1e-4 * k, 1e-3 * k),
+                    VoltageCmd(1, (0.5 * k - 10, 12.0 - 0.25 * k), q)):
             msg = codec.encode(obj)
-            out.append(RawFrame.of(10**9 + 250_000 * len(out), msg))
-    out.append(RawFrame(10**9 + 250_000 * len(out), 0x7FF, 2, b"\x01\x02"))   # unknown id: /can/raw only
+            d = codec.decode(msg)   # the values the frame carries (the DBC's resolution)
+            if isinstance(d, FeedbackAngle):
+                decoded = ("/can/feedback", {"t_us": d.t_us, "theta1_rad": d.theta_rad[0],
+                                             "theta2_rad": d.theta_rad[1]})
+            elif isinstance(d, FeedbackJoint1 | FeedbackJoint2):
+                j = 1 if isinstance(d, FeedbackJoint1) else 2
+                decoded = ("/can/feedback", {f"omega{j}_rad_s": d.omega_rad_s, f"delta{j}_m": d.delta_m,
+                                             f"nut_vel{j}_m_s": d.nut_vel_m_s})
+            else:
+                assert isinstance(d, VoltageCmd)
+                decoded = ("/can/command", {"kind": "voltage", "u1_v": d.voltage_v[0], "u2_v": d.voltage_v[1]})
+            out.append((RawFrame.of(10**9 + 250_000 * len(out), msg),
+                        {"/can/raw": {"can_id": msg.arbitration_id, "dlc": msg.dlc, "data_hex": bytes(msg.data).hex(),
+                                      "direction": "rx", "is_extended": False, "node_id": 1},
+                         decoded[0]: {"node_id": 1, "seq": q, **decoded[1]}}))
+    bad = RawFrame(10**9 + 250_000 * len(out), 0x7FF, 2, b"\x01\x02")   # unknown id: /can/raw only
+    out.append((bad, {"/can/raw": {"can_id": 0x7FF, "dlc": 2, "data_hex": "0102", "direction": "rx",
+                                   "is_extended": False, "node_id": 0x7FF >> 5}}))
     return out
 
 
@@ -81,11 +104,11 @@ def _independent_classes(schema_data: bytes, names: list[str]) -> dict[str, type
 
 
 def test_binary_channels_decode_independently_to_the_source_values(tmp_path: Path) -> None:
-    frames = _frames()
-    codec = SeaCodec(fd=None)
-    expected = {t: [] for t in binary.BINARY_TOPICS}
-    for f in frames:
-        for topic, payload in can_records(codec, f)[0]:
+    pairs = _frames_and_expected()
+    frames = [f for f, _ in pairs]
+    expected: dict[str, list[dict]] = {t: [] for t in binary.BINARY_TOPICS}
+    for _, messages in pairs:
+        for topic, payload in messages.items():
             expected[topic].append(payload)
     path = tmp_path / "p.mcap"
     rp = RecorderProcess(path, load_config().record)
@@ -156,3 +179,28 @@ def test_in_process_and_bulk_paths_write_the_same_messages(tmp_path: Path) -> No
         rec.record_batch([r for f in frames for r in tap.records(f)])
     ra, rb = read_session(a), read_session(b)
     assert ra.messages == rb.messages and ra.message_count == rb.message_count > len(frames)
+
+
+def test_the_taps_encoding_is_the_checked_encoders_byte_for_byte() -> None:
+    """`CanTap.encode` serializes its own payloads unchecked and builds `/can/raw` from cached pieces around the
+    data: every message must be what `binary.encode` writes for the payload a reader decodes from it."""
+    rng = random.Random(7)
+    codec = SeaCodec(fd=True)
+    frames = [tuple(f) for f in _frames()]
+    for n in (*range(0, 9), 12, 16, 20, 24, 32, 48, 63, 64):   # every classic and FD length, odd ones too
+        for ext, fd in ((False, False), (True, False), (False, True)):
+            can_id = rng.randrange(1 << 29 if ext else 1 << 11)
+            frames.append((rng.randrange(10**18), can_id, n, rng.randbytes(n), ext, False, False, fd))
+    fb = codec.encode(Feedback(3, 200, 60_000, (0.5, -0.5), (1.0, -1.0), (1e-3, -1e-3), (0.01, -0.01)))
+    frames.append((5, fb.arbitration_id, fb.dlc, bytes(fb.data), False, False, False, True))   # FEEDBACK_FD
+    tap = CanTap()
+    out = tap.encode(frames)
+    assert {m[0] for m in out} >= {*binary.BINARY_TOPICS, "/log/faults"}
+    for topic, _, _, data, _ in out:
+        if topic in binary.BINARY_TOPICS:
+            assert binary.encode(topic, binary.decode(topic, data)) == data, topic
+    raws = [binary.decode("/can/raw", m[3]) for m in out if m[0] == "/can/raw"]
+    assert len(raws) == len(frames) == tap.frames
+    for raw, (_, can_id, dlc, data, ext, _, _, fd) in zip(raws, frames, strict=True):
+        assert raw == {"can_id": can_id, "dlc": dlc, "data_hex": data.hex(), "direction": "rx", "is_extended": ext,
+                       "node_id": can_id >> 5, **({"is_fd": True} if fd else {})}

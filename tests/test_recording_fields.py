@@ -8,6 +8,7 @@ import jsonschema
 import pytest
 from mcap.reader import make_reader
 
+from sea_hil.config.loader import config_to_toml, load_config
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import DriverState, ErrorFlags, Feedback, Heartbeat, VoltageCmd
 from sea_hil.protocol.payloads import EventStatePayload, SetpointPayload, StatePayload, TriggerReason, encode
@@ -113,3 +114,21 @@ def test_sequence_reaches_the_file_and_final_metadata_counts_every_chunk(tmp_pat
     assert seqs == [i % 256 for i in range(1, 400)]
     data = read_session(path)
     assert chunks > 1 and int(data.metadata[META_FINAL]["chunks_written"]) == chunks == data.chunks
+
+
+def test_a_latch_line_reports_the_newest_feedback_of_each_joint():
+    """With the session's config, a heartbeat that latches a limit fault gets one /log/faults line naming the
+    limit and the drive's newest measured values: the angles of its last FEEDBACK_ANGLE, each joint's velocity from
+    its own last FEEDBACK_JOINTn."""
+    tap = CanTap()
+    tap.configure(config_to_toml(load_config()))
+    fb = Feedback(1, 5, 5000, (0.9, 0.2), (0.5, 3.5), (1e-3, 2e-3), (0.0, 0.0))
+    angle, _, joint2 = (CODEC.encode(p) for p in fb.parts())
+    older = CODEC.encode(Feedback(1, 4, 4000, (0.1, 0.1), (2.5, 0.1), (0.0, 0.0), (0.0, 0.0)).parts()[1])
+    hb = Heartbeat(1, DriverState.FAULT, ErrorFlags.POSITION_LIMIT | ErrorFlags.VELOCITY_LIMIT, 0, 0, 6)
+    frames = [older, angle, joint2, CODEC.encode(hb)]   # joint1's newest velocity is the older 2.5 rad/s
+    lines = [r.payload["message"] for i, m in enumerate(frames) for r in tap.records(RawFrame.of(i, m))
+             if r.topic == "/log/faults" and "latched" in r.payload["message"]]
+    assert len(lines) == 1
+    assert "hip angle 0.9" in lines[0] and "position_max_rad[0]" in lines[0]
+    assert "hip velocity 2.5" in lines[0] and "knee velocity 3.5" in lines[0]

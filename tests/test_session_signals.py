@@ -2,7 +2,9 @@
 
 - SIGTERM: the session's close path runs (controller ended, recording closed in order), exit status 143;
 - SIGKILL (no close path can run): the controller child gets SIGTERM from Linux (`PR_SET_PDEATHSIG`), the recorder
-  child finalises its file at the end of its input pipe (`closed_by = eof`).
+  child finalises its file at the end of its input pipe (`closed_by = eof`);
+- with `--driver-process` the driver child (`sea-hil plant --hold`) is one more: SIGTERM'd by the close path, by
+  Linux when the parent is SIGKILLed (and its stdin ends).
 """
 from __future__ import annotations
 
@@ -29,6 +31,8 @@ def _children(proc: subprocess.Popen[bytes]) -> dict[str, psutil.Process]:
                 out["recorder"] = c
             elif " controller " in f" {cmd} ":
                 out["controller"] = c
+            elif " plant " in f" {cmd} ":
+                out["driver"] = c
     except psutil.Error:
         pass
     return out
@@ -41,14 +45,15 @@ def _alive(p: psutil.Process) -> bool:
         return False
 
 
-@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGKILL])
-def test_run_stopped_by_a_signal_leaves_no_process(tmp_path: Path, sig: signal.Signals) -> None:
+@pytest.mark.parametrize(("sig", "split"), [(signal.SIGTERM, False), (signal.SIGKILL, False), (signal.SIGKILL, True)])
+def test_run_stopped_by_a_signal_leaves_no_process(tmp_path: Path, sig: signal.Signals, split: bool) -> None:
     out = tmp_path / "run"
-    proc = subprocess.Popen(sea_hil_cmd("run", "--controller", "et", "--cycles", "1", "--quiet", "--out", str(out)),
+    proc = subprocess.Popen(sea_hil_cmd("run", "--controller", "et", "--cycles", "1", "--quiet", "--out", str(out),
+                                        *(["--driver-process"] if split else [])),
                             cwd=REPO, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE)
     kids: dict[str, psutil.Process] = {}
     try:
-        assert wait_for(lambda: len(kids.update(_children(proc)) or kids) == 2
+        assert wait_for(lambda: len(kids.update(_children(proc)) or kids) == 2 + split
                         and (out / "session.mcap").exists(), START_S, poll_s=0.05), "session never started"
         proc.send_signal(sig)
         rc = proc.wait(timeout=60)

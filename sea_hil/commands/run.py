@@ -58,6 +58,9 @@ def register(sub: argparse._SubParsersAction) -> None:
                    help="write no PNG figures (about 1 s a session; `sea-hil report DIR` draws them from the "
                         "recording later): a sweep's points run with it")
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
+    p.add_argument("--driver-process", action=argparse.BooleanOptionalAction, default=None,
+                   help="real time: each CAN driver in a process of its own, on an ipc bus in place of the embedded "
+                        "virtual one (no GIL shared with the edge; docs/timing.md); default [timing] driver_process")
     add_strict_arg(p)
     add_link_args(p)
     add_live_args(p)
@@ -79,7 +82,7 @@ def _main(args: argparse.Namespace) -> int:
                       inner=args.inner, can=args.can, node_id=args.node, limbs=args.limbs, listen=tuple(args.listen),
                       progress=not args.quiet, seed=args.seed,
                       join_timeout_s=args.join_timeout, secure=args.secure or args.certs is not None,
-                      certs=args.certs, figures=args.figures)
+                      certs=args.certs, figures=args.figures, driver_process=args.driver_process)
     with SessionProgress(sys.stderr) as progress:
         summary = run_session(cfg, opts, log=progress)
     if args.json:

@@ -19,6 +19,13 @@ def feedback_measurement(x: State, p: Any, lsb: tuple[float, float, float, float
     """(theta1, theta2, omega1, omega2, delta1, delta2, nut_vel1, nut_vel2) of the driver's feedback frames as the
     edge decodes them (DBC resolution; in range). Plain float code: the kernel compiles it."""
     dl1, dl2, _, _ = deflections(x, p)
+    return quantised_feedback(x, dl1, dl2, lsb)
+
+
+def quantised_feedback(x: State, dl1: float, dl2: float, lsb: tuple[float, float, float, float, float]
+                       ) -> tuple[float, float, float, float, float, float, float, float]:
+    """`feedback_measurement` of x whose spring deflections (`deflections`) are dl1, dl2: the kernel computes them
+    once per sample, for the drive's soft-limit check and for the feedback."""
     return (quantised(x[0], lsb[0]), quantised(x[1], lsb[0]), quantised(x[2], lsb[1]), quantised(x[3], lsb[1]),
             quantised(dl1, lsb[2]), quantised(dl2, lsb[2]), quantised(x[6], lsb[3]), quantised(x[7], lsb[3]))
 
@@ -45,10 +52,10 @@ def edge_drive_sample(x, m, k, period_ns, substeps, vx, s, hold_measured, p, pn,
         x = rk4_core(t + i * h, x, (u1, u2), h, p, (d[0], d[1]), (d[2], d[3]), (d[4], d[5]))
     if not is_finite(x):
         return x, m, saturated, c1, c2, obs, faulted, False
+    d1, d2, _, _ = deflections(x, p)      # once: the soft-limit check and the feedback frames
     if not faulted:         # `DriverCore`'s soft-limit check on the new sample
-        d1, d2, _, _ = deflections(x, p)
         faulted = limit_bits(lim, (x[0], x[1]), (x[2], x[3]), (d1, d2), p.k1, p.k2)
-    return x, feedback_measurement(x, p, lsb), saturated, c1, c2, obs, faulted, True
+    return x, quantised_feedback(x, d1, d2, lsb), saturated, c1, c2, obs, faulted, True
 
 
 def make_session_steps(fingerprint: str = "") -> Callable[..., tuple]:

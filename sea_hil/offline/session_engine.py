@@ -202,13 +202,14 @@ class _Session:
     def run(self) -> EngineResult:
         cfg, edge, inner = self.cfg, self.edge, self.edge.inner
         m = feedback_measurement(self.x, self.p, self.lsb)  # the feedback of the current sample, as the edge decodes it
-        saturated, u_max, k, faulted, finished, told = 0, [0.0, 0.0], 0, 0, False, False
+        saturated, u1_max, u2_max, k, faulted, finished, told = 0, 0.0, 0.0, 0, 0, False, False
         tab: Any = None
         steps: Any = None
-        substeps, period, x = cfg.sim.substeps, self.period_ns, self.x
-        while k < self.n_max:
+        substeps, period, x, n_max, node_id = cfg.sim.substeps, self.period_ns, self.x, self.n_max, self.NODE_ID
+        p, pn, gains, dt_s, lsb, limits = self.p, inner._p, inner.gains, inner.period_s, self.lsb, self.drive_limits
+        while k < n_max:
             self.now = now = k * period
-            fb = Feedback(self.NODE_ID, k & 0xFF, (now // 1000) & 0xFFFF, (m[0], m[1]), (m[2], m[3]), (m[4], m[5]),
+            fb = Feedback(node_id, k & 0xFF, (now // 1000) & 0xFFFF, (m[0], m[1]), (m[2], m[3]), (m[4], m[5]),
                           (m[6], m[7]))
             edge.accept(fb, 0)
             if faulted and not told:   # the drive latched in the last stretch: its heartbeat, at the next sample
@@ -216,7 +217,7 @@ class _Session:
                 edge.on_heartbeat(self._fault_heartbeat(faulted))
             edge.publish(fb)
             edge.poll(now)
-            if not self._controller(now):
+            if self.released and not self._controller(now):
                 finished = True
                 break
             edge.take_downlink(now)
@@ -224,14 +225,13 @@ class _Session:
             if tab is None or nxt > self.dist.samples:
                 tab = self.dist.upto(nxt) if self.jit else self.dist.upto(nxt).tolist()
             held = inner.deflection_m
-            args = (x, k, nxt - k, period, substeps, held or (0.0, 0.0), inner.sliding, held is None, self.p, inner._p,
-                    inner.gains, inner.observer, inner.period_s, inner._p.voltage_limit, tab, self.lsb,
-                    self.drive_limits, faulted)
+            args = (x, k, nxt - k, period, substeps, held or (0.0, 0.0), inner.sliding, held is None, p, pn, gains,
+                    inner.observer, dt_s, pn.voltage_limit, tab, lsb, limits, faulted)
             steps = entry(self.steps, args) if steps is None else steps   # the types stay these (`entry`)
             x, m, n_sat, u1m, u2m, bad, inner.observer, faulted = steps(*args)
             saturated += n_sat
             edge.ran_elsewhere(nxt - k - 1, nxt - k, n_sat)   # samples k+1..nxt-1 accepted, k..nxt-1 commanded
-            u_max = [max(u_max[0], u1m), max(u_max[1], u2m)]
+            u1_max, u2_max = max(u1_max, u1m), max(u2_max, u2m)
             if bad >= 0:
                 raise SeaHilError(f"offline session diverged at sample {bad} (t = {bad * period * 1e-9:.3f} s)")
             k = nxt
@@ -239,7 +239,7 @@ class _Session:
             edge.ran_elsewhere(0, 1, 0)    # not simulated here: the session ends)
         if faulted:      # still latched at the end: the drive's last heartbeat
             edge.on_heartbeat(self._fault_heartbeat(faulted))
-        self.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u_max[0], "u2_v": u_max[1]})]
+        self.rec.messages["/can/command"] = [RecordedMessage(0, 0, {"u1_v": u1_max, "u2_v": u2_max})]
         stats = edge.stats()
         # the edge's final /stats record, as lockstep's edge writes it at its last sample time (`record_edge_finals`)
         end_ns = edge.sample_t_ns

@@ -12,7 +12,7 @@ order: integers `int64`, numbers `double`, strings `string`, booleans `bool`. A 
 from __future__ import annotations
 
 import math
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
@@ -69,6 +69,12 @@ def _classes() -> dict[str, type[Message]]:
 
 _CLASS = _classes()
 _DOUBLES = {t: frozenset(f for f, k in fields if k == _D) for t, (_, fields) in CHANNELS.items()}
+
+
+def message_class(topic: str) -> Callable[..., Message]:
+    """The protobuf message class of binary channel `topic`, for payloads that need none of `encode`'s checks
+    (the CAN tap's own, built from decoded frames: `cls(**payload).SerializeToString()` is what `encode` writes)."""
+    return _CLASS[topic]
 
 
 def encode(topic: str, payload: Mapping[str, Any]) -> bytes:

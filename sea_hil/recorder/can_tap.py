@@ -1,6 +1,8 @@
 """What one CAN frame becomes in a recording: a `/can/raw` message and, when the DBC accepts it, a decoded
 `/can/feedback` or `/can/command` message. Pure (no I/O); used by the in-process recorder node and the recorder
-process alike (through `CanTap`, which also keeps the CAN counters), so both write identical files.
+process alike (through `CanTap`, which also keeps the CAN counters), so both write identical files. `CanTap.encode`
+is the recorder's hot path: a batch of frames straight to encoded messages (the protobuf channels serialized from
+the decoded frame, `/can/raw` from cached pieces around its data), with no payload dict per message.
 
 Time (`sea_hil.recorder.clock`): with `time_base="wall"` a frame is logged at its bus timestamp, with "sample" at the
 drive's sample time (its node's latest FEEDBACK_ANGLE `t_us`, unwrapped). The MCAP `sequence` of a frame's messages
@@ -30,13 +32,15 @@ from __future__ import annotations
 
 import logging
 import tomllib
+from binascii import hexlify
+from collections.abc import Callable, Iterable, Sequence
 from typing import Any, NamedTuple
 
 import can
 
 from sea_hil.config.loader import config_from_dict
 from sea_hil.errors import MalformedFrame, SeaHilError
-from sea_hil.fault_explain import LatchWatch, Measured, latch_level
+from sea_hil.fault_explain import LatchWatch, latch_level
 from sea_hil.protocol.can_assembly import seq_gap
 from sea_hil.protocol.can_codec import SeaCodec
 from sea_hil.protocol.can_frames import (
@@ -52,7 +56,9 @@ from sea_hil.protocol.can_frames import (
 )
 from sea_hil.protocol.cia402_decode import Cia402Decoder, decoder_for
 from sea_hil.protocol.cia402_od import SYNC_DEFAULT
+from sea_hil.recorder import binary
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
+from sea_hil.recorder.schemas import message_bytes, message_payload
 from sea_hil.recorder.well_known import LogLevel, log_message
 
 _FD_FIELDS = (("theta", "theta_rad", "rad"), ("omega", "omega_rad_s", "rad_s"), ("delta", "delta_m", "m"),
@@ -85,34 +91,13 @@ class RawFrame(NamedTuple):
                    bool(msg.is_error_frame), bool(msg.is_remote_frame), bool(msg.is_fd))
 
 
-def can_records(codec: SeaCodec, f: RawFrame) -> tuple[list[tuple[str, dict[str, Any]]], bool, Any]:
-    """((topic, payload) messages to record, rejected?, the decoded frame or the DBC's error) for one frame;
-    rejected frames keep their `/can/raw`."""
-    raw = {"can_id": f.can_id, "dlc": f.dlc, "data_hex": f.data.hex(), "direction": "rx",
-           "is_extended": f.is_extended, "node_id": f.can_id >> CMD_BITS}
-    if f.is_fd:
-        raw["is_fd"] = True
-    out: list[tuple[str, dict[str, Any]]] = [("/can/raw", raw)]
-    try:
-        d = codec.decode_raw(f.can_id, f.data, f.dlc, is_extended=f.is_extended, is_error=f.is_error,
-                             is_remote=f.is_remote, is_fd=f.is_fd)
-    except MalformedFrame as err:
-        return out, True, err
-    if isinstance(d, VoltageCmd):
-        out.append(("/can/command", {"node_id": d.node_id, "seq": d.seq, "kind": "voltage",
-                                     "u1_v": d.voltage_v[0], "u2_v": d.voltage_v[1]}))
-    elif isinstance(d, FeedbackAngle):
-        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, "t_us": d.t_us,
-                                      "theta1_rad": d.theta_rad[0], "theta2_rad": d.theta_rad[1]}))
-    elif isinstance(d, Feedback):   # CAN FD: the whole sample in one frame
-        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, "t_us": d.t_us,
-                                      **{f"{k}{j + 1}_{u}": getattr(d, a)[j] for k, a, u in _FD_FIELDS
-                                         for j in (0, 1)}}))
-    elif isinstance(d, (FeedbackJoint1, FeedbackJoint2)):
-        j = 1 if isinstance(d, FeedbackJoint1) else 2
-        out.append(("/can/feedback", {"node_id": d.node_id, "seq": d.seq, f"omega{j}_rad_s": d.omega_rad_s,
-                                      f"delta{j}_m": d.delta_m, f"nut_vel{j}_m_s": d.nut_vel_m_s}))
-    return out, False, d
+Encoded = tuple[str, int, int, bytes, int]
+"""One message ready for the file: (topic, log time, publish time, encoded data, sequence), what
+`SessionRecorder.write_encoded` takes."""
+
+_RAW, _FEEDBACK, _COMMAND = "/can/raw", "/can/feedback", "/can/command"
+_RAW_TEMPLATES = 4096
+_Add = Callable[[Encoded], None]
 
 
 class SeqGapCounter:
@@ -131,8 +116,9 @@ class SeqGapCounter:
 
 
 class CanTap:
-    """`can_records` plus the recorder's CAN counters (frames seen, rejected by the DBC, missed from seq gaps), the
-    log time of each message (`time_base`) and the `/log` messages of faults."""
+    """What frames become in the file (`encode`, the encoded messages; `records`, the same read back as payload
+    dicts), the recorder's CAN counters (frames seen, rejected by the DBC, missed from seq gaps), the log time of
+    each message (`time_base`) and the `/log` messages of faults."""
 
     def __init__(self, codec: SeaCodec | None = None, time_base: TimeBase = "wall") -> None:
         self.codec = codec or SeaCodec(fd=None)
@@ -149,6 +135,18 @@ class CanTap:
         self._syncs = 0                            # cia402: SYNCs decoded (the /can/command seq)
         self._bus_syncs = 0                        # cia402, sample time base: SYNCs stamped (`stamp`)
         self._period_ns = 0
+        # the tap's own payloads need none of `binary.encode`'s checks: serialized as they are
+        self._raw, self._feedback = binary.message_class(_RAW), binary.message_class(_FEEDBACK)
+        self._command = binary.message_class(_COMMAND)
+        self._raw_templates: dict[tuple[int, int, int, bool, bool], tuple[bytes, bytes]] = {}
+        # decoded frame type -> what it adds beside its /can/raw (other types: nothing)
+        self._handlers: dict[type, Callable[[Any, int, int, int, _Add], None]] = {
+            FeedbackAngle: self._on_angle, FeedbackJoint1: self._on_joint1, FeedbackJoint2: self._on_joint2,
+            Feedback: self._on_fd, VoltageCmd: self._on_command, Heartbeat: self._on_heartbeat}
+        # with `latches`: per node the newest feedback values, which a latch's line reports as measured
+        self._theta: dict[int, tuple[float, float]] = {}
+        self._omega: dict[int, list[float]] = {}
+        self._delta: dict[int, list[float]] = {}
 
     def configure(self, config_toml: str) -> None:
         """The session's config (its attached config.toml): from now on a drive's latch gets one `/log/faults` line
@@ -169,43 +167,133 @@ class CanTap:
                                   (cfg.plant.k1_n_per_m, cfg.plant.k2_n_per_m))
 
     def records(self, f: RawFrame) -> list[Record]:
-        """The messages of one frame, counted and timed."""
+        """The messages of one frame, counted and timed, with their payloads as a reader decodes them (the dicts
+        of the schemas, `sea_hil.recorder.schemas`): `encode` read back."""
+        return [Record(topic, log, pub, message_payload(topic, data), seq)
+                for topic, log, pub, data, seq in self.encode([f])]
+
+    def encode(self, frames: Iterable[Sequence[Any]]) -> list[Encoded]:
+        """The messages of many frames (`RawFrame`s or plain tuples of their fields), counted, timed and encoded
+        as the file holds them: the recorder's hot path (one pass; per frame its bytes, no payload objects)."""
         if self.canopen is not None:
-            return self._canopen_records(self.canopen, f)
-        out, rejected, decoded = can_records(self.codec, f)
-        self.frames += 1
-        self.rejected += rejected
-        if isinstance(decoded, (FeedbackAngle, Feedback)):
-            self.clock.on_feedback(decoded.node_id, decoded.t_us)
-        t_ns = f.t_ns if self.time_base == "wall" else self.clock.node_ns(f.can_id >> CMD_BITS)
-        seq = getattr(decoded, "seq", 0)
-        recs = [Record(topic, t_ns, t_ns, payload, seq) for topic, payload in out]
-        logs: list[tuple[LogLevel, str, str]] = []
-        if rejected:
-            logs.append((LogLevel.WARNING, "recorder", f"CAN frame 0x{f.can_id:03X} rejected by the DBC: {decoded}"))
-        elif isinstance(decoded, VoltageCmd):   # its seq is the sample it answers: a gap may be an unanswered one
-            self.command_gaps.feed(f.can_id, decoded.seq)
-        elif len(out) > 1 and isinstance(out[1][1].get("seq"), int):   # the driver's own numbering of its samples
-            missed = self.gaps.feed(f.can_id, out[1][1]["seq"])
-            if missed:
-                logs.append((LogLevel.WARNING, "recorder", f"CAN id 0x{f.can_id:03X}: {missed} frame(s) missed"))
-        if isinstance(decoded, Heartbeat):
-            logs.extend(self._driver_change(decoded))
-            line = self.latches.on_heartbeat(decoded) if self.latches is not None else None
-            if line is not None:   # ERROR when it needs the user, WARNING when the edge clears it
-                level = LogLevel.ERROR if latch_level(decoded) >= logging.ERROR else LogLevel.WARNING
-                logs.append((level, f"driver{decoded.node_id}", line))
-        elif self.latches is not None and isinstance(decoded, (FeedbackAngle, Feedback)):
-            self.latches.feedback(decoded.node_id, decoded.theta_rad,
-                                  *((decoded.omega_rad_s, decoded.delta_m) if isinstance(decoded, Feedback) else ()))
-        elif self.latches is not None and isinstance(decoded, (FeedbackJoint1, FeedbackJoint2)):
-            m = self.latches.measured.setdefault(decoded.node_id, Measured())
-            j = 0 if isinstance(decoded, FeedbackJoint1) else 1
-            w, d = list(m.omega_rad_s or (0.0, 0.0)), list(m.delta_m or (0.0, 0.0))
-            w[j], d[j] = decoded.omega_rad_s, decoded.delta_m
-            m.omega_rad_s, m.delta_m = (w[0], w[1]), (d[0], d[1])
-        recs.extend(Record("/log/faults", t_ns, t_ns, log_message(t_ns, lv, who, text), seq) for lv, who, text in logs)
-        return recs
+            return [(r.topic, r.log_time_ns, r.publish_time_ns, message_bytes(r.topic, r.payload), r.sequence)
+                    for f in frames for r in self._canopen_records(self.canopen, RawFrame(*f))]
+        out: list[Encoded] = []
+        add, decode, handlers, raws = out.append, self.codec.decode_raw, self._handlers, self._raw_templates
+        wall, clock = self.time_base == "wall", self.clock
+        for t_ns, can_id, dlc, data, ext, err, rem, fd in frames:
+            self.frames += 1
+            key = (can_id, dlc, len(data), ext, fd)
+            tpl = raws.get(key) or self._raw_template(key)
+            raw = tpl[0] + hexlify(data) + tpl[1]
+            try:
+                d = decode(can_id, data, dlc, is_extended=ext, is_error=err, is_remote=rem, is_fd=fd)
+            except MalformedFrame as bad:
+                self.rejected += 1
+                t = t_ns if wall else clock.node_ns(can_id >> CMD_BITS)
+                add((_RAW, t, t, raw, 0))
+                self._log(add, t, 0, LogLevel.WARNING, "recorder",
+                          f"CAN frame 0x{can_id:03X} rejected by the DBC: {bad}")
+                continue
+            if not wall:
+                if isinstance(d, (FeedbackAngle, Feedback)):
+                    clock.on_feedback(d.node_id, d.t_us)
+                t_ns = clock.node_ns(can_id >> CMD_BITS)
+            seq = getattr(d, "seq", 0)
+            add((_RAW, t_ns, t_ns, raw, seq))
+            handler = handlers.get(type(d))
+            if handler is not None:
+                handler(d, can_id, t_ns, seq, add)
+        return out
+
+    def _raw_template(self, key: tuple[int, int, int, bool, bool]) -> tuple[bytes, bytes]:
+        """The `/can/raw` message of a frame with this (id, DLC, data length, extended, FD) around its data: the
+        encoding up to `data_hex`'s characters, and after them. A protobuf message is its fields' encodings in
+        field order, so head + the hex digits + tail is what the whole message serializes to
+        (tests/test_recording_binary.py). At most `_RAW_TEMPLATES` are kept (a bus of random ids cannot grow it)."""
+        can_id, dlc, n, ext, fd = key
+        head = self._raw(can_id=can_id, dlc=dlc, data_hex="0" * 2 * n).SerializeToString()[:-2 * n or None]
+        tail = self._raw(direction="rx", is_extended=ext, node_id=can_id >> CMD_BITS,
+                         **({"is_fd": True} if fd else {})).SerializeToString()
+        if len(self._raw_templates) >= _RAW_TEMPLATES:
+            self._raw_templates.clear()
+        self._raw_templates[key] = head, tail
+        return head, tail
+
+    def _on_angle(self, d: FeedbackAngle, can_id: int, t: int, seq: int, add: _Add) -> None:
+        add((_FEEDBACK, t, t, self._feedback(node_id=d.node_id, seq=seq, t_us=d.t_us, theta1_rad=d.theta_rad[0],
+                                             theta2_rad=d.theta_rad[1]).SerializeToString(), seq))
+        self._feedback_gap(can_id, t, seq, add)
+        if self.latches is not None:
+            self._theta[d.node_id] = d.theta_rad
+
+    def _on_joint1(self, d: FeedbackJoint1, can_id: int, t: int, seq: int, add: _Add) -> None:
+        add((_FEEDBACK, t, t, self._feedback(node_id=d.node_id, seq=seq, omega1_rad_s=d.omega_rad_s,
+                                             delta1_m=d.delta_m, nut_vel1_m_s=d.nut_vel_m_s).SerializeToString(), seq))
+        self._feedback_gap(can_id, t, seq, add)
+        if self.latches is not None:
+            self._joint(d.node_id, 0, d.omega_rad_s, d.delta_m)
+
+    def _on_joint2(self, d: FeedbackJoint2, can_id: int, t: int, seq: int, add: _Add) -> None:
+        add((_FEEDBACK, t, t, self._feedback(node_id=d.node_id, seq=seq, omega2_rad_s=d.omega_rad_s,
+                                             delta2_m=d.delta_m, nut_vel2_m_s=d.nut_vel_m_s).SerializeToString(), seq))
+        self._feedback_gap(can_id, t, seq, add)
+        if self.latches is not None:
+            self._joint(d.node_id, 1, d.omega_rad_s, d.delta_m)
+
+    def _on_fd(self, d: Feedback, can_id: int, t: int, seq: int, add: _Add) -> None:   # CAN FD: a whole sample
+        fields = {f"{k}{j + 1}_{u}": getattr(d, a)[j] for k, a, u in _FD_FIELDS for j in (0, 1)}
+        add((_FEEDBACK, t, t, self._feedback(node_id=d.node_id, seq=seq, t_us=d.t_us, **fields).SerializeToString(),
+             seq))
+        self._feedback_gap(can_id, t, seq, add)
+        if self.latches is not None:
+            self._theta[d.node_id] = d.theta_rad
+            self._joint(d.node_id, 0, d.omega_rad_s[0], d.delta_m[0])
+            self._joint(d.node_id, 1, d.omega_rad_s[1], d.delta_m[1])
+
+    def _on_command(self, d: VoltageCmd, can_id: int, t: int, seq: int, add: _Add) -> None:
+        add((_COMMAND, t, t, self._command(node_id=d.node_id, seq=seq, kind="voltage", u1_v=d.voltage_v[0],
+                                           u2_v=d.voltage_v[1]).SerializeToString(), seq))
+        self.command_gaps.feed(can_id, seq)   # its seq is the sample it answers: a gap may be an unanswered one
+
+    def _feedback_gap(self, can_id: int, t: int, seq: int, add: _Add) -> None:
+        """The driver's numbering of its samples: a gap is frames lost (module docstring)."""
+        missed = self.gaps.feed(can_id, seq)
+        if missed:
+            self._log(add, t, seq, LogLevel.WARNING, "recorder", f"CAN id 0x{can_id:03X}: {missed} frame(s) missed")
+
+    def _joint(self, node_id: int, j: int, omega_rad_s: float, delta_m: float) -> None:
+        """One joint's newest velocity and deflection (the other joint's stay; 0 before any)."""
+        w = self._omega.get(node_id)
+        if w is None:
+            w = self._omega[node_id] = [0.0, 0.0]
+            self._delta[node_id] = [0.0, 0.0]
+        w[j] = omega_rad_s
+        self._delta[node_id][j] = delta_m
+
+    def _on_heartbeat(self, hb: Heartbeat, can_id: int, t: int, seq: int, add: _Add) -> None:
+        """A driver's state change, and (with the session's config) the explanation of a latch, to /log/faults."""
+        for lv, who, text in self._driver_change(hb):
+            self._log(add, t, seq, lv, who, text)
+        if self.latches is None:
+            return
+        n = hb.node_id
+        w, dm = self._omega.get(n), self._delta.get(n)
+        self.latches.feedback(n, self._theta.get(n), None if w is None else (w[0], w[1]),
+                              None if dm is None else (dm[0], dm[1]))   # the newest feedback, read when it latches
+        line = self.latches.on_heartbeat(hb)
+        if line is not None:   # ERROR when it needs the user, WARNING when the edge clears it
+            level = LogLevel.ERROR if latch_level(hb) >= logging.ERROR else LogLevel.WARNING
+            self._log(add, t, seq, level, f"driver{n}", line)
+
+    @staticmethod
+    def _log(add: _Add, t_ns: int, seq: int, level: LogLevel, who: str, text: str) -> None:
+        add(("/log/faults", t_ns, t_ns, message_bytes("/log/faults", log_message(t_ns, level, who, text)), seq))
+
+    @property
+    def restamps(self) -> bool:
+        """Whether `stamp` changes a frame's time (a cia402 session on the sample time base)."""
+        return self.canopen is not None and self.time_base != "wall"
 
     def stamp(self, t_ns: int, can_id: int, is_extended: bool = False) -> int:
         """The log time of a frame received at `t_ns` on this tap's bus: `t_ns`, except in a cia402 session on the

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import itertools
 import struct
-from collections.abc import Iterable
+from collections.abc import Sequence
 
 from mcap.data_stream import RecordBuilder
 from mcap.opcode import Opcode
@@ -49,9 +49,11 @@ class BulkWriter(Writer):
         st = getattr(self, "_Writer__statistics", None)
         return None if st is None else int(st.chunk_count)
 
-    def add_messages(self, items: Iterable[tuple[int, int, bytes, int, int]]) -> None:
+    def add_messages(self, items: Sequence[tuple[int, int, bytes, int, int]]) -> None:
         """Add (channel id, log time, data, publish time, sequence) messages in order, as `add_message` would;
-        a chunk that grows past the chunk size is written out at once, as `add_message` does."""
+        a chunk that grows past the chunk size is written out at once, as `add_message` does. The messages up to
+        a chunk's end go into its buffer in one write, and the statistics take each run's earliest and latest log
+        time once."""
         if not self.bulk_supported:
             for ch, log, data, pub, seq in items:
                 self.add_message(ch, log, data, pub, seq)
@@ -59,33 +61,40 @@ class BulkWriter(Writer):
         st = self._Writer__statistics          # type: ignore[attr-defined]
         cb = self._Writer__chunk_builder       # type: ignore[attr-defined]
         limit: int = self._Writer__chunk_size  # type: ignore[attr-defined]
-        counts, indices = st.channel_message_counts, cb.message_indices
-        buf = cb.record_writer._buffer
-        pack, write, tell = _HEAD.pack, buf.write, buf.tell
-        for ch, log, data, pub, seq in items:
-            if st.message_count == 0:
-                st.message_start_time = log
-            elif log < st.message_start_time:
-                st.message_start_time = log
-            if log > st.message_end_time:
-                st.message_end_time = log
-            counts[ch] += 1
-            st.message_count += 1
-            if cb.num_messages == 0:
-                cb.message_start_time = log
-            elif log < cb.message_start_time:
-                cb.message_start_time = log
-            if log > cb.message_end_time:
-                cb.message_end_time = log
-            index = indices.get(ch)
-            if not index:
-                index = indices[ch] = _MessageIndex(channel_id=ch, records=[])
-            offset = tell()
-            index.records.append((log, offset))
-            cb.num_messages += 1
-            write(pack(_MESSAGE, _FIXED + len(data), ch, seq, log, pub))
-            write(data)
-            if tell() > limit:
+        counts, indices, pack = st.channel_message_counts, cb.message_indices, _HEAD.pack
+        i, n = 0, len(items)
+        while i < n:
+            buf = cb.record_writer._buffer
+            pos = start = buf.tell()
+            parts: list[bytes] = []
+            put = parts.append
+            first = i
+            lo = hi = items[i][1]
+            for ch, log, data, pub, seq in itertools.islice(items, i, None):
+                i += 1
+                if log < lo:
+                    lo = log
+                elif log > hi:
+                    hi = log
+                counts[ch] += 1
+                index = indices.get(ch)
+                if not index:
+                    index = indices[ch] = _MessageIndex(channel_id=ch, records=[])
+                index.records.append((log, pos))
+                size = _FIXED + len(data)
+                put(pack(_MESSAGE, size, ch, seq, log, pub))
+                put(data)
+                pos += 9 + size
+                if pos > limit:
+                    break
+            buf.write(b"".join(parts))
+            assert buf.tell() == pos, (start, pos)
+            k = i - first
+            st.message_start_time = lo if st.message_count == 0 else min(lo, st.message_start_time)
+            st.message_end_time = max(hi, st.message_end_time)
+            st.message_count += k
+            cb.message_start_time = lo if cb.num_messages == 0 else min(lo, cb.message_start_time)
+            cb.message_end_time = max(hi, cb.message_end_time)
+            cb.num_messages += k
+            if pos > limit:
                 self._Writer__finalize_chunk()   # type: ignore[attr-defined]
-                buf = cb.record_writer._buffer   # the chunk builder starts a new buffer
-                write, tell = buf.write, buf.tell

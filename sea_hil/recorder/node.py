@@ -4,7 +4,7 @@ Binary payloads are decoded (rejects counted, raw size kept); JSON stats/trackin
 their channels. CAN frames go to `/can/raw` and, decoded with the DBC, to `/can/feedback` / `/can/command`
 (`sea_hil.recorder.can_tap`). With an in-process `SessionRecorder` the node decodes and the recorder's writer thread
 writes (bounded queue: a recorder that falls behind drops and counts); with a `RecorderProcess` the node only
-forwards raw frames and the child process decodes and writes.
+forwards raw frames and Zenoh messages as they came, and the child process decodes, counts and writes.
 
 On SocketCAN (and udp_multicast) the kernel drops frames silently when the tap's socket receive queue is full, so the node asks for a
 large receive buffer (`sea_hil.protocol.canbus.enlarge_rx_buffer`; on udp_multicast too) and the frames that were missed anyway are counted from seq gaps
@@ -31,7 +31,6 @@ from sea_hil.recorder.process import RecorderProcess
 from sea_hil.recorder.writer import SessionRecorder
 from sea_hil.recorder.zenoh_tap import ZenohTap
 from sea_hil.runtime.node import Node
-from sea_hil.stats.schema import StatsError
 
 __all__ = ["RecorderNode"]
 
@@ -65,8 +64,7 @@ class RecorderNode(Node):
         self.ztap = ZenohTap(self.payloads, time_base)
         self.can_forwarded = 0   # frames shipped raw to a RecorderProcess (which counts and decodes them)
         self.can_tap_unfinished = False   # stop() gave up on a CAN backlog (frames not seen, not counted)
-        self.zenoh_msgs = 0
-        self.stats_rejected = 0  # stats records from the wire that break the stats schema
+        self.zenoh_forwarded = 0   # messages shipped as they came to a RecorderProcess (which decodes and counts them)
         self.rx_buffer_bytes = _enlarge_all(bus, rx_buffer_bytes) if bus is not None else None
         self._sub = session.declare_subscriber(everything(prefix), zenoh.handlers.FifoChannel(65536)) \
             if session is not None else None
@@ -116,14 +114,13 @@ class RecorderNode(Node):
             self._on_zenoh(s)
 
     def _on_zenoh(self, s: zenoh.Sample) -> None:
-        try:
-            recs = self.ztap.records(str(s.key_expr), s.payload.to_bytes(), time.time_ns())
-        except StatsError as err:   # bad input from the wire: counted, logged, not recorded
-            self.stats_rejected += 1
-            log.warning("stats message not recorded: %s", err)
+        """Record one Zenoh message, taken at the wall time now (a `RecorderProcess` gets it as it came and decodes
+        it in the child, as the CAN frames)."""
+        if isinstance(self.rec, RecorderProcess):
+            self.zenoh_forwarded += 1
+            self.rec.submit_zenoh(str(s.key_expr), s.payload.to_bytes(), time.time_ns())
             return
-        self.zenoh_msgs += bool(recs)
-        for r in recs:
+        for r in self.ztap.take(str(s.key_expr), s.payload.to_bytes(), time.time_ns()):
             self.rec.submit(*r)
 
     def _taps_loop(self) -> None:
@@ -178,13 +175,21 @@ class RecorderNode(Node):
                 self.on_can(msg)
                 n += 1
             return n
-        frames, now_ns, stamp = [], time.time_ns, self.tap.stamp
-        while (msg := bus.recv(timeout=0)) is not None:
-            t = msg.timestamp
-            frames.append((stamp(round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.is_extended_id),
-                           msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
-                           bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
-                           bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
+        frames, now_ns, recv = [], time.time_ns, bus.recv
+        if self.tap.restamps:   # a cia402 bus on the sample time base: the tap's SYNC count times each frame
+            stamp = self.tap.stamp
+            while (msg := recv(timeout=0)) is not None:
+                t = msg.timestamp
+                frames.append((stamp(round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.is_extended_id),
+                               msg.arbitration_id, msg.dlc, bytes(msg.data or b""),
+                               bool(msg.is_extended_id), bool(msg.is_error_frame), bool(msg.is_remote_frame),
+                               bool(msg.is_fd)))   # the fields of `RawFrame.of`, as a plain tuple
+        else:                   # (`stamp` would return the bus time as it is)
+            while (msg := recv(timeout=0)) is not None:
+                t = msg.timestamp
+                frames.append((round(t * 1e9) if t > 0 else now_ns(), msg.arbitration_id, msg.dlc,
+                               bytes(msg.data or b""), bool(msg.is_extended_id), bool(msg.is_error_frame),
+                               bool(msg.is_remote_frame), bool(msg.is_fd)))
         self.can_forwarded += len(frames)
         self.rec.submit_can_batch(frames)
         return len(frames)
@@ -198,15 +203,14 @@ class RecorderNode(Node):
             self.can_forwarded += 1
             self.rec.submit_can(frame)    # decoded (rejects and gaps counted) by the recorder process
             return
-        for r in self.tap.records(frame):
-            self.rec.submit(*r)
+        for m in self.tap.encode((frame,)):
+            self.rec.submit_encoded(*m)
 
     def counters(self) -> dict[str, Any]:
-        """Final-stats counters; with a `RecorderProcess` its child's CAN counts replace these in the file."""
+        """Final-stats counters; with a `RecorderProcess` its child's CAN and Zenoh counts replace these in the
+        file."""
         can_counts = self.tap.counters()
         if self.can_forwarded:
             can_counts["can_frames"] = self.can_forwarded
         rx = {} if self.rx_buffer_bytes is None else {"can_rx_buffer_bytes": self.rx_buffer_bytes}
-        return {**can_counts, **rx, "can_tap_unfinished": int(self.can_tap_unfinished), "zenoh_msgs": self.zenoh_msgs,
-                "stats_rejected": self.stats_rejected,
-                **{f"payload_{k}": v for k, v in self.payloads.as_dict().items() if not isinstance(v, dict)}}
+        return {**can_counts, **rx, "can_tap_unfinished": int(self.can_tap_unfinished), **self.ztap.counters()}

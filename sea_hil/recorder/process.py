@@ -3,9 +3,9 @@
 `RecorderProcess(path, cfg)` starts ``python -m sea_hil.recorder.process PATH RECORD_CONFIG_JSON`` and offers the
 recorder interface the recorder node and `sea-hil run` use (`submit`, `record`, `add_metadata`, `add_attachment`,
 `write_session_header`, `close`) plus `submit_can(raw_frame)` and `submit_can_batch(frames)`: raw frames are shipped
-as plain tuples (10x cheaper to pickle than `RawFrame`s: 0.2 vs 1.5 us per frame) and decoded in the child
-(`sea_hil.recorder.can_tap.can_records`, exactly what the in-process recorder writes), which writes each batch's
-messages in one `SessionRecorder.record_batch` call. Operations are batched (`batch_ops` frames or messages) into
+as plain tuples (10x cheaper to pickle than `RawFrame`s: 0.2 vs 1.5 us per frame) and decoded and encoded in the
+child (`sea_hil.recorder.can_tap.CanTap.encode`, exactly what the in-process recorder writes), which writes each
+batch's messages in one `SessionRecorder.write_encoded` call. Operations are batched (`batch_ops` frames or messages) into
 length-prefixed pickles on the child's stdin (a private pipe between two processes of
 the same program). `time_base` (`sea_hil.recorder.clock`) is the log-time clock of the child's CAN tap. A child that
 dies is reported by `close` (`RecordingError`); operations that could not be
@@ -21,6 +21,7 @@ import struct
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import Mapping
 from typing import IO, TYPE_CHECKING, Any, BinaryIO
 
@@ -29,18 +30,19 @@ from sea_hil.config.root import SeaHilConfig
 from sea_hil.errors import RecordingError
 from sea_hil.live.feed import LiveSpec, start_live_feed
 from sea_hil.live.link import live_child_argv
-from sea_hil.recorder.can_tap import CanTap, RawFrame
+from sea_hil.recorder.can_tap import CanTap, Encoded, RawFrame
 from sea_hil.recorder.clock import TimeBase, check_time_base
 from sea_hil.recorder.meta import CONFIG_ATTACHMENT, write_session_header
-from sea_hil.recorder.schemas import validate_payload
+from sea_hil.recorder.schemas import encoded_payload, message_bytes, message_payload, validate_payload
 from sea_hil.recorder.writer import SessionRecorder
+from sea_hil.recorder.zenoh_tap import ZenohTap
 
 if TYPE_CHECKING:
     from sea_hil.live.feed import LiveFeed
 
 log = logging.getLogger("sea_hil.record")
 _LEN = struct.Struct("<I")
-CAN, CANS, RECORD, METADATA, ATTACHMENT, CLOSE = "c", "n", "r", "m", "a", "x"
+CAN, CANS, ZENOH, RECORD, METADATA, ATTACHMENT, CLOSE = "c", "n", "z", "r", "m", "a", "x"
 
 
 class RecorderProcess:
@@ -85,6 +87,10 @@ class RecorderProcess:
         hands over once per wake-up)."""
         if frames:
             self._put((CANS, frames), len(frames))
+
+    def submit_zenoh(self, key: str, data: bytes, rx_wall_ns: int) -> None:
+        """Queue one Zenoh message as it came (decoded, counted and written by the child's Zenoh tap)."""
+        self._put((ZENOH, key, data, rx_wall_ns))
 
     def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
                sequence: int = 0) -> bool:
@@ -191,33 +197,49 @@ class RecorderProcess:
                 log.error("recorder process pipe: %s", err)
 
 
-def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: LiveFeed | None = None) -> bool:
+def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: LiveFeed | None = None,
+           cpu_from_s: float | None = None, ztap: ZenohTap | None = None) -> bool:
     """Apply one batch in the child; True when the batch closed the recording. `live` sees what was written.
-    Messages (decoded frames, records) are collected and written in one `record_batch` per run of them."""
-    batch: list[tuple[Any, ...]] = []   # (topic, log time, publish time, payload, sequence)
+    Messages (encoded frames and Zenoh messages, records) are collected and written in one `write_encoded` per run
+    of them. `cpu_from_s`: the child's process CPU time when its work began (the final stats get `recorder_cpu_s`).
+    `ztap`: the child's Zenoh tap (a new one if not given: its counts then stay out of the final stats)."""
+    ztap = ztap or ZenohTap(time_base=tap.time_base)
+    batch: list[Encoded] = []   # (topic, log time, publish time, encoded data, sequence)
 
     def write() -> None:
         try:
-            rec.record_batch(batch)
+            rec.write_encoded(batch)
         except RecordingError as err:   # written after close: counted, as one bad message is
             rec.write_errors += 1
             rec.last_error = str(err)
         if live is not None:
-            for r in batch:
-                live.feed(r[0], r[1], r[3])
+            for topic, log_time_ns, _, data, _ in batch:
+                live.feed(topic, log_time_ns, message_payload(topic, data))
         batch.clear()
 
     for op in ops:
         kind = op[0]
-        if kind == CAN:
-            batch.extend(tap.records(RawFrame(*op[1])))
-            continue
         if kind == CANS:
-            for f in op[1]:
-                batch.extend(tap.records(RawFrame(*f)))
+            batch += tap.encode(op[1])
+            continue
+        if kind == CAN:
+            batch += tap.encode((op[1],))
+            continue
+        if kind == ZENOH:
+            for r in ztap.take(op[1], op[2], op[3]):
+                try:   # from the wire: checked as it is encoded
+                    batch.append((r.topic, r.log_time_ns, r.publish_time_ns, message_bytes(r.topic, r.payload),
+                                  r.sequence))
+                except RecordingError as err:
+                    rec.write_errors += 1
+                    rec.last_error = str(err)
             continue
         if kind == RECORD:
-            batch.append(op[1:])
+            try:   # checked by the parent (`submit`): only encoded here
+                batch.append((op[1], op[2], op[3], encoded_payload(op[1], op[4]), op[5]))
+            except RecordingError as err:
+                rec.write_errors += 1
+                rec.last_error = str(err)
             continue
         if batch:
             write()
@@ -232,7 +254,8 @@ def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: 
                         live.view.follow_canopen(tap.canopen.fresh())
             elif kind == CLOSE:
                 live_counts = live.counters() if live is not None else {}
-                rec.close(final_stats={**op[1], **tap.counters(), **live_counts})  # the child's CAN counts rule
+                rec.close(final_stats={**op[1], **tap.counters(), **ztap.counters(), **live_counts,
+                                       **_cpu(cpu_from_s)})   # the child's CAN and Zenoh counts rule
                 return True
         except RecordingError as err:   # one bad message: counted in the file's final metadata, keep going
             rec.write_errors += 1
@@ -240,6 +263,12 @@ def _apply(rec: SessionRecorder, tap: CanTap, ops: list[tuple[Any, ...]], live: 
     if batch:
         write()
     return False
+
+
+def _cpu(cpu_from_s: float | None) -> dict[str, float]:
+    """`recorder_cpu_s`: the child's CPU time (process, user + system) from `cpu_from_s` on: what recording the
+    session's messages cost, start-up excluded (bench/bench_cpu_per_sample.py reads it)."""
+    return {} if cpu_from_s is None else {"recorder_cpu_s": round(time.process_time() - cpu_from_s, 3)}
 
 
 def _read_exact(f: BinaryIO, n: int) -> bytes | None:
@@ -268,19 +297,22 @@ def child_main(path: str, cfg_json: str, stream: BinaryIO, nice: int = 0, idle: 
     if idle:
         _idle_policy()
     rec = SessionRecorder.from_config(path, RecordConfig.model_validate_json(cfg_json))
-    tap = CanTap(time_base=time_base)
+    tap, ztap = CanTap(time_base=time_base), ZenohTap(time_base=time_base)
     live = None
     if live_json is not None:
         live = start_live_feed(live_json)
+    cpu_from_s = None
     try:
         while (head := _read_exact(stream, _LEN.size)) is not None:
             blob = _read_exact(stream, _LEN.unpack(head)[0])
             if blob is None:
                 break
-            if _apply(rec, tap, pickle.loads(blob), live):
+            if cpu_from_s is None:
+                cpu_from_s = time.process_time()
+            if _apply(rec, tap, pickle.loads(blob), live, cpu_from_s, ztap):
                 return 0
         rec.closed_by = "eof"   # the parent went away without closing: finalise what arrived
-        rec.close(final_stats=tap.counters())
+        rec.close(final_stats={**tap.counters(), **ztap.counters(), **_cpu(cpu_from_s)})
         return 0
     finally:
         if live is not None:

@@ -115,6 +115,26 @@ def message_bytes(topic: str, payload: Mapping[str, Any]) -> bytes:
     return encode_payload(payload)
 
 
+def encoded_payload(topic: str, payload: Mapping[str, Any]) -> bytes:
+    """`message_bytes` of a payload `validate_payload` has already passed (the recorder process encodes what its
+    parent checked): the encoding alone."""
+    return binary.encode(topic, payload) if topic in binary.BINARY_TOPICS else encode_payload(payload)
+
+
+def message_payload(topic: str, data: bytes) -> dict[str, Any]:
+    """The payload dict of one encoded message of `topic` (`message_bytes` read back, as the reader decodes it);
+    `RecordingError` if `data` is not one."""
+    if topic in binary.BINARY_TOPICS:
+        return binary.decode(topic, data)
+    try:
+        payload = json.loads(data)
+    except ValueError as err:
+        raise RecordingError(f"{topic}: undecodable JSON message: {err}") from err
+    if not isinstance(payload, dict):
+        raise RecordingError(f"{topic}: a message must be a JSON object, got {type(payload).__name__}")
+    return payload
+
+
 def validate_payload(topic: str, payload: Mapping[str, Any]) -> None:
     """Cheap structural check: known topic, a mapping of str keys to scalars, required keys present."""
     if topic not in _CHANNELS and topic not in WELL_KNOWN:

@@ -1,6 +1,7 @@
 """MCAP session recording: a thread-safe writer with a bounded queue and a signal-safe finaliser. Messages are JSON
-(schema encoding jsonschema), the high-rate CAN channels protobuf (`sea_hil.recorder.binary`); `record_batch` writes
-many messages under one lock through `sea_hil.recorder.mcap_bulk.BulkWriter` (what the recorder process uses).
+(schema encoding jsonschema), the high-rate CAN channels protobuf (`sea_hil.recorder.binary`); `write_encoded` writes
+many encoded messages under one lock through `sea_hil.recorder.mcap_bulk.BulkWriter` (what the recorder process
+does with the CAN tap's `encode`), `record_batch` checks and encodes payload dicts first.
 
 Metadata/header helpers live in `sea_hil.recorder.meta`, the reader in `sea_hil.recorder.reader`. `RecordSink` is
 what a session needs of a recorder: this `SessionRecorder`, or `sea_hil.recorder.process.RecorderProcess` (the
@@ -17,7 +18,7 @@ import queue
 import signal
 import threading
 import time
-from collections.abc import Callable, Iterable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from typing import IO, Any, Protocol, cast
 
 from mcap.writer import CompressionType
@@ -159,27 +160,40 @@ class SessionRecorder:
         """Check, encode and write many (topic, log time, publish time, payload, sequence) messages now, under one
         lock and one bulk append; a bad one is not written but counted (`write_errors`, `last_error`), as the
         writer thread counts its failures. -> messages written."""
-        items, topics = [], []
+        items = []
         for topic, log_time_ns, publish_time_ns, payload, sequence in records:
             try:
-                if not 0 <= sequence < 1 << 32:
-                    raise RecordingError(f"{topic}: sequence {sequence} is not a u32")
-                items.append((self._channels[topic], log_time_ns, message_bytes(topic, payload), publish_time_ns,
-                              sequence))
-                topics.append(topic)
+                items.append((topic, log_time_ns, publish_time_ns, message_bytes(topic, payload), sequence))
             except RecordingError as err:
                 self.write_errors += 1
                 self.last_error = str(err)
-        if not items:
+        return self.write_encoded(items)
+
+    def write_encoded(self, items: Sequence[tuple[str, int, int, bytes, int]]) -> int:
+        """Write many (topic, log time, publish time, encoded data, sequence) messages now (data as
+        `schemas.message_bytes` encodes it: the CAN tap's `encode`), under one lock and one bulk append; one with
+        an unknown topic or a sequence that is not a u32 is not written but counted (`write_errors`). -> messages
+        written."""
+        channels = self._channels
+        try:
+            batch = [(channels[topic], log, data, pub, seq) for topic, log, pub, data, seq in items
+                     if 0 <= seq < 1 << 32]
+        except KeyError:
+            batch = []
+        if len(batch) != len(items):   # the rare bad one: count it, write the rest
+            items = self._valid(items)
+            batch = [(channels[topic], log, data, pub, seq) for topic, log, pub, data, seq in items]
+        if not batch:
             return 0
         with self._locked():
             self._writing_thread = threading.get_ident()
             try:
                 before, chunks_before = self._sink.bytes_written, self._writer.chunk_count
-                self._writer.add_messages(items)
-                self.written += len(items)
-                for topic in topics:
-                    self.per_topic[topic] += 1
+                self._writer.add_messages(batch)
+                self.written += len(batch)
+                per_topic = self.per_topic
+                for it in items:
+                    per_topic[it[0]] += 1
                 now = time.monotonic_ns()
                 if self._flush_period_ns is not None and now - self._last_flush_ns >= self._flush_period_ns:
                     self._writer.flush()
@@ -192,12 +206,33 @@ class SessionRecorder:
                 self._writing_thread = None
         if self.deferred_signal is not None and threading.current_thread() is threading.main_thread():
             raise SystemExit(128 + self.deferred_signal)
-        return len(items)
+        return len(batch)
+
+    def _valid(self, items: Sequence[tuple[str, int, int, bytes, int]]) -> list[tuple[str, int, int, bytes, int]]:
+        """The items `write_encoded` can write; each other one counted in `write_errors`."""
+        ok = []
+        for it in items:
+            topic, seq = it[0], it[4]
+            if topic not in self._channels:
+                self.last_error = f"unknown recording topic {topic!r}"
+            elif not 0 <= seq < 1 << 32:
+                self.last_error = f"{topic}: sequence {seq} is not a u32"
+            else:
+                ok.append(it)
+                continue
+            self.write_errors += 1
+        return ok
 
     def submit(self, topic: str, log_time_ns: int, publish_time_ns: int, payload: Mapping[str, Any],
                sequence: int = 0) -> bool:
         """Validate, encode and enqueue; returns False (and counts `dropped`) when the queue is full."""
-        data = message_bytes(topic, payload)
+        return self.submit_encoded(topic, log_time_ns, publish_time_ns, message_bytes(topic, payload), sequence)
+
+    def submit_encoded(self, topic: str, log_time_ns: int, publish_time_ns: int, data: bytes,
+                       sequence: int = 0) -> bool:
+        """`submit` of a message already encoded (`write_encoded`'s items: the CAN tap's `encode`)."""
+        if topic not in self._channels:
+            raise RecordingError(f"unknown recording topic {topic!r}")
         if self._closing:
             raise RecordingError("recorder is closed")
         try:

@@ -9,6 +9,7 @@ every trigger event. `publish_time` equals `log_time`: the senders stamp their p
 from __future__ import annotations
 
 import json
+import logging
 from typing import Any
 
 from sea_hil.protocol.keys import KEY_PAYLOADS
@@ -23,7 +24,9 @@ from sea_hil.protocol.payloads import (
 from sea_hil.recorder.can_tap import Record
 from sea_hil.recorder.clock import SampleClock, TimeBase, check_time_base
 from sea_hil.recorder.well_known import LogLevel, joint_states, log_message
-from sea_hil.stats.schema import validate_stats
+from sea_hil.stats.schema import StatsError, validate_stats
+
+log = logging.getLogger("sea_hil.record")
 
 
 def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str, dict[str, Any]] | None:
@@ -66,12 +69,31 @@ def zenoh_record(key: str, data: bytes, payloads: PayloadCounters) -> tuple[str,
 
 
 class ZenohTap:
-    """`zenoh_record` plus log time, sequence and the well-known messages of one Zenoh message."""
+    """`zenoh_record` plus log time, sequence and the well-known messages of one Zenoh message; `take` also keeps
+    the recorder's Zenoh counters (`counters`)."""
 
     def __init__(self, payloads: PayloadCounters | None = None, time_base: TimeBase = "wall") -> None:
         self.payloads = payloads or PayloadCounters()
         self.time_base = check_time_base(time_base)
         self.clock = SampleClock()
+        self.msgs = 0             # messages recorded
+        self.stats_rejected = 0   # stats records from the wire that break the stats schema
+
+    def take(self, key: str, data: bytes, rx_wall_ns: int) -> list[Record]:
+        """`records`, counted; a stats record that breaks the stats schema is bad input from the wire: counted,
+        logged, not recorded."""
+        try:
+            recs = self.records(key, data, rx_wall_ns)
+        except StatsError as err:
+            self.stats_rejected += 1
+            log.warning("stats message not recorded: %s", err)
+            return []
+        self.msgs += bool(recs)
+        return recs
+
+    def counters(self) -> dict[str, Any]:
+        return {"zenoh_msgs": self.msgs, "stats_rejected": self.stats_rejected,
+                **{f"payload_{k}": v for k, v in self.payloads.as_dict().items() if not isinstance(v, dict)}}
 
     def records(self, key: str, data: bytes, rx_wall_ns: int) -> list[Record]:
         """The messages of one Zenoh message received at wall time `rx_wall_ns` (empty if not recordable)."""

@@ -17,11 +17,11 @@ from rich.table import Table
 
 from sea_hil.report.completeness import COMPLETENESS_SCHEMA, completeness_lines
 
-KINDS = ("edge", "controller", "recorder")
+KINDS = ("plant", "edge", "controller", "recorder")
 _NUMBER = {"type": "number"}
 NODE_SUMMARY_SCHEMA: dict[str, Any] = {
     "$schema": "https://json-schema.org/draft/2020-12/schema",
-    "title": "sea-hil node summary (sea-hil edge | controller | record --json)",
+    "title": "sea-hil node summary (sea-hil plant | edge | controller | record --json)",
     "type": "object", "additionalProperties": False,
     "required": ["node", "finished", "counters", "warnings"],
     "properties": {

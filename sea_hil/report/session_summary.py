@@ -44,9 +44,12 @@ def _unique(msgs: list, key: str = "seq") -> list[dict[str, Any]]:
     return out
 
 
-def tracking_arrays(data: SessionData) -> dict[str, np.ndarray]:
-    rows = _unique(data.messages.get("/tracking", []), "state_seq")
-    rows.sort(key=lambda r: r["t_s"])
+def tracking_arrays(data: SessionData, unique_rows: list[dict[str, Any]] | None = None) -> dict[str, np.ndarray]:
+    """The tracking records' arrays, in time order; `unique_rows`: `data`'s tracking rows without repeats, if the
+    caller has them (`one_limb_summary`)."""
+    if unique_rows is None:
+        unique_rows = _unique(data.messages.get("/tracking", []), "state_seq")
+    rows = sorted(unique_rows, key=lambda r: r["t_s"])
     t = np.array([r["t_s"] for r in rows])
     theta = np.array([[r["theta1_rad"], r["theta2_rad"]] for r in rows]).reshape(-1, 2)
     desired = np.array([[r["theta1_d_rad"], r["theta2_d_rad"]] for r in rows]).reshape(-1, 2)
@@ -55,13 +58,14 @@ def tracking_arrays(data: SessionData) -> dict[str, np.ndarray]:
     return {"t_s": t, "theta_rad": theta, "desired_rad": desired, "event_t_s": ev_t, "reasons": np.array(reasons)}
 
 
-def _phase_of(data: SessionData, rows: list[dict[str, Any]]) -> Callable[[int], str]:
-    """state seq -> "cycle" | "lead_in" | "outside", from the state's sample time and the controller's time axis
-    (`cycle_origin_ns`)."""
+def _phase_of(data: SessionData, rows: list[dict[str, Any]], states: list[dict[str, Any]]) -> Callable[[int], str]:
+    """state seq -> "cycle" | "lead_in" | "outside", from the state's sample time (`states`: the recorded states
+    without repeats) and the controller's time axis (`cycle_origin_ns`; `rows`: the tracking records without
+    repeats)."""
     t0_ns = cycle_origin_ns(data)
     if t0_ns is None:
         return lambda seq: "cycle"
-    sample_ns = {p["seq"]: p["sample_t_ns"] for p in _unique(data.messages.get("/zenoh/state", []))}
+    sample_ns = {p["seq"]: p["sample_t_ns"] for p in states}
     t_of = {r["state_seq"]: round(r["t_s"] * 1e9) for r in rows}
     first_ns, last_ns = min(t_of.values()), max(t_of.values())
 
@@ -168,12 +172,15 @@ def session_summary(data: SessionData, controller: str, node_counters: NodeCount
 
 def one_limb_summary(data: SessionData, controller: str) -> dict[str, Any]:
     """The 1-limb blocks of `data` (one limb's view of the recording)."""
-    tr = tracking_arrays(data)
-    phase = _phase_of(data, _unique(data.messages.get("/tracking", []), "state_seq"))
+    rows = _unique(data.messages.get("/tracking", []), "state_seq")
+    tr = tracking_arrays(data, rows)
     down_all = _unique(data.messages.get("/zenoh/setpoint", [])) + _unique(data.messages.get("/zenoh/voltage", []))
     up_all = _unique(data.messages.get("/zenoh/state", []))
-    down = [d for d in down_all if phase(d["state_seq"]) == "cycle"]
-    up = [u for u in up_all if phase(u["seq"]) == "cycle"]
+    phase = _phase_of(data, rows, up_all)
+    down_phase = [phase(d["state_seq"]) for d in down_all]
+    up_phase = [phase(u["seq"]) for u in up_all]
+    down = [d for d, ph in zip(down_all, down_phase, strict=True) if ph == "cycle"]
+    up = [u for u, ph in zip(up_all, up_phase, strict=True) if ph == "cycle"]
     lead = tr["t_s"] < 0
     tr_lead = {k: tr[k][lead] for k in ("t_s", "theta_rad", "desired_rad")}
     tr = {**{k: tr[k][~lead] for k in ("t_s", "theta_rad", "desired_rad")},
@@ -191,10 +198,10 @@ def one_limb_summary(data: SessionData, controller: str) -> dict[str, Any]:
         "duration_s": float(tr["t_s"][-1]) if len(tr["t_s"]) else 0.0,
         "transmissions": _counts(down, up),
         "lead_in": {"duration_s": float(-tr_lead["t_s"][0]) if len(tr_lead["t_s"]) else 0.0,
-                    **_counts([d for d in down_all if phase(d["state_seq"]) == "lead_in"],
-                              [u for u in up_all if phase(u["seq"]) == "lead_in"]),
+                    **_counts([d for d, ph in zip(down_all, down_phase, strict=True) if ph == "lead_in"],
+                              [u for u, ph in zip(up_all, up_phase, strict=True) if ph == "lead_in"]),
                     "tracking": tracking_or_zero(tr_lead["theta_rad"], tr_lead["desired_rad"])},
-        "uplink_outside_msgs": sum(phase(u["seq"]) == "outside" for u in up_all),
+        "uplink_outside_msgs": up_phase.count("outside"),
         "events_by_reason": dict(sorted(reasons.items())),
         "tracking": tracking_or_zero(tr["theta_rad"], tr["desired_rad"]),
         "inter_event_s": inter_event_block(tr["event_t_s"]),

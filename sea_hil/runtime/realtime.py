@@ -64,8 +64,8 @@ class ThreadPolicy:
     while the driver waits for them), and threads created later by them inherit it. `undo()` puts every thread it
     raised back to SCHED_OTHER (process scope: also the threads that inherited it meanwhile)."""
 
-    def __init__(self, timing: TimingConfig, role: str = "driver") -> None:
-        self.timing, self.role = timing, role
+    def __init__(self, timing: TimingConfig, role: str = "driver", others_below: int = 1) -> None:
+        self.timing, self.role, self.others_below = timing, role, others_below
         self._raised: list[int] = []
 
     def apply(self) -> dict[str, object]:
@@ -94,7 +94,7 @@ class ThreadPolicy:
             if tid in self._raised:
                 continue
             try:
-                _fifo(tid, max(1, self.timing.realtime_priority - 1))
+                _fifo(tid, max(1, self.timing.realtime_priority - self.others_below))
                 self._raised.append(tid)
             except OSError:   # a thread that has just ended, or a refusal: it keeps its policy
                 pass
@@ -108,6 +108,18 @@ class ThreadPolicy:
             except OSError:   # ended meanwhile
                 pass
         self._raised = []
+
+
+def host_policy(timing: TimingConfig) -> ThreadPolicy | None:
+    """`sea-hil run` whose drivers run in processes of their own (`[timing] driver_process`), in its main thread:
+    every thread of this process (edge, Zenoh, recorder taps) at SCHED_FIFO one below the driver, as the driver's
+    `process` / `session` scope gives them when it runs in this process; its `refresh()` raises threads started
+    since, `undo()` restores. None (nothing raised) with `driver` scope or priority 0, or when refused (logged)."""
+    if timing.realtime_priority <= 0 or timing.realtime_scope == "driver":
+        return None
+    policy = ThreadPolicy(TimingConfig(realtime_priority=max(1, timing.realtime_priority - 1),
+                                       realtime_scope="process"), "session", others_below=0)
+    return policy if policy.apply() else None
 
 
 def raise_node_process(node: Any, timing: TimingConfig, role: str) -> dict[str, object]:

@@ -1,8 +1,10 @@
 """`sea-hil run`: a full session on one machine.
 
 This process hosts the plant (driver node) and the edge on the CAN bus (embedded `virtual` bus by default, or
-`socketcan:vcan0`), plus the recorder; the remote controller runs in a separate process and reaches them over Zenoh
-(this process listens on a free loopback port, the controller connects). Both use `[zenoh]` of the config (mode,
+`socketcan:vcan0`), plus the recorder (real time with `[timing] driver_process`: each driver in a process of its
+own, on an `ipc:` bus in place of the embedded one, `sea_hil.session.driver_process`; lockstep never); the remote
+controller runs in a separate process and reaches them over Zenoh (this process listens on a free loopback port,
+the controller connects). Both use `[zenoh]` of the config (mode,
 TLS, ACL); only the endpoints are the session's own (`tls/` when TLS is enabled). `secure=True` (`--secure`)
 gives each its own certificate, mutual TLS and the ACL (`sea_hil.session.secure`). When the controller has finished
 its cycles everything is stopped (`SessionBuilder`, in reverse order of creation), the MCAP file is closed and
@@ -34,10 +36,11 @@ from sea_hil.report.session_summary import session_summary
 from sea_hil.report.summary import write_summary
 from sea_hil.report.writer import write_report_figures
 from sea_hil.runtime.processes import end_process, spawn_child, stop_on_signals
-from sea_hil.runtime.realtime import child_priority
+from sea_hil.runtime.realtime import ThreadPolicy, child_priority, host_policy
 from sea_hil.runtime.timer_floor import measure_floor
 from sea_hil.session import limb_nodes
 from sea_hil.session.builder import SessionBuilder
+from sea_hil.session.driver_process import process_limbs, session_token
 from sea_hil.session.external import OutsideController
 from sea_hil.session.limbs import Limb, session_limbs
 from sea_hil.session.secure import secure_profile
@@ -61,6 +64,7 @@ class RunOptions:
     certs: Path | None = None       # secure: certificates of `sea-hil certs --out DIR`; None: generated in out/certs
     figures: bool = True            # the five PNGs in out (--no-figures: none; `sea-hil report` draws them later)
     on_nodes: Callable[[Any, Any, Any], None] | None = None   # called with (plant, edge, controller) once they run
+    driver_process: bool | None = None   # real time: the drivers in processes of their own; None: [timing]
 
 
 def _controller_cmd(opts: RunOptions, cfg_path: Path) -> list[str]:
@@ -101,6 +105,8 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     cfg_path.write_text(config_to_toml(quiet), encoding="utf-8")
     listen = listen_endpoints(cfg, opts)
     limbs = session_limbs(cfg, opts.limbs, opts.node_id, opts.can)
+    if split_drivers(cfg, opts):   # the drivers in processes of their own: buses that cross processes
+        limbs = process_limbs(cfg, limbs, session_token())
     if opts.controller == "external" and len(limbs) > 1:
         raise SeaHilError(f"--controller external serves one limb, not {len(limbs)}")
     if opts.inner == "remote" and cfg.trigger.placement == "edge":   # the CLI picks the paper's scheme for it
@@ -147,6 +153,12 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
     return summary
 
 
+def split_drivers(cfg: SeaHilConfig, opts: RunOptions) -> bool:
+    """True when the session's drivers run in processes of their own: real time and `driver_process` (the option,
+    else `[timing] driver_process`); lockstep always in one process (its results unchanged bit for bit)."""
+    return not opts.lockstep and (cfg.timing.driver_process if opts.driver_process is None else opts.driver_process)
+
+
 def _floor_figures(floor: dict[str, Any] | None) -> dict[str, float] | None:
     """The host floor's figures for the live view's verdict (its numbers, as the recording's metadata has them)."""
     if floor is None:
@@ -165,9 +177,11 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     ends, plant and edge stop, the recorder's taps stop, the edge's final stats are recorded and the MCAP file is
     closed, then buses go."""
     cfg = b.cfg
-    spec = opts.can or cfg.can.interface
-    # every bus: plant, edge(s), recorder tap
-    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller)
+    split = split_drivers(cfg, opts)
+    spec = ", ".join(limb_nodes.buses_of(limbs)) if split else opts.can or cfg.can.interface
+    # every bus: plant (or its driver process), edge(s), recorder tap
+    nodes = limb_nodes.build_limb_nodes(b, session, limbs, opts.inner, opts.controller,
+                                        driver_dir=opts.out if split else None)
     # decode + JSON + MCAP off this GIL; in real time on idle CPU time only (SCHED_IDLE)
     time_base: TimeBase = "sample" if opts.lockstep else "wall"   # log_time clock (docs/recording.md)
     rec = RecorderProcess(opts.out / "session.mcap", cfg.record, idle=not opts.lockstep, time_base=time_base,
@@ -178,7 +192,8 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     b.callback(rec.close)   # idempotent: closes the file if building the nodes failed
     rec.write_session_header(cfg, seed=cfg.link.seed, argv=sys.argv,
                              extra={"controller": opts.controller, "lockstep": str(opts.lockstep),
-                                    "inner": opts.inner, "can": spec, "secure": str(opts.secure)})
+                                    "inner": opts.inner, "can": spec, "secure": str(opts.secure),
+                                    "driver_process": str(split)})
     rec.add_metadata("sea-hil.limbs", nodes.metadata())
     if floor is not None:   # the verdict weighs the driver's tick misses against it (sea_hil/verdict/rules.py)
         rec.add_metadata(META_FLOOR, {k: str(v) for k, v in floor.items()})
@@ -193,14 +208,22 @@ def _host_nodes(b: SessionBuilder, opts: RunOptions, session: Any, proc: Any, li
     for recorder in recorders:
         recorder.start()
     limb_nodes.start(nodes)
+    # the drivers elsewhere: this process's threads (edge, Zenoh, taps) take the SCHED_FIFO the driver's process
+    # scope would have given them here (undone on close, before the report)
+    policy = host_policy(cfg.timing) if split else None
+    if policy is not None:
+        b.callback(policy.undo)
     if opts.on_nodes is not None:   # the public API's handle on a running session (sea_hil.api.Session)
         opts.on_nodes(nodes.plants[0], edge, proc)
     extra_s = waited_s + (opts.join_timeout_s if opts.controller == "external" else 0.0)
-    _wait_for_controller(proc, edge, opts, cfg, t0, extra_s, log)
+    _wait_for_controller(proc, edge, opts, cfg, t0, extra_s, log, nodes, policy)
 
 
 def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConfig, t0: float, extra_s: float,
-                         log: Callable[..., None]) -> None:
+                         log: Callable[..., None], nodes: limb_nodes.LimbNodes | None = None,
+                         policy: ThreadPolicy | None = None) -> None:
+    """Until the controller `proc` has finished (`SeaHilError` past the wall budget, or when a driver process ended
+    meanwhile); progress lines once a second; `policy` raises this process's threads started since."""
     period_s = cfg.trajectory.period_s
     budget_s = 60.0 + 3.0 * period_s * opts.cycles + extra_s
     while True:
@@ -209,6 +232,10 @@ def _wait_for_controller(proc: Any, edge: Any, opts: RunOptions, cfg: SeaHilConf
             break
         except subprocess.TimeoutExpired:
             pass
+        for driver in nodes.driver_processes() if nodes is not None else ():
+            driver.check()
+        if policy is not None:
+            policy.refresh()
         now = time.monotonic() - t0
         if now > budget_s:
             raise SeaHilError(f"session did not finish within {budget_s:.0f} s")
@@ -237,6 +264,10 @@ def _finish(rec: RecorderProcess, nodes: limb_nodes.LimbNodes, recorders: list[A
     for recorder in recorders:
         recorder.join()
     limb_nodes.record_edge_finals(rec, nodes, lockstep)
+    for i, driver in enumerate(nodes.driver_processes()):   # a driver process's own result (lateness, sends, ...)
+        if driver.result is not None:
+            rec.add_metadata("sea-hil.driver" if i == 0 else f"sea-hil.driver.bus{i}",
+                             {k: str(v) for k, v in driver.result["counters"].items()})
     rec.close(final_stats={**nodes.final_stats(), **recorders[0].counters()})
 
 
