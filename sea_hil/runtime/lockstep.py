@@ -16,20 +16,26 @@
 """
 from __future__ import annotations
 
+import logging
 import queue
 import time
 from collections.abc import Callable
 from typing import Any
 
+import can
 import zenoh
 
+from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_frames import VoltageCmd
+from sea_hil.protocol.canbus import batches, send_all
 from sea_hil.protocol.link import DelayQueue, release_sample_ns
 from sea_hil.protocol.payloads import AckPayload, encode
 from sea_hil.protocol.sequence import SeqVerdict
 from sea_hil.protocol.zsession import publisher
 from sea_hil.queues import timed_get
 from sea_hil.runtime.clock import Clock, RealTimeClock, control_payload
+
+log = logging.getLogger("sea_hil.plant")
 
 
 class LockstepClock(Clock):
@@ -69,11 +75,36 @@ class LockstepPacer:
     def _all_answered(self) -> bool:
         return len(self.answered) >= len(self.node.drivers)
 
+    def _publish_all(self) -> None:
+        """Every served node's feedback of the current sample. Where the bus `batches` (`FastVirtualBus`, the
+        default in-process bus) all frames leave in one send, so each reader (the edge, the recorder's tap) wakes once
+        per sample instead of once per frame while the driver still holds the GIL; the frames, their order and
+        what each reader receives are the same. The bus-timing model's simulated handle (its clock moves per
+        driver) and other buses send frame by frame (`PlantNode.publish`)."""
+        n = self.node
+        if n.sim is not None or not batches(n.bus):
+            for drv in n.drivers.values():
+                n.publish(drv, drv.feedback())
+            return
+        frames: list[can.Message] = []
+        for drv in n.drivers.values():
+            try:
+                frames += n.codec.encode_feedback(drv.feedback(), saturate=True)
+            except MalformedFrame as err:   # as `PlantNode.publish`: a diverged (NaN) model, reported
+                n.stats.send_failures += 1
+                log.error("node %d: feedback not encodable: %s", drv.node_id, err)
+        if not frames:
+            return
+        try:
+            send_all(n.bus, frames)
+        except (can.CanError, OSError) as err:
+            n.stats.send_failures += 1
+            n._bus_error(f"CAN send failed: {err}")
+
     def tick(self) -> None:
         n = self.node
         self.answered.clear()
-        for drv in n.drivers.values():
-            n.publish(drv, drv.feedback())
+        self._publish_all()
         while not self._all_answered() and not n.stop_event.is_set():
             before = len(self.answered)
             n.drain_until(time.monotonic_ns() + self.resend_ns, self._all_answered)
