@@ -55,6 +55,16 @@ def test_lockstep_never_splits() -> None:
     assert not split_drivers(load_config(), RunOptions())
 
 
+def test_unset_the_cia402_profile_splits_and_the_sea_profile_does_not() -> None:
+    cia = load_config(overrides={"can": {"profile": "cia402"}})
+    assert cia.timing.driver_process is None
+    assert split_drivers(cia, RunOptions()) and not split_drivers(cia, RunOptions(lockstep=True))
+    assert not split_drivers(cia, RunOptions(driver_process=False))
+    assert not split_drivers(load_config(overrides={"can": {"profile": "cia402", "emulate_bitrate": True}}),
+                             RunOptions())   # the bus-timing model is one process's: in-process unless asked
+    assert not split_drivers(load_config(), RunOptions())
+
+
 def _metadata(path: Path) -> dict[str, dict[str, str]]:
     with open(path, "rb") as f:
         return {m.name: dict(m.metadata) for m in make_reader(f).iter_metadata()}

@@ -60,7 +60,8 @@ def register(sub: argparse._SubParsersAction) -> None:
     p.add_argument("--json", action="store_true", help="print summary.json instead of the end-of-run table")
     p.add_argument("--driver-process", action=argparse.BooleanOptionalAction, default=None,
                    help="real time: each CAN driver in a process of its own, on an ipc bus in place of the embedded "
-                        "virtual one (no GIL shared with the edge; docs/timing.md); default [timing] driver_process")
+                        "virtual one (no GIL shared with the edge; docs/timing.md); default [timing] driver_process, else "
+                        "by profile (cia402 yes, sea no)")
     add_strict_arg(p)
     add_link_args(p)
     add_live_args(p)

@@ -22,8 +22,11 @@ class TimingConfig(_Frozen):
     merge_buses: bool = Field(True, description="`sea-hil run` with several CAN buses: one driver thread, one edge "
                                                 "thread and one recorder tap for all buses (one MergedBus each) "
                                                 "instead of one of each per bus; false = one of each per bus")
-    driver_process: bool = Field(False, description="real-time `sea-hil run`: each driver (one per bus, or one for "
-                                                    "the merged buses) in a `sea-hil plant` process of its own, "
-                                                    "joined to the edge by an `ipc:` bus (a `virtual:` bus becomes "
-                                                    "one) or the given SocketCAN / ipc bus: no GIL shared by driver "
-                                                    "and edge; lockstep stays in one process; false = in-process")
+    driver_process: bool | None = Field(None, description="real-time `sea-hil run`: each driver (one per bus, or one "
+                                                           "for the merged buses) in a `sea-hil plant` process of "
+                                                           "its own, joined to the edge by an `ipc:` bus (a "
+                                                           "`virtual:` bus becomes one) or the given SocketCAN / ipc "
+                                                           "bus: no GIL shared by driver and edge; lockstep stays in "
+                                                           "one process; false = in-process; unset = by profile: "
+                                                           "true for cia402 (its edge produces SYNC), false for sea "
+                                                           "(docs/timing.md)")

@@ -155,8 +155,17 @@ def run_session(cfg: SeaHilConfig, opts: RunOptions, log: Callable[..., None] = 
 
 def split_drivers(cfg: SeaHilConfig, opts: RunOptions) -> bool:
     """True when the session's drivers run in processes of their own: real time and `driver_process` (the option,
-    else `[timing] driver_process`); lockstep always in one process (its results unchanged bit for bit)."""
-    return not opts.lockstep and (cfg.timing.driver_process if opts.driver_process is None else opts.driver_process)
+    else `[timing] driver_process`, else by profile: cia402 yes, unless `[can] emulate_bitrate` (one process's
+    timeline); sea no); lockstep always in one process (its results unchanged bit for bit). Why by profile: the
+    cia402 edge is the SYNC producer, and a drive sharing its GIL made it miss 0.5-0.7 % of its SYNCs on an idle
+    host, against 0-0.02 % with the drive in its own process; the sea driver owns its tick and gained nothing, at
+    25-50 % more CPU (docs/timing.md)."""
+    if opts.lockstep:
+        return False
+    setting = cfg.timing.driver_process if opts.driver_process is None else opts.driver_process
+    if setting is None:
+        return cfg.can.profile == "cia402" and not cfg.can.emulate_bitrate
+    return setting
 
 
 def _floor_figures(floor: dict[str, Any] | None) -> dict[str, float] | None:
