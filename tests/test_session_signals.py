@@ -59,7 +59,7 @@ def test_run_stopped_by_a_signal_leaves_no_process(tmp_path: Path, sig: signal.S
         rc = proc.wait(timeout=60)
         assert rc == (128 + signal.SIGTERM if sig is signal.SIGTERM else -signal.SIGKILL), rc
         gone = wait_for(lambda: not any(_alive(k) for k in kids.values()), GONE_S, poll_s=0.05)
-        assert gone is not None, f"left running: {[n for n, k in kids.items() if _alive(k)]}"
+        assert gone is not None, f"left running: {[(n, k.pid, k.cmdline()) for n, k in kids.items() if _alive(k)]}"
     finally:
         end_process(proc)
         for k in kids.values():

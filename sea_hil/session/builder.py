@@ -145,10 +145,20 @@ class SessionBuilder:
 
 
 def _stop_on_signals(node: Node, signals: tuple[signal.Signals, ...]) -> Callable[[], None]:
-    """`signals` stop `node` (main thread only); returns a function restoring the old handlers."""
+    """`signals` stop `node` (main thread only); returns a function restoring the old handlers. The first signal
+    stops it, later ones do nothing: a handler runs between two bytecodes of the main thread, so a second SIGTERM
+    arriving while the first handler's `Event.set` holds the event's lock would wait for that lock forever (seen:
+    a `sea-hil plant` driver child, SIGTERMed more than once when its session was SIGKILLed, hung in nested
+    handlers)."""
     if threading.current_thread() is not threading.main_thread():
         return lambda: None
-    old = {sig: signal.signal(sig, lambda *_: node.stop()) for sig in signals}
+    fired: list[int] = []
+
+    def handler(signum: int, _frame: object) -> None:
+        if not fired:
+            fired.append(signum)
+            node.stop()
+    old = {sig: signal.signal(sig, handler) for sig in signals}
 
     def restore() -> None:
         for sig, handler in old.items():
