@@ -165,6 +165,11 @@ class PlantNode(Node):
         for drv in self._starting:
             drv.period_start_ns = start_ns
         self._starting = []
+        self.send_frames(frames)
+
+    def send_frames(self, frames: list[can.Message]) -> None:
+        """`frames` in one `canbus.send_all` where the bus batches, else frame by frame (each with its retries); a
+        failed send is counted and reported, the node lives on."""
         if not frames:
             return
         if not batches(self.bus):

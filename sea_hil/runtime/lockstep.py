@@ -27,7 +27,7 @@ import zenoh
 
 from sea_hil.errors import MalformedFrame
 from sea_hil.protocol.can_frames import VoltageCmd
-from sea_hil.protocol.canbus import batches, send_all
+from sea_hil.protocol.canbus import batches
 from sea_hil.protocol.link import DelayQueue, release_sample_ns
 from sea_hil.protocol.payloads import AckPayload, encode
 from sea_hil.protocol.sequence import SeqVerdict
@@ -93,13 +93,7 @@ class LockstepPacer:
             except MalformedFrame as err:   # as `PlantNode.publish`: a diverged (NaN) model, reported
                 n.stats.send_failures += 1
                 log.error("node %d: feedback not encodable: %s", drv.node_id, err)
-        if not frames:
-            return
-        try:
-            send_all(n.bus, frames)
-        except (can.CanError, OSError) as err:
-            n.stats.send_failures += 1
-            n._bus_error(f"CAN send failed: {err}")
+        n.send_frames(frames)   # the bus batches (above): one send
 
     def tick(self) -> None:
         n = self.node
